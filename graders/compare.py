@@ -1,0 +1,50 @@
+"""Error measures that compare geometric quantities the way they are defined.
+
+Every function returns one non-negative float (0 = identical) in the unit its name says, so an
+exercise case can print it next to its tolerance. Inputs are already validated arrays.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def max_distance(x: np.ndarray, y: np.ndarray) -> float:
+    """Largest Euclidean distance between corresponding rows. x, y: (N, D) -> float (their unit)."""
+    return float(np.max(np.linalg.norm(np.reshape(x - y, (len(x), -1)), axis=1))) if len(x) else 0.0
+
+
+def max_abs(x: np.ndarray, y: np.ndarray) -> float:
+    """Largest absolute elementwise difference."""
+    return float(np.max(np.abs(np.asarray(x, float) - np.asarray(y, float)))) if np.size(x) else 0.0
+
+
+def relative(x: float | np.ndarray, y: float | np.ndarray) -> float:
+    """Largest relative difference |x - y| / |y| (y is the truth; never divides by zero)."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    return float(np.max(np.abs(x - y) / np.maximum(np.abs(y), 1e-12)))
+
+
+def rotation_angle_deg(R1: np.ndarray, R2: np.ndarray) -> float:
+    """Angle of the rotation R1 R2^T in degrees. R1, R2: (3, 3)."""
+    c = (np.trace(R1 @ R2.T) - 1.0) / 2.0
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+def max_angle_deg(u: np.ndarray, v: np.ndarray) -> float:
+    """Largest angle in degrees between corresponding direction vectors. u, v: (N, 3)."""
+    u = u / np.linalg.norm(u, axis=-1, keepdims=True)
+    v = v / np.linalg.norm(v, axis=-1, keepdims=True)
+    # atan2 of |u x v| and u.v is accurate for tiny angles, where arccos of the dot product is not.
+    s = np.linalg.norm(np.cross(u, v), axis=-1)
+    return float(np.degrees(np.max(np.arctan2(s, np.sum(u * v, axis=-1))))) if len(u) else 0.0
+
+
+def up_to_scale(A: np.ndarray, B: np.ndarray) -> float:
+    """Distance between two matrices defined up to a non-zero scale and sign (F, E, H, P).
+
+    Both are scaled to unit Frobenius norm and the sign that brings them closer is chosen;
+    the result lies in [0, sqrt(2)].
+    """
+    a = np.ravel(A) / np.linalg.norm(A)
+    b = np.ravel(B) / np.linalg.norm(B)
+    return float(min(np.linalg.norm(a - b), np.linalg.norm(a + b)))

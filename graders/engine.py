@@ -1,0 +1,229 @@
+"""The exercise engine: exercise specifications are data, one loop judges them all.
+
+An `Exercise` says what the learner writes (`name`), how many points it is worth, how to draw
+hidden `Case`s from a seeded generator, and which `Hint`s name known mistakes. `grade` calls the
+learner's function on every case through `sandbox.safe_call`, validates what comes back, measures
+the error with the case's metric and compares it with the case's tolerance. A case never raises:
+everything the learner does wrong becomes a failed row with a message.
+
+Read docs/ENGINE.md for how a chapter adds exercises.
+"""
+from __future__ import annotations
+
+import importlib
+import secrets
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from .report import CaseResult, ExerciseResult
+from .sandbox import safe_call
+
+KINDS = ("concept", "code", "debug", "design", "frontier")
+
+
+class OutputError(ValueError):
+    """What the learner returned cannot be judged (wrong type, shape, NaN, ...)."""
+
+
+@dataclass
+class Case:
+    """One hidden test: call the learner with `args`, compare with `expected` by `metric`.
+
+    metric(output, expected) -> error (float, in `unit`); the case passes if error <= tol.
+    shape: the required output shape (None: do not check). `check` may replace `convert`:
+    it turns the raw output into the form the metric expects and raises OutputError otherwise.
+    """
+    name: str
+    args: tuple
+    expected: Any
+    metric: Callable[[Any, Any], float]
+    tol: float
+    unit: str = ""
+    shape: tuple[int, ...] | None = None
+    kwargs: dict = field(default_factory=dict)
+    weight: float = 1.0
+    convert: Callable[[Any, "Case"], Any] | None = None
+    info: dict = field(default_factory=dict)  # anything hints need (e.g. the scene)
+
+
+@dataclass
+class Hint:
+    """A known mistake: `when(case, output)` is True if the output looks like that mistake."""
+    text: str
+    when: Callable[[Case, Any], bool]
+
+
+def like(bug: Callable[[Case], Any], text: str, factor: float = 1.0) -> Hint:
+    """A hint that fires when the output matches what the mistake `bug(case)` would return."""
+
+    def when(case: Case, out: Any) -> bool:
+        try:
+            return case.metric(out, bug(case)) <= factor * case.tol
+        except Exception:  # a hint model that does not apply to this output is simply silent
+            return False
+
+    return Hint(text, when)
+
+
+@dataclass
+class Exercise:
+    """A graded exercise.
+
+    id: "chapter.number", e.g. "1.5"; name: the learner's function or variable; kind: one of KINDS.
+    cases(rng) -> list[Case]: fresh hidden cases for a seed.
+    fallback: an implementation independent of `solutions` (an OpenCV call or the grader's own
+      ground-truth model) that demo cells use until the learner's version passes.
+    value: True if the learner gives a value (a numeric or choice answer), not a function.
+    explanation: a model answer shown once the learner has attempted the exercise.
+    """
+    id: str
+    title: str
+    name: str
+    kind: str
+    points: float
+    cases: Callable[[np.random.Generator], list[Case]]
+    hints: list[Hint] = field(default_factory=list)
+    fallback: Callable | None = None
+    value: bool = False
+    timeout: float = 10.0
+    explanation: str = ""
+    arg_names: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        assert self.kind in KINDS, f"{self.id}: kind {self.kind!r} is not one of {KINDS}"
+
+
+# ---------------------------------------------------------------- registry ----------
+
+_REGISTRY: dict[str, Exercise] = {}
+CHAPTER_MODULES = {  # chapter number -> module that defines its exercises
+    "1": "graders.ch01_camera_models",
+}
+
+
+def register(*exercises: Exercise) -> None:
+    for ex in exercises:
+        _REGISTRY[ex.id] = ex
+
+
+def chapter(number: str | int) -> list[Exercise]:
+    """All exercises of a chapter, in order."""
+    number = str(int(number))
+    importlib.import_module(CHAPTER_MODULES[number])
+    ids = [i for i in _REGISTRY if i.split(".")[0] == number]
+    return [_REGISTRY[i] for i in sorted(ids, key=lambda i: [int(p) for p in i.split(".")])]
+
+
+def get(exercise_id: str) -> Exercise:
+    number = exercise_id.split(".")[0]
+    if number not in CHAPTER_MODULES:
+        raise KeyError(f"no chapter {number!r}; chapters: {', '.join(CHAPTER_MODULES)}")
+    importlib.import_module(CHAPTER_MODULES[number])
+    if exercise_id not in _REGISTRY:
+        known = ", ".join(e.id for e in chapter(number))
+        raise KeyError(f"no exercise {exercise_id!r}; chapter {number} has {known}")
+    return _REGISTRY[exercise_id]
+
+
+# ---------------------------------------------------------------- judging -----------
+
+def as_array(out: Any, case: Case) -> np.ndarray:
+    """Default conversion: a finite float array of exactly `case.shape`."""
+    if out is None:
+        raise OutputError("returned None: is a `return` missing?")
+    try:
+        arr = np.asarray(out, dtype=float)
+    except Exception:
+        raise OutputError(f"returned a {type(out).__name__}, expected a numeric array") from None
+    if case.shape is not None and arr.shape != tuple(case.shape):
+        want = tuple(case.shape)
+        why = " (transposed?)" if arr.shape == want[::-1] and len(want) == 2 else ""
+        raise OutputError(f"returned shape {arr.shape}, expected {want}{why}")
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        raise OutputError(f"returned {int(bad.sum())} non-finite value(s) (NaN or inf) out of {arr.size}")
+    return arr
+
+
+def _not_attempted(value: Any) -> bool:
+    return value is None or value is Ellipsis
+
+
+def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None) -> ExerciseResult:
+    """Judge `fn_or_value` on fresh hidden cases drawn with `seed` (random if None). Never raises."""
+    seed = secrets.randbits(32) if seed is None else int(seed)
+    result = ExerciseResult(id=ex.id, title=ex.title, name=ex.name, kind=ex.kind,
+                            max_score=ex.points, seed=seed)
+    if ex.value:
+        if _not_attempted(fn_or_value):
+            result.status, result.message = "not_attempted", f"`{ex.name}` is still None: not attempted"
+            return result
+        value = fn_or_value
+        fn = lambda *a, **k: value  # noqa: E731 — a value answer is a function of nothing
+    else:
+        if not callable(fn_or_value):
+            result.status = "error"
+            result.message = f"`{ex.name}` should be a function, got {type(fn_or_value).__name__}"
+            return result
+        fn = fn_or_value
+    try:
+        cases = ex.cases(np.random.default_rng(seed))
+    except Exception as exc:  # a broken case generator is our bug, not the learner's; say so
+        result.status, result.message = "error", f"grader error while drawing cases ({exc!r}); please report it"
+        return result
+    total_weight = sum(c.weight for c in cases)
+    for case in cases:
+        row = _judge_case(ex, fn, case)
+        if row is None:  # NotImplementedError on a case: the whole exercise is not attempted
+            result.status, result.message, result.cases = "not_attempted", "raises NotImplementedError: not attempted", []
+            return result
+        row.points = ex.points * case.weight / total_weight if row.passed else 0.0
+        row.max_points = ex.points * case.weight / total_weight
+        result.cases.append(row)
+    result.score = round(sum(r.points for r in result.cases), 6)
+    result.status = ("passed" if all(r.passed for r in result.cases)
+                     else "failed" if result.score == 0 else "partial")
+    if ex.explanation:
+        result.explanation = ex.explanation
+    return result
+
+
+def _judge_case(ex: Exercise, fn: Callable, case: Case) -> CaseResult | None:
+    row = CaseResult(name=case.name, tol=case.tol, unit=case.unit)
+    outcome = safe_call(fn, case.args, case.kwargs, timeout=ex.timeout, names=ex.arg_names)
+    if outcome.kind == "not_implemented":
+        return None
+    row.stdout = outcome.stdout + (f"\n… {outcome.stdout_truncated} more characters of output dropped"
+                                   if outcome.stdout_truncated else "")
+    if outcome.kind != "ok":
+        row.message = outcome.error
+        row.traceback = outcome.traceback
+        return row
+    try:
+        out = (case.convert or as_array)(outcome.value, case)
+        row.error = float(case.metric(out, case.expected))
+    except OutputError as exc:
+        row.message = str(exc)
+        return row
+    except Exception as exc:  # an output the metric cannot digest is a wrong output
+        row.message = f"output could not be compared ({type(exc).__name__}: {exc})"
+        return row
+    if not np.isfinite(row.error):
+        row.error, row.message = None, "error is not finite"
+        return row
+    row.passed = row.error <= case.tol
+    if outcome.mutated:
+        row.passed = False
+        row.message = f"modified its input {', '.join(outcome.mutated)} in place; work on a copy"
+    if not row.passed:
+        for hint in ex.hints:
+            try:
+                fired = hint.when(case, out)
+            except Exception:
+                fired = False
+            if fired:
+                row.hint = hint.text
+                break
+    return row

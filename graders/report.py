@@ -1,0 +1,140 @@
+"""Results of grading and their three faces: a text table (shell), an HTML table (notebook),
+and Gradescope's results.json."""
+from __future__ import annotations
+
+import html
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+STATUS_MARK = {"passed": "✔ passed", "partial": "◐ partial", "failed": "✘ failed",
+               "not_attempted": "· not attempted", "error": "✘ error"}
+
+
+@dataclass
+class CaseResult:
+    name: str
+    passed: bool = False
+    error: float | None = None
+    tol: float = 0.0
+    unit: str = ""
+    points: float = 0.0
+    max_points: float = 0.0
+    message: str = ""
+    hint: str = ""
+    stdout: str = ""
+    traceback: str = ""
+
+    def error_text(self) -> str:
+        return "—" if self.error is None else f"{self.error:.3g} {self.unit}".strip()
+
+    def tol_text(self) -> str:
+        return f"≤ {self.tol:.3g} {self.unit}".strip()
+
+
+@dataclass
+class ExerciseResult:
+    id: str
+    title: str
+    name: str
+    kind: str
+    max_score: float
+    seed: int
+    score: float = 0.0
+    status: str = "error"  # passed | partial | failed | not_attempted | error
+    message: str = ""
+    explanation: str = ""
+    cases: list[CaseResult] = field(default_factory=list)
+
+    @property
+    def passed(self) -> bool:
+        return self.status == "passed"
+
+    def headline(self) -> str:
+        return (f"[{self.id}] {self.title} ({self.kind.upper()}, `{self.name}`): "
+                f"{STATUS_MARK[self.status]} — {self.score:g}/{self.max_score:g} points")
+
+    def footer(self) -> str:
+        if self.status in ("partial", "failed"):
+            return (f"hidden cases drawn with seed={self.seed}; reproduce with "
+                    f"check(\"{self.id}\", {self.name}, seed={self.seed})")
+        return ""
+
+    def __str__(self) -> str:
+        lines = [self.headline()]
+        if self.message:
+            lines.append(f"  {self.message}")
+        if self.cases:
+            w = max(len(c.name) for c in self.cases)
+            lines.append(f"  {'case':<{w}}  {'result':<6}  {'error':>14}  {'tolerance':>14}  points")
+            for c in self.cases:
+                lines.append(f"  {c.name:<{w}}  {'pass' if c.passed else 'FAIL':<6}  {c.error_text():>14}  "
+                             f"{c.tol_text():>14}  {c.points:.2g}/{c.max_points:.2g}")
+                for extra in _case_notes(c):
+                    lines.append(f"  {'':<{w}}    {extra}")
+        if self.footer():
+            lines.append("  " + self.footer())
+        if self.explanation and self.status != "not_attempted":
+            lines.append("  model answer: " + self.explanation)
+        return "\n".join(lines)
+
+    def _repr_html_(self) -> str:
+        colour = {"passed": "#1a7f37", "partial": "#9a6700", "failed": "#cf222e",
+                  "not_attempted": "#57606a", "error": "#cf222e"}[self.status]
+        e = html.escape
+        rows = []
+        for c in self.cases:
+            notes = "<br>".join(e(n) for n in _case_notes(c))
+            mark = "✔" if c.passed else "✘"
+            rows.append(f"<tr><td style='text-align:left'>{e(c.name)}</td><td>{mark}</td>"
+                        f"<td>{e(c.error_text())}</td><td>{e(c.tol_text())}</td>"
+                        f"<td>{c.points:.2g}/{c.max_points:.2g}</td>"
+                        f"<td style='text-align:left'>{notes}</td></tr>")
+        table = ("<table style='font-size:90%'><tr><th style='text-align:left'>case</th><th></th>"
+                 "<th>error</th><th>tolerance</th><th>points</th><th style='text-align:left'>notes</th></tr>"
+                 + "".join(rows) + "</table>") if rows else ""
+        parts = [f"<div style='border-left:4px solid {colour};padding-left:8px'>",
+                 f"<b style='color:{colour}'>{e(self.headline())}</b>"]
+        if self.message:
+            parts.append(f"<div>{e(self.message)}</div>")
+        parts.append(table)
+        if self.footer():
+            parts.append(f"<div style='color:#57606a'>{e(self.footer())}</div>")
+        if self.explanation and self.status != "not_attempted":
+            parts.append(f"<details><summary>model answer</summary>{e(self.explanation)}</details>")
+        parts.append("</div>")
+        return "".join(parts)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _case_notes(c: CaseResult) -> list[str]:
+    notes = []
+    if c.message:
+        notes.append(c.message)
+    if c.hint:
+        notes.append("hint: " + c.hint)
+    if c.traceback and not c.passed:
+        notes.append(c.traceback.splitlines()[-1])
+    if c.stdout.strip():
+        first = c.stdout.strip().splitlines()
+        notes.append(f"printed {len(c.stdout)} characters, first line: {first[0][:80]!r}")
+    return notes
+
+
+def gradescope(results: list[ExerciseResult], message: str = "") -> dict:
+    """Gradescope's results.json: score, max_score, tests[{name, score, max_score, status, output,
+    visibility}]."""
+    tests = [{"name": f"{r.id} {r.title}", "score": r.score, "max_score": r.max_score,
+              "status": "passed" if r.passed else "failed", "output": str(r),
+              "visibility": "visible"} for r in results]
+    doc = {"score": round(sum(r.score for r in results), 6),
+           "max_score": sum(r.max_score for r in results), "tests": tests}
+    if message:
+        doc["output"] = message
+    return doc
+
+
+def write_gradescope(path: str | Path, results: list[ExerciseResult], message: str = "") -> None:
+    Path(path).write_text(json.dumps(gradescope(results, message), indent=2))

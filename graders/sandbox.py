@@ -1,0 +1,147 @@
+"""Call untrusted learner code and describe what happened, whatever it does.
+
+`safe_call` never raises for anything the callee does (exceptions, `sys.exit`, endless loops,
+floods of output, mutating its arguments); it returns an `Outcome` that says what went wrong.
+Only `KeyboardInterrupt` is let through, so a learner can still stop a cell.
+
+Time limits use SIGALRM, which interrupts Python code (an endless `while` loop) but not a single
+long C call; it is available only in the main thread (a notebook cell and `python -m graders`
+both run there). The shell grader adds a hard per-exercise limit by running every notebook in a
+worker process it can kill (see `graders.cli`).
+"""
+from __future__ import annotations
+
+import contextlib
+import copy
+import io
+import signal
+import threading
+import time
+import traceback
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+OUTPUT_CAP = 2_000  # characters of learner print output kept per call
+
+
+class TimeLimitExceeded(BaseException):
+    """Raised inside learner code when its time is up (BaseException: a bare `except Exception` in
+    learner code cannot swallow it)."""
+
+
+@dataclass
+class Outcome:
+    value: Any = None
+    error: str | None = None          # one-line description of what went wrong, None if it returned
+    kind: str = "ok"                  # ok | not_implemented | exception | timeout | exit
+    traceback: str = ""
+    stdout: str = ""                  # captured output, capped at OUTPUT_CAP characters
+    stdout_truncated: int = 0         # characters dropped
+    mutated: list[str] = field(default_factory=list)  # names of arguments the callee changed
+    seconds: float = 0.0
+
+
+class _CappedWriter(io.TextIOBase):
+    """A text stream that keeps the first `cap` characters and counts the rest."""
+
+    def __init__(self, cap: int):
+        self.cap, self.parts, self.kept, self.dropped = cap, [], 0, 0
+
+    def write(self, s: str) -> int:
+        room = self.cap - self.kept
+        if room > 0:
+            self.parts.append(s[:room])
+            self.kept += min(room, len(s))
+        self.dropped += max(0, len(s) - max(room, 0))
+        return len(s)
+
+    def getvalue(self) -> str:
+        return "".join(self.parts)
+
+
+@contextlib.contextmanager
+def _time_limit(seconds: float | None):
+    usable = (seconds is not None and seconds > 0 and hasattr(signal, "setitimer")
+              and threading.current_thread() is threading.main_thread())
+    if not usable:
+        yield
+        return
+
+    def _raise(signum, frame):
+        raise TimeLimitExceeded(f"time limit of {seconds:g} s exceeded")
+
+    previous = signal.signal(signal.SIGALRM, _raise)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def _snapshot(x: Any) -> Any:
+    try:
+        return copy.deepcopy(x)
+    except Exception:  # objects that cannot be copied are not checked for mutation
+        return None
+
+
+def _same(a: Any, b: Any) -> bool:
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return (isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.shape == b.shape
+                and a.dtype == b.dtype and np.array_equal(a, b, equal_nan=True))
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return type(a) is type(b) and len(a) == len(b) and all(_same(u, v) for u, v in zip(a, b))
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    try:
+        return bool(a == b)
+    except Exception:
+        return True
+
+
+def _short_traceback(exc: BaseException) -> str:
+    """The learner-facing part of a traceback: drop the frames that belong to this module."""
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if f.filename != __file__]
+    lines = traceback.format_list(frames[-4:]) + traceback.format_exception_only(type(exc), exc)
+    return "".join(lines).rstrip()
+
+
+def safe_call(fn: Callable, args: tuple = (), kwargs: dict | None = None,
+              timeout: float | None = 10.0, names: tuple[str, ...] | None = None) -> Outcome:
+    """Call `fn(*args, **kwargs)` and report what happened; never raises (but KeyboardInterrupt).
+
+    names: argument names used when reporting a mutated input (defaults to arg0, arg1, ...).
+    """
+    kwargs = dict(kwargs or {})
+    labels = list(names or ()) + [f"arg{i}" for i in range(len(names or ()), len(args))]
+    before = [_snapshot(a) for a in args], {k: _snapshot(v) for k, v in kwargs.items()}
+    out = Outcome()
+    buffer = _CappedWriter(OUTPUT_CAP)
+    start = time.perf_counter()
+    try:
+        with _time_limit(timeout), contextlib.redirect_stdout(buffer), contextlib.redirect_stderr(buffer):
+            out.value = fn(*args, **kwargs)
+    except KeyboardInterrupt:
+        raise
+    except NotImplementedError as exc:
+        out.kind, out.error = "not_implemented", "not implemented yet (raises NotImplementedError)"
+        out.traceback = _short_traceback(exc)
+    except TimeLimitExceeded as exc:
+        out.kind, out.error = "timeout", f"{exc}: an endless loop, or far too slow?"
+    except SystemExit as exc:
+        out.kind, out.error = "exit", f"called sys.exit({exc.code!r}); a function must return a value"
+    except BaseException as exc:  # noqa: BLE001 — anything the learner raises is reported, not re-raised
+        out.kind, out.error = "exception", f"raised {type(exc).__name__}: {exc}"
+        out.traceback = _short_traceback(exc)
+    out.seconds = time.perf_counter() - start
+    out.stdout, out.stdout_truncated = buffer.getvalue(), buffer.dropped
+    for label, old, new in zip(labels, before[0], args):
+        if old is not None and not _same(old, new):
+            out.mutated.append(label)
+    for key, old in before[1].items():
+        if old is not None and not _same(old, kwargs[key]):
+            out.mutated.append(key)
+    return out
