@@ -1,0 +1,129 @@
+"""The engine survives and explains whatever learner code does (docs/ENGINE.md, 'untrusted code')."""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+
+from graders import Case, Exercise, check, grade, like, use
+from graders.compare import max_abs, max_distance, up_to_scale, rotation_angle_deg, max_angle_deg
+from graders.sandbox import safe_call
+
+
+def _double_cases(rng):
+    x = rng.normal(size=(20, 2))
+    return [Case("twenty points", (x,), 2 * x, max_distance, 1e-9, "px", shape=(20, 2))]
+
+
+TOY = Exercise("0.1", "double it", "double", "code", 2, _double_cases,
+               hints=[like(lambda c: 3 * c.args[0], "tripled instead of doubled?")],
+               fallback=lambda x: 2 * x, timeout=1.0)
+
+
+def good(x):
+    return 2 * x
+
+
+def test_reference_passes_with_full_marks():
+    r = grade(TOY, good, seed=1)
+    assert r.status == "passed" and r.score == r.max_score == 2
+    assert r.cases[0].error < 1e-12
+
+
+def test_not_implemented_is_not_attempted():
+    def stub(x):
+        raise NotImplementedError
+    r = grade(TOY, stub, seed=1)
+    assert r.status == "not_attempted" and r.score == 0 and "not attempted" in str(r)
+
+
+@pytest.mark.parametrize("learner, status, phrase", [
+    (lambda x: 1 / 0, "failed", "ZeroDivisionError"),
+    (lambda x: np.full_like(x, np.nan), "failed", "non-finite"),
+    (lambda x: (2 * x).T, "failed", "transposed?"),
+    (lambda x: None, "failed", "return"),
+    (lambda x: "a string", "failed", "numeric array"),
+    (lambda x: sys.exit(3), "failed", "sys.exit"),
+    (lambda x: 3 * x, "failed", "tripled instead of doubled?"),
+])
+def test_failures_are_explained(learner, status, phrase):
+    r = grade(TOY, learner, seed=7)
+    assert r.status == status and r.score == 0
+    assert phrase in str(r), str(r)
+    assert "seed=7" in str(r)  # a failing run tells how to replay it
+
+
+def test_endless_loop_hits_the_time_limit():
+    def spin(x):
+        while True:
+            pass
+    r = grade(TOY, spin, seed=1)
+    assert r.status == "failed" and "time limit" in str(r)
+
+
+def test_catching_everything_cannot_swallow_the_time_limit():
+    def stubborn(x):
+        while True:
+            try:
+                while True:
+                    pass
+            except Exception:
+                pass
+    r = grade(TOY, stubborn, seed=1)
+    assert "time limit" in str(r)
+
+
+def test_mutating_inputs_fails_the_case():
+    def in_place(x):
+        x *= 2
+        return x
+    r = grade(TOY, in_place, seed=1)
+    assert r.status == "failed" and "modified its input" in str(r)
+
+
+def test_print_flood_is_capped():
+    def chatty(x):
+        for i in range(100_000):
+            print("debug", i)
+        return 2 * x
+    out = safe_call(chatty, (np.zeros(2),))
+    assert out.kind == "ok" and len(out.stdout) <= 2_000 and out.stdout_truncated > 100_000
+    assert grade(TOY, chatty, seed=1).status == "passed"  # printing is not penalised
+
+
+def test_value_answer_none_is_not_attempted():
+    ex = Exercise("0.2", "a number", "answer", "concept", 1, value=True,
+                  cases=lambda rng: [Case("x", (), np.array(3.0), max_abs, 0.1, shape=())])
+    assert grade(ex, None).status == "not_attempted"
+    assert grade(ex, 3.05).status == "passed"
+    assert grade(ex, 4).status == "failed"
+
+
+def test_seed_replays_the_same_cases():
+    a, b = grade(TOY, lambda x: 2 * x + 1e-3, seed=5), grade(TOY, lambda x: 2 * x + 1e-3, seed=5)
+    assert a.cases[0].error == b.cases[0].error
+
+
+def test_use_falls_back_with_a_notice(capsys):
+    def stub(*a):
+        raise NotImplementedError
+    f = use("1.9", stub)
+    assert "stand-in" in capsys.readouterr().out
+    assert np.allclose(f("opencv", "opencv"), np.eye(3))
+
+
+def test_check_returns_a_displayable_table():
+    r = check("1.1", [480, 560])
+    assert r.passed and "<table" in r._repr_html_() and "model answer" in r._repr_html_()
+
+
+def test_comparisons_respect_scale_sign_and_gauge():
+    F = np.random.default_rng(0).normal(size=(3, 3))
+    assert up_to_scale(F, -3.7 * F) < 1e-12
+    assert up_to_scale(F, F + 0.1) > 1e-3
+    assert rotation_angle_deg(np.eye(3), np.eye(3)) == 0
+    c, s = np.cos(np.radians(2)), np.sin(np.radians(2))
+    assert abs(rotation_angle_deg(np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]), np.eye(3)) - 2) < 1e-9
+    v = np.array([[1.0, 0, 0]])
+    assert abs(max_angle_deg(v, np.array([[1.0, 1e-8, 0]])) - np.degrees(1e-8)) < 1e-15
