@@ -684,3 +684,13 @@ register(
              cases_fit_focal_k1, fallback=scipy_fit_focal_k1, timeout=30.0,
              arg_names=("X_c", "uv", "cx", "cy", "f0")),
 )
+
+
+DEBUG_GENERATORS = {"1.11": debug_distortion, "1.12": debug_extrinsics,
+                    "1.13": debug_principal_point, "1.14": debug_frame_convention}
+
+
+def debug_case(exercise_id: str, seed: int = 0) -> dict:
+    """A broken rig to practise on (the hidden truth stays here; the check draws fresh ones)."""
+    case, _ = DEBUG_GENERATORS[exercise_id](np.random.default_rng(seed))
+    return case

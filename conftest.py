@@ -1,0 +1,36 @@
+"""Shared pytest set-up: a non-interactive matplotlib, and the notebook time budget.
+
+nbval runs every notebook under notebooks/ (see pyproject's addopts). Here we add up the time of
+each notebook's cells, print a table at the end of the run, and fail the run if a notebook takes
+longer than NOTEBOOK_BUDGET_S on this machine (2 cores in CI).
+"""
+from __future__ import annotations
+
+import os
+from collections import defaultdict
+
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+NOTEBOOK_BUDGET_S = 60.0
+_notebook_seconds: dict[str, float] = defaultdict(float)
+
+
+def pytest_runtest_logreport(report):
+    path = report.nodeid.split("::")[0]
+    if path.endswith(".ipynb"):
+        _notebook_seconds[path] += report.duration
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    if not _notebook_seconds:
+        return
+    terminalreporter.section("notebook run times (budget %.0f s each)" % NOTEBOOK_BUDGET_S)
+    for path, seconds in sorted(_notebook_seconds.items()):
+        flag = "  OVER BUDGET" if seconds > NOTEBOOK_BUDGET_S else ""
+        terminalreporter.write_line(f"{seconds:6.1f} s  {path}{flag}")
+
+
+def pytest_sessionfinish(session, exitstatus):
+    over = [p for p, s in _notebook_seconds.items() if s > NOTEBOOK_BUDGET_S]
+    if over and session.exitstatus == 0:
+        session.exitstatus = 1

@@ -1,0 +1,1 @@
+"""From-scratch reference solutions, one module per chapter topic."""

@@ -1,0 +1,104 @@
+"""Chapter 1 graders: the reference and the OpenCV/scipy-backed versions pass; every mutant fails.
+
+Seeds are fixed so a failure here is reproducible; the graders themselves draw fresh seeds for
+learners. Three seeds per exercise: the hidden-case generators are random, and a grader that
+only works for a lucky draw is a bug.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from graders import chapter, get, grade
+from graders import ch01_camera_models as ch1
+from mutants.ch01 import MUTANTS
+from solutions import camera_debug, camera_models, camera_questions
+
+SEEDS = [0, 1, 2]
+EXERCISES = {ex.id: ex for ex in chapter(1)}
+
+
+def reference(ex) -> object:
+    for module in (camera_models, camera_debug, camera_questions):
+        if hasattr(module, ex.name):
+            return getattr(module, ex.name)
+    raise LookupError(f"no reference for {ex.id} `{ex.name}`")
+
+
+def cv_fisheye_unproject(uv, K, D):
+    """OpenCV-backed unprojection: cv2.fisheye.undistortPoints gives tan θ-scaled coordinates,
+    which cannot represent rays beyond 90° (see the 'beyond 90°' case)."""
+    x = cv2.fisheye.undistortPoints(uv.reshape(-1, 1, 2), K, D).reshape(-1, 2)
+    rays = np.c_[x, np.ones(len(x))]
+    return rays / np.linalg.norm(rays, axis=1, keepdims=True)
+
+
+# Library-backed implementations: exercise id -> (function, cases it cannot answer and why).
+LIBRARY = {
+    "1.5": (ch1.cv_project, {}),
+    "1.6": (ch1.cv_undistort, {}),
+    "1.7": (ch1.cv_fisheye_project, {}),
+    "1.8": (cv_fisheye_unproject, {"beyond 90°": "OpenCV's normalised coordinates end at 90°"}),
+    "1.11": (ch1.cv_fix_distortion, {}),
+    "1.12": (ch1.cv_fix_extrinsics, {}),
+    "1.13": (ch1.cv_fix_principal_point, {}),
+    "1.18": (ch1.scipy_fit_focal_k1, {}),
+}
+
+
+def _show(result) -> str:
+    return f"\n{result}"
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("exercise_id", list(EXERCISES))
+def test_reference_gets_full_marks(exercise_id, seed):
+    ex = EXERCISES[exercise_id]
+    result = grade(ex, reference(ex), seed=seed)
+    assert result.passed and result.score == ex.points, _show(result)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("exercise_id", list(LIBRARY))
+def test_library_backed_implementation_passes(exercise_id, seed):
+    fn, cannot = LIBRARY[exercise_id]
+    result = grade(get(exercise_id), fn, seed=seed)
+    for row in result.cases:
+        if row.name in cannot:
+            assert not row.passed, f"expected OpenCV to fail '{row.name}' ({cannot[row.name]})"
+        else:
+            assert row.passed, _show(result)
+
+
+@pytest.mark.parametrize("exercise_id", [i for i, ex in EXERCISES.items() if ex.fallback is not None])
+def test_fallback_passes(exercise_id):
+    # Demo cells run on the fallback until the learner's version passes, so it must be right.
+    result = grade(EXERCISES[exercise_id], EXERCISES[exercise_id].fallback, seed=3)
+    assert result.passed, _show(result)
+
+
+@pytest.mark.parametrize("exercise_id, name, mutant, hint", MUTANTS, ids=[f"{m[0]}-{m[1]}" for m in MUTANTS])
+def test_mutant_is_caught(exercise_id, name, mutant, hint):
+    ex = EXERCISES[exercise_id]
+    for seed in SEEDS:
+        result = grade(ex, mutant, seed=seed)
+        assert result.score < ex.points, f"mutant '{name}' scored full marks with seed {seed}"
+        if hint:
+            assert any(hint in row.hint for row in result.cases), f"hint '{hint}' did not fire:{_show(result)}"
+
+
+def test_every_code_and_debug_exercise_has_three_mutants():
+    counts = {i: sum(m[0] == i for m in MUTANTS) for i, ex in EXERCISES.items() if ex.kind in ("code", "frontier")}
+    counts.update({i: sum(m[0] == i for m in MUTANTS) for i, ex in EXERCISES.items() if ex.kind == "debug"})
+    for exercise_id, n in counts.items():
+        minimum = 2 if EXERCISES[exercise_id].kind == "debug" else 3
+        assert n >= minimum, f"{exercise_id} has only {n} mutants"
+
+
+@pytest.mark.parametrize("exercise_id", [i for i, ex in EXERCISES.items() if ex.value])
+def test_value_hints_name_the_classic_slip(exercise_id):
+    ex = EXERCISES[exercise_id]
+    case = ex.cases(np.random.default_rng(0))[0]
+    for hint in ex.hints:
+        assert not hint.when(case, case.expected), f"{exercise_id}: hint fires on the right answer"
