@@ -35,12 +35,12 @@ def cv_project(X: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray,
 def cv_undistort(uv: np.ndarray, K: np.ndarray, dist: np.ndarray, iters: int = 20) -> np.ndarray:
     """OpenCV-backed `undistort_points`: (N, 2) pixels -> (N, 2) undistorted normalised coordinates.
 
-    Plain `cv2.undistortPoints` runs a fixed 5 iterations, too few for strong distortion at the
-    corners; `undistortPointsIter` with a tight criterion converges.
+    `cv2.undistortPoints` without `criteria` runs a fixed 5 iterations, too few for strong
+    distortion at the corners; with a tight criterion it converges.
     """
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, max(iters, 200), 1e-14)
-    x = cv2.undistortPointsIter(np.asarray(uv, float).reshape(-1, 1, 2), np.asarray(K, float),
-                                np.asarray(dist, float), None, None, criteria)
+    x = cv2.undistortPoints(np.asarray(uv, float).reshape(-1, 1, 2), np.asarray(K, float),
+                            np.asarray(dist, float), None, None, None, criteria)
     return x.reshape(-1, 2)
 
 
@@ -49,6 +49,19 @@ def cv_fisheye_project(X_c: np.ndarray, K: np.ndarray, D: np.ndarray) -> np.ndar
     uv, _ = cv2.fisheye.projectPoints(np.asarray(X_c, float).reshape(-1, 1, 3), np.zeros(3), np.zeros(3),
                                       np.asarray(K, float), np.asarray(D, float))
     return uv.reshape(-1, 2)
+
+
+def gt_fisheye_project(X_c: np.ndarray, K: np.ndarray, D: np.ndarray) -> np.ndarray:
+    """Ground-truth Kannala-Brandt projection with theta = atan2(r, z), valid past 90°.
+
+    cv2.fisheye.projectPoints computes theta = atan(r / z), which folds rays behind the lens
+    plane (z < 0) back in front; it is the oracle only below 90°.
+    """
+    X_c = np.asarray(X_c, float)
+    r = np.linalg.norm(X_c[:, :2], axis=1)
+    theta = np.arctan2(r, X_c[:, 2])
+    scale = np.divide(kb_theta_d(theta, np.asarray(D, float)), r, out=np.zeros_like(r), where=r > 0)
+    return (X_c[:, :2] * scale[:, None]) @ np.asarray(K, float)[:2, :2].T + np.asarray(K, float)[:2, 2]
 
 
 def kb_theta_d(theta: np.ndarray, D: np.ndarray) -> np.ndarray:
@@ -144,15 +157,17 @@ def scipy_fit_focal_k1(X_c: np.ndarray, uv: np.ndarray, cx: float, cy: float, f0
 # Each returns (case shown to the learner, hidden truth). The learner's fix is judged by
 # reprojection error on held-out points drawn from the same hidden truth.
 
-def _board_views(rng, K, n_views=6, dist=None):
-    """A 9x6 chessboard seen in several poses that together cover the image (corners included)."""
+def _board_views(rng, K, width, height):
+    """A 9x6 chessboard (4 cm squares) in nine poses whose centres sit on a 3x3 grid of the image,
+    corners included: the coverage a good calibration needs (and the seed's fix for warped edges)."""
     X_board = scene.chessboard(rows=6, cols=9, square=0.04)
     views = []
-    for _ in range(n_views):
-        R = scene.random_rotation(rng, max_angle_deg=30)
-        centre = np.array([rng.uniform(-0.5, 0.5), rng.uniform(-0.35, 0.35), rng.uniform(0.9, 1.4)])
-        t = centre - R @ X_board.mean(axis=0)
-        views.append((R, t))
+    for gx in (0.12, 0.5, 0.88):
+        for gy in (0.12, 0.5, 0.88):
+            depth = rng.uniform(0.8, 1.1)
+            centre = depth * np.linalg.solve(K, [gx * width, gy * height, 1.0])
+            R = scene.random_rotation(rng, max_angle_deg=25)
+            views.append((R, centre - R @ X_board.mean(axis=0)))
     return X_board, views
 
 
@@ -170,7 +185,7 @@ def debug_distortion(rng) -> tuple[dict, dict]:
     K = scene.random_intrinsics(rng, width=w, height=h, hfov_deg=(70, 90))
     dist_true = np.array([rng.uniform(-0.35, -0.2), rng.uniform(0.05, 0.12), 0, 0, 0])
     dist_file = np.array([rng.uniform(-0.08, -0.02), 0.0, 0, 0, 0])  # a narrow lens's numbers
-    X_board, views = _board_views(rng, K)
+    X_board, views = _board_views(rng, K, w, h)
     obs = [scene.add_noise(rng, cv_project(X_board, K, R, t, dist_true), 0.1) for R, t in views]
     case = {"K": K, "dist": dist_file, "X_board": X_board, "poses": views, "uv": obs, "image_size": (w, h)}
     return case, {"K": K, "dist": dist_true, "size": (w, h)}
@@ -305,8 +320,9 @@ def cv_fix_distortion(case: dict) -> np.ndarray:
 
 
 def cv_fix_extrinsics(case: dict) -> tuple[np.ndarray, np.ndarray]:
+    # solvePnP writes into the guess arrays: pass copies, never views of the case
     ok, rvec, tvec = cv2.solvePnP(case["X"], case["uv2"], case["K2"], None, _rvec(case["R"]),
-                                  case["t"].reshape(3, 1), useExtrinsicGuess=True,
+                                  case["t"].reshape(3, 1).copy(), useExtrinsicGuess=True,
                                   flags=cv2.SOLVEPNP_ITERATIVE)
     return cv2.Rodrigues(rvec)[0], tvec.ravel()
 
@@ -381,22 +397,29 @@ def cases_fisheye_project(rng) -> list[Case]:
         theta = np.radians(rng.uniform(0, theta_max, n))
         phi = rng.uniform(-np.pi, np.pi, n)
         rays = np.c_[np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)]
+        if theta_max > 90:
+            theta[: n // 2] = np.radians(rng.uniform(90.5, theta_max, n // 2))
+            rays = np.c_[np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)]
         X_c = rays * rng.uniform(0.5, 10, (n, 1))
+        oracle = gt_fisheye_project if theta_max > 90 else cv_fisheye_project  # OpenCV stops at 90°
         # 1e-6 px: the same closed form in float64 on both sides.
-        out.append(Case(name, (X_c, K, D), cv_fisheye_project(X_c, K, D), max_distance, 1e-6, "px", shape=(n, 2)))
+        out.append(Case(name, (X_c, K, D), oracle(X_c, K, D), max_distance, 1e-6, "px", shape=(n, 2)))
     return out
 
 
 def cases_fisheye_unproject(rng) -> list[Case]:
     out = []
-    for name, theta_max, n in [("within 60°", 60, 100), ("up to 85°", 85, 200), ("beyond 90°", 95, 100)]:
+    # OpenCV's fisheye.undistortPoints clamps theta_d to 90°, which real lenses reach near
+    # theta = 80°: the last case (80°-95°) is beyond what OpenCV can answer.
+    for name, theta_min, theta_max, n in [("within 60°", 0, 60, 100), ("up to 75°", 0, 75, 200),
+                                          ("80° to 95° (past 90°)", 80, 95, 100)]:
         K, D = scene.random_fisheye(rng)
-        theta = np.radians(rng.uniform(0, theta_max, n))
+        theta = np.radians(rng.uniform(theta_min, theta_max, n))
         if theta_max > 90:
             theta[: n // 2] = np.radians(rng.uniform(90.5, theta_max, n // 2))
         phi = rng.uniform(-np.pi, np.pi, n)
         rays = np.c_[np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)]
-        uv = cv_fisheye_project(rays, K, D)
+        uv = gt_fisheye_project(rays, K, D)  # cv2.fisheye folds rays past 90°
         # 1e-4°: ~0.0006 px at a fisheye's ~6 px/° — converged Newton gives ~1e-10°.
         out.append(Case(name, (uv, K, D), rays, max_angle_deg, 1e-4, "°", shape=(n, 3), convert=_unit_rays))
     return out
@@ -642,7 +665,7 @@ register(
     Exercise("1.6", "Iterative undistortion that converges", "undistort_points", "code", 4,
              cases_undistort, UNDISTORT_HINTS, fallback=cv_undistort, arg_names=("uv", "K", "dist")),
     Exercise("1.7", "Kannala-Brandt fisheye projection", "fisheye_project", "code", 3,
-             cases_fisheye_project, FISHEYE_PROJECT_HINTS, fallback=cv_fisheye_project, arg_names=("X_c", "K", "D")),
+             cases_fisheye_project, FISHEYE_PROJECT_HINTS, fallback=gt_fisheye_project, arg_names=("X_c", "K", "D")),
     Exercise("1.8", "Kannala-Brandt unprojection to rays", "fisheye_unproject", "code", 3,
              cases_fisheye_unproject, FISHEYE_UNPROJECT_HINTS, fallback=gt_fisheye_unproject, arg_names=("uv", "K", "D")),
     Exercise("1.9", "Camera-frame conventions", "frame_change", "code", 3,

@@ -55,12 +55,15 @@ class Hint:
     when: Callable[[Case, Any], bool]
 
 
-def like(bug: Callable[[Case], Any], text: str, factor: float = 1.0) -> Hint:
-    """A hint that fires when the output matches what the mistake `bug(case)` would return."""
+def like(bug: Callable[[Case], Any], text: str, factor: float = 1.0, rel: float = 1e-9) -> Hint:
+    """A hint that fires when the output matches what the mistake `bug(case)` would return:
+    within the case's tolerance (times `factor`), plus `rel` of the bug's own magnitude, since
+    some mistakes produce values so large (1e14 px) that float rounding alone exceeds 1e-6 px."""
 
     def when(case: Case, out: Any) -> bool:
         try:
-            return case.metric(out, bug(case)) <= factor * case.tol
+            wrong = bug(case)
+            return case.metric(out, wrong) <= factor * case.tol + rel * float(np.max(np.abs(wrong)))
         except Exception:  # a hint model that does not apply to this output is simply silent
             return False
 

@@ -28,8 +28,9 @@ def reference(ex) -> object:
 
 def cv_fisheye_unproject(uv, K, D):
     """OpenCV-backed unprojection: cv2.fisheye.undistortPoints gives tan θ-scaled coordinates,
-    which cannot represent rays beyond 90° (see the 'beyond 90°' case)."""
-    x = cv2.fisheye.undistortPoints(uv.reshape(-1, 1, 2), K, D).reshape(-1, 2)
+    which cannot represent rays beyond 90°, and it clamps theta_d to 90° (reached near θ = 80°)."""
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)  # default stops at 1e-8·10 steps
+    x = cv2.fisheye.undistortPoints(uv.reshape(-1, 1, 2), K, D, None, None, None, criteria).reshape(-1, 2)
     rays = np.c_[x, np.ones(len(x))]
     return rays / np.linalg.norm(rays, axis=1, keepdims=True)
 
@@ -38,13 +39,21 @@ def cv_fisheye_unproject(uv, K, D):
 LIBRARY = {
     "1.5": (ch1.cv_project, {}),
     "1.6": (ch1.cv_undistort, {}),
-    "1.7": (ch1.cv_fisheye_project, {}),
-    "1.8": (cv_fisheye_unproject, {"beyond 90°": "OpenCV's normalised coordinates end at 90°"}),
+    "1.7": (ch1.cv_fisheye_project, {"beyond 90° (behind the lens plane)": "OpenCV uses atan(r/z), not atan2"}),
+    "1.8": (cv_fisheye_unproject, {"80° to 95° (past 90°)": "OpenCV clamps theta_d at 90° and its tan θ "
+                                                             "coordinates cannot express rays past 90°"}),
     "1.11": (ch1.cv_fix_distortion, {}),
     "1.12": (ch1.cv_fix_extrinsics, {}),
     "1.13": (ch1.cv_fix_principal_point, {}),
     "1.18": (ch1.scipy_fit_focal_k1, {}),
 }
+
+
+def test_ground_truth_fisheye_agrees_with_opencv_below_90_degrees():
+    rng = np.random.default_rng(0)
+    K, D = ch1.scene.random_fisheye(rng)
+    X_c = rng.normal(size=(500, 3)) * [1, 1, 0] + [0, 0, 1] * rng.uniform(0.05, 3, (500, 1))
+    assert np.abs(ch1.gt_fisheye_project(X_c, K, D) - ch1.cv_fisheye_project(X_c, K, D)).max() < 1e-9
 
 
 def _show(result) -> str:

@@ -1,0 +1,161 @@
+"""Notebook conventions, the solved run, and the shell grader on real notebooks.
+
+nbval (configured in pyproject) runs every notebook with its stubs untouched; here we check how the
+notebooks are stored, run each one with its stubs replaced by the reference solutions, and grade
+notebooks from the shell as an instructor would.
+"""
+from __future__ import annotations
+
+import ast
+import importlib
+import json
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import nbformat
+import pytest
+from nbclient import NotebookClient
+
+ROOT = Path(__file__).resolve().parents[1]
+NOTEBOOKS = sorted((ROOT / "notebooks").glob("[0-9][0-9]_*.ipynb"))
+# Where the reference answers of each chapter live (instructor-only package).
+SOLUTION_MODULES = {
+    "01": ["solutions.camera_models", "solutions.camera_debug", "solutions.camera_questions"],
+}
+BUDGET_S = 60.0
+PLOT_CALL = re.compile(r"\b(plt|ax|axes|fig)\.\w*(plot|imshow|scatter|quiver|hist|bar|contour)\w*\(")
+
+
+def _cells(path):
+    return nbformat.read(path, as_version=4).cells
+
+
+def _tags(cell):
+    return set(cell.get("metadata", {}).get("tags", []))
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
+def test_stored_without_outputs(path):
+    dirty = [i for i, c in enumerate(_cells(path), 1)
+             if c.cell_type == "code" and (c.get("outputs") or c.get("execution_count") is not None)]
+    assert not dirty, f"{path.name}: code cells {dirty} have outputs; run `make clean-notebooks`"
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
+def test_cell_conventions(path):
+    problems = []
+    cells = _cells(path)
+    for i, c in enumerate(cells, 1):
+        if c.cell_type != "code":
+            continue
+        src, tags = c.source, _tags(c)
+        if ("interact" in src or "widgets." in src) and not {"widget", "nbval-ignore-output"} <= tags:
+            problems.append(f"cell {i}: widget cell without tags widget + nbval-ignore-output")
+        if PLOT_CALL.search(src) and "plt.show()" not in src.strip().splitlines()[-1] and "widget" not in tags:
+            problems.append(f"cell {i}: draws a plot but does not end with plt.show()")
+        if "stub" in tags and not re.match(r"# (EXERCISE|QUESTION) \d+\.\d+", src):
+            problems.append(f"cell {i}: stub cell must start with '# EXERCISE n.m' or '# QUESTION n.m'")
+        if "check" in tags and not re.search(r"^check\(\"\d+\.\d+\", \w+\)\s*$", src.strip().splitlines()[-1]):
+            problems.append(f"cell {i}: check cell must end with check(\"n.m\", name)")
+        if re.search(r"^(\w+)\s*=\s*use\(\"[\d.]+\",\s*\1\)", src, re.M):
+            problems.append(f"cell {i}: rebinds the learner's name to use(...); use a new name")
+    assert not problems, "\n".join(problems)
+
+
+def _solved(path: Path) -> nbformat.NotebookNode:
+    """The notebook with every stub cell replaced by imports of the reference answers."""
+    nb = nbformat.read(path, as_version=4)
+    modules = [importlib.import_module(m) for m in SOLUTION_MODULES[path.name[:2]]]
+    for cell in nb.cells:
+        if "stub" not in _tags(cell):
+            continue
+        names = [n.name if isinstance(n, ast.FunctionDef) else n.targets[0].id
+                 for n in ast.parse(cell.source).body if isinstance(n, (ast.FunctionDef, ast.Assign))]
+        lines = []
+        for name in names:
+            module = next(m for m in modules if hasattr(m, name))
+            lines.append(f"from {module.__name__} import {name}")
+        cell.source = "\n".join(lines)
+    return nb
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
+def test_solved_notebook_passes_every_check_in_budget(path, tmp_path):
+    nb = _solved(path)
+    start = time.perf_counter()
+    NotebookClient(nb, timeout=BUDGET_S, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}).execute()
+    seconds = time.perf_counter() - start
+    print(f"{path.name} with reference solutions: {seconds:.1f} s")
+    verdicts = []
+    for cell in nb.cells:
+        if "check" in _tags(cell):
+            text = "".join(o.get("data", {}).get("text/plain", "") + o.get("text", "") for o in cell.outputs)
+            verdicts.append((cell.source.strip().splitlines()[-1], text))
+    assert verdicts, "no check cells found"
+    failing = [(call, text[:300]) for call, text in verdicts if "✔ passed" not in text]
+    assert not failing, failing
+    assert seconds < BUDGET_S
+
+
+def _grade(file: Path, out_json: Path, *extra: str) -> dict:
+    proc = subprocess.run([sys.executable, "-m", "graders", "check", str(file), "--json", str(out_json), *extra],
+                          capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads(out_json.read_text())
+    assert {"score", "max_score", "tests"} <= doc.keys()
+    for test in doc["tests"]:
+        assert {"name", "score", "max_score", "status", "output", "visibility"} <= test.keys()
+    return doc
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
+def test_shell_grader_on_untouched_notebook(path, tmp_path):
+    before = path.read_bytes()
+    doc = _grade(path, tmp_path / "r.json")
+    assert doc["score"] == 0 and doc["max_score"] > 0
+    assert all("not attempted" in t["output"] for t in doc["tests"]), [t["output"] for t in doc["tests"]]
+    assert path.read_bytes() == before  # grading never edits the learner's notebook
+
+
+def test_shell_grader_on_solved_notebook(tmp_path):
+    path = ROOT / "notebooks" / "01_camera_models.ipynb"
+    solved = tmp_path / path.name
+    nbformat.write(_solved(path), solved)
+    doc = _grade(solved, tmp_path / "r.json")
+    assert doc["score"] == doc["max_score"], [t["output"] for t in doc["tests"] if t["score"] < t["max_score"]]
+
+
+def test_shell_grader_survives_hostile_code(tmp_path):
+    learner = tmp_path / "01_camera_models.py"
+    learner.write_text(
+        "import os, sys, time\n"
+        "def project_points(X, K, R, t, dist=None):\n"
+        "    os._exit(3)\n"
+        "def undistort_points(uv, K, dist):\n"
+        "    time.sleep(1000)\n"
+        "def fisheye_project(X_c, K, D):\n"
+        "    sys.exit(1)\n"
+        "def frame_change(src, dst):\n"
+        "    print('x' * 10_000_000)\n"
+        "    return None\n"
+        "pixel_1_1 = [480, 560]\n"
+        "plot_something_expensive()\n"  # not a definition: never run by the grader
+    )
+    doc = _grade(learner, tmp_path / "r.json", "--only", "1.1,1.5,1.6,1.7,1.9", "--hard-limit", "8")
+    out = {t["name"].split()[0]: t for t in doc["tests"]}
+    assert out["1.1"]["score"] == 1
+    assert "exit status 3" in out["1.5"]["output"]
+    assert "time limit" in out["1.6"]["output"] or "stopped" in out["1.6"]["output"]
+    assert "sys.exit" in out["1.7"]["output"]
+    assert "None" in out["1.9"]["output"] and len(out["1.9"]["output"]) < 20_000
+
+
+def test_shell_grader_when_code_does_not_load(tmp_path):
+    learner = tmp_path / "01_camera_models.py"
+    learner.write_text("import not_a_module_anyone_has\n\ndef project_points(X, K, R, t, dist=None):\n    return X\n")
+    doc = _grade(learner, tmp_path / "r.json")
+    assert doc["score"] == 0
+    assert all("failed to load" in t["output"] for t in doc["tests"])
