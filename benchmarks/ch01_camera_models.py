@@ -42,7 +42,7 @@ def run() -> list[dict]:
     tasks = [
         ("project_points (strong dist.)", lambda: ref.project_points(X, K, R, t, dist),
          lambda: ch1.cv_project(X, K, R, t, dist), max_distance, "px"),
-        ("undistort_points vs undistortPointsIter", lambda: ref.undistort_points(uv, K, dist),
+        ("undistort_points (OpenCV with tight criteria)", lambda: ref.undistort_points(uv, K, dist),
          lambda: ch1.cv_undistort(uv, K, dist), lambda a, b: K[0, 0] * max_distance(a, b), "px"),
         ("fisheye_project", lambda: ref.fisheye_project(rays, Kf, D),
          lambda: ch1.cv_fisheye_project(rays, Kf, D), max_distance, "px"),

@@ -6,13 +6,14 @@ hidden calibrations for the DEBUG cases). Conventions: docs/CONVENTIONS.md.
 """
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Any
 
 import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from . import scene
+from . import datasets, scene
 from .compare import max_abs, max_angle_deg, max_distance, relative
 from .engine import Case, Exercise, Hint, OutputError, as_array, like, register
 
@@ -371,8 +372,31 @@ def cases_project_points(rng) -> list[Case]:
     return out
 
 
+@lru_cache(maxsize=1)
+def real_chessboard_corners() -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Corners detected in OpenCV's 13 real left chessboard views, with OpenCV's calibration of
+    that camera: (uv: (N, 2) pixels, K, dist), or None when the dataset is not available."""
+    if not datasets.available("chessboard"):
+        return None
+    calib = datasets.load_chessboard_intrinsics()
+    corners = []
+    for p in datasets.chessboard_images("left"):
+        gray = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
+        found, c = cv2.findChessboardCorners(gray, calib["pattern_size"])
+        if found:
+            criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 1e-3)
+            corners.append(cv2.cornerSubPix(gray, c, (11, 11), (-1, -1), criteria).reshape(-1, 2))
+    return np.concatenate(corners).astype(float), calib["K"], calib["dist"]
+
+
 def cases_undistort(rng) -> list[Case]:
     out = []
+    real = real_chessboard_corners()
+    if real is not None:
+        uv, K, dist = real
+        # Real lens, real corners: OpenCV (converged) is the oracle; 0.01 px as below.
+        out.append(Case("real chessboard corners (OpenCV sample, 13 views)", (uv, K, dist), cv_undistort(uv, K, dist),
+                        (lambda fx: lambda a, b: fx * max_distance(a, b))(K[0, 0]), 0.01, "px", shape=uv.shape))
     for name, strength, n in [("mild radial", "mild", 100), ("strong radial, corners included", "strong", 400),
                               ("tangential terms", "tangential", 200)]:
         w, h = 1280, 960

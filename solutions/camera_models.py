@@ -163,16 +163,30 @@ def fisheye_unproject(uv: np.ndarray, K: np.ndarray, D: np.ndarray, iters: int =
     """Kannala-Brandt unprojection of pixels to unit bearing vectors (camera frame).
 
     uv: (N, 2) pixels; K: (3, 3); D: (4,). Returns rays: (N, 3), unit length, possibly with Z < 0
-    (beyond 90 deg). Newton on theta_d(theta) = |K^-1 uv|, started at theta = theta_d (exact for
-    D = 0); theta_d is increasing for a real lens, so Newton converges in a handful of steps.
+    (beyond 90 deg). Solves theta_d(theta) = |K^-1 uv| for theta by Newton, started at
+    theta = theta_d (exact for D = 0) and safeguarded by bisection.
+
+    Why the safeguard: theta_d(theta) rises only up to the lens's maximum angle; past it the
+    polynomial turns over. With k1 > 0, theta_d > theta, so the start can lie past the turnover for
+    pixels near the image circle's rim (e.g. a ray at 107 deg); there the slope is negative and plain
+    Newton walks to a spurious root (128 deg). Points with slope <= 0 therefore shrink the bracket
+    from above, and any Newton step that leaves the bracket [lo, hi] is replaced by bisection.
     """
     a = _pixels_to_normalised(np.asarray(uv, float), K)  # (N, 2): theta_d along the azimuth
     theta_d = np.linalg.norm(a, axis=1)
     theta = theta_d.copy()
+    lo, hi = np.zeros_like(theta), np.full_like(theta, np.pi)  # a ray's angle to the axis is in [0, pi]
     for _ in range(iters):
-        step = (_kb_theta_d(theta, D) - theta_d) / _kb_dtheta_d(theta, D)
-        theta = np.clip(theta - step, 0.0, np.pi)  # a ray's angle to the axis lies in [0, pi]
-        if np.all(np.abs(step) <= 1e-15 * (1 + theta)):
+        res, slope = _kb_theta_d(theta, D) - theta_d, _kb_dtheta_d(theta, D)
+        rising = slope > 0  # on the lens's valid, increasing branch
+        lo = np.where(rising & (res < 0), theta, lo)
+        hi = np.where(~rising | (res > 0), theta, hi)
+        newton = theta - res / np.where(rising, slope, 1.0)
+        theta_new = np.where(rising & (newton >= lo) & (newton <= hi), newton, 0.5 * (lo + hi))
+        theta_new = np.where(res == 0, theta, theta_new)  # exact root: stay
+        done = np.all(np.abs(theta_new - theta) <= 1e-15 * (1 + theta))
+        theta = theta_new
+        if done:
             break
     # Direction in the image plane is a / |a|; on the axis (theta_d = 0) any direction will do.
     azimuth = np.divide(a, theta_d[:, None], out=np.zeros_like(a), where=theta_d[:, None] > 0)

@@ -283,6 +283,18 @@ def test_fisheye_unproject_recovers_rays(seed):
     assert _angle_deg(out, rays).max() < 1e-9
 
 
+def test_fisheye_unproject_near_the_rim_of_a_lens_with_positive_k1():
+    """theta_d > theta when k1 > 0: for rays past ~106 deg the start theta = theta_d lies beyond the
+    polynomial's turnover (slope < 0), where plain Newton walks to a spurious root ~20 deg off."""
+    f = (W / 2) / np.radians(95)
+    K = np.array([[f, 0, (W - 1) / 2], [0, f, (H - 1) / 2], [0, 0, 1]])
+    D = np.array([0.06, 0.0036, -0.0023, -0.00027])
+    assert np.all(np.diff(_kb_theta_d(np.linspace(0, np.radians(110), 1000), D)) > 0)  # a valid lens
+    rays, theta, phi = _rays(np.random.default_rng(0), 200, (100, 110))
+    # Tolerance as in test_fisheye_unproject_recovers_rays.
+    assert _angle_deg(fisheye_unproject(_kb_truth(theta, phi, K, D), K, D), rays).max() < 1e-9
+
+
 @pytest.mark.parametrize("seed", SEEDS)
 def test_fisheye_unproject_matches_opencv(seed):
     rng = np.random.default_rng(seed)
