@@ -78,6 +78,8 @@ class ExerciseResult:
             lines.append("  model answer: " + self.explanation)
         return "\n".join(lines)
 
+    __repr__ = __str__  # a notebook's plain-text view (and nbval) shows the table, not the fields
+
     def _repr_html_(self) -> str:
         colour = {"passed": "#1a7f37", "partial": "#9a6700", "failed": "#cf222e",
                   "not_attempted": "#57606a", "error": "#cf222e"}[self.status]
