@@ -65,21 +65,29 @@ def test_cell_conventions(path):
     assert not problems, "\n".join(problems)
 
 
-def _solved(path: Path) -> nbformat.NotebookNode:
-    """The notebook with every stub cell replaced by imports of the reference answers."""
+def _replace_stubs(path: Path, source_for) -> nbformat.NotebookNode:
+    """The notebook with each stub cell's names defined by `source_for(name)` (or left as is: None)."""
     nb = nbformat.read(path, as_version=4)
-    modules = [importlib.import_module(m) for m in SOLUTION_MODULES[path.name[:2]]]
     for cell in nb.cells:
         if "stub" not in _tags(cell):
             continue
         names = [n.name if isinstance(n, ast.FunctionDef) else n.targets[0].id
                  for n in ast.parse(cell.source).body if isinstance(n, (ast.FunctionDef, ast.Assign))]
-        lines = []
-        for name in names:
-            module = next(m for m in modules if hasattr(m, name))
-            lines.append(f"from {module.__name__} import {name}")
-        cell.source = "\n".join(lines)
+        sources = [source_for(name) for name in names]
+        if all(sources):
+            cell.source = "\n".join(sources)
     return nb
+
+
+def _solved(path: Path) -> nbformat.NotebookNode:
+    """The notebook with every stub cell replaced by imports of the reference answers."""
+    modules = [importlib.import_module(m) for m in SOLUTION_MODULES[path.name[:2]]]
+
+    def source_for(name):
+        module = next(m for m in modules if hasattr(m, name))
+        return f"from {module.__name__} import {name}"
+
+    return _replace_stubs(path, source_for)
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
@@ -126,6 +134,31 @@ def test_shell_grader_on_solved_notebook(tmp_path):
     nbformat.write(_solved(path), solved)
     doc = _grade(solved, tmp_path / "r.json")
     assert doc["score"] == doc["max_score"], [t["output"] for t in doc["tests"] if t["score"] < t["max_score"]]
+
+
+# Chapter 1 stubs answered by OpenCV (or scipy where a fix is a fit): every exercise OpenCV can
+# answer gets full marks; OpenCV's fisheye model stops at 90°, which costs exactly those cases.
+OPENCV_STUBS_CH01 = {
+    "project_points": "from graders.ch01_camera_models import cv_project as project_points",
+    "undistort_points": "from graders.ch01_camera_models import cv_undistort as undistort_points",
+    "fisheye_project": "from graders.ch01_camera_models import cv_fisheye_project as fisheye_project",
+    "fix_distortion": "from graders.ch01_camera_models import cv_fix_distortion as fix_distortion",
+    "fix_extrinsics": "from graders.ch01_camera_models import cv_fix_extrinsics as fix_extrinsics",
+    "fix_principal_point": "from graders.ch01_camera_models import cv_fix_principal_point as fix_principal_point",
+    "fit_focal_k1": "from graders.ch01_camera_models import scipy_fit_focal_k1 as fit_focal_k1",
+}
+
+
+def test_shell_grader_on_opencv_notebook(tmp_path):
+    path = ROOT / "notebooks" / "01_camera_models.ipynb"
+    nb = _replace_stubs(path, OPENCV_STUBS_CH01.get)
+    nbformat.write(nb, tmp_path / path.name)
+    doc = _grade(tmp_path / path.name, tmp_path / "r.json", "--seed", "11")
+    by_id = {t["name"].split()[0]: t for t in doc["tests"]}
+    for exercise_id in ("1.5", "1.6", "1.11", "1.12", "1.13", "1.18"):
+        assert by_id[exercise_id]["score"] == by_id[exercise_id]["max_score"], by_id[exercise_id]["output"]
+    fisheye = by_id["1.7"]["output"]
+    assert by_id["1.7"]["score"] == 2 and "beyond 90°" in fisheye and "FAIL" in fisheye, fisheye
 
 
 def test_shell_grader_survives_hostile_code(tmp_path):
