@@ -136,6 +136,8 @@ def as_array(out: Any, case: Case) -> np.ndarray:
     """Default conversion: a finite float array of exactly `case.shape`."""
     if out is None:
         raise OutputError("returned None: is a `return` missing?")
+    if np.iscomplexobj(out):
+        raise OutputError("returned complex numbers: a square root or eigenvalue of a negative value?")
     try:
         arr = np.asarray(out, dtype=float)
     except Exception:

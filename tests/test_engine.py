@@ -45,6 +45,8 @@ def test_not_implemented_is_not_attempted():
     (lambda x: None, "failed", "return"),
     (lambda x: "a string", "failed", "numeric array"),
     (lambda x: sys.exit(3), "failed", "sys.exit"),
+    (lambda x: (2 * x).astype(complex), "failed", "complex"),
+    (lambda x: [[1, 2], [3]], "failed", "numeric array"),
     (lambda x: 3 * x, "failed", "tripled instead of doubled?"),
 ])
 def test_failures_are_explained(learner, status, phrase):
