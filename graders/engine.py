@@ -136,10 +136,13 @@ def as_array(out: Any, case: Case) -> np.ndarray:
     """Default conversion: a finite float array of exactly `case.shape`."""
     if out is None:
         raise OutputError("returned None: is a `return` missing?")
-    if np.iscomplexobj(out):
-        raise OutputError("returned complex numbers: a square root or eigenvalue of a negative value?")
     try:
-        arr = np.asarray(out, dtype=float)
+        raw = np.asarray(out)
+        if np.iscomplexobj(raw):
+            raise OutputError("returned complex numbers: a square root or eigenvalue of a negative value?")
+        arr = raw.astype(float)
+    except OutputError:
+        raise
     except Exception:
         raise OutputError(f"returned a {type(out).__name__}, expected a numeric array") from None
     if case.shape is not None and arr.shape != tuple(case.shape):
