@@ -163,7 +163,7 @@ def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None) -> ExerciseRe
     """Judge `fn_or_value` on fresh hidden cases drawn with `seed` (random if None). Never raises."""
     seed = secrets.randbits(32) if seed is None else int(seed)
     result = ExerciseResult(id=ex.id, title=ex.title, name=ex.name, kind=ex.kind,
-                            max_score=ex.points, seed=seed)
+                            max_score=ex.points, seed=seed, replayable=not ex.value)
     if ex.value:
         if _not_attempted(fn_or_value):
             result.status, result.message = "not_attempted", f"`{ex.name}` is still None: not attempted"

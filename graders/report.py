@@ -45,6 +45,7 @@ class ExerciseResult:
     message: str = ""
     explanation: str = ""
     cases: list[CaseResult] = field(default_factory=list)
+    replayable: bool = True  # False for fixed questions: no hidden draw to replay
 
     @property
     def passed(self) -> bool:
@@ -52,10 +53,10 @@ class ExerciseResult:
 
     def headline(self) -> str:
         return (f"[{self.id}] {self.title} ({self.kind.upper()}, `{self.name}`): "
-                f"{STATUS_MARK[self.status]} — {self.score:g}/{self.max_score:g} points")
+                f"{STATUS_MARK[self.status]} — {self.score:.3g}/{self.max_score:g} points")
 
     def footer(self) -> str:
-        if self.status in ("partial", "failed"):
+        if self.status in ("partial", "failed") and self.replayable:
             return (f"hidden cases drawn with seed={self.seed}; reproduce with "
                     f"check(\"{self.id}\", {self.name}, seed={self.seed})")
         return ""
