@@ -516,11 +516,10 @@ def cases_fit_focal_k1(rng) -> list[Case]:
         truth = {"f": K[0, 0], "k1": k1, "c": K[:2, 2]}
 
         def metric(out, truth, x=x):
+            # the fitted model against the noise-free truth, on the same rays
             f, k = out
-            grid = x  # the same rays; error of the fitted model against the noise-free truth
-            pred = f * (1 + k * np.sum(grid ** 2, 1, keepdims=True)) * grid
-            true = truth["f"] * (1 + truth["k1"] * np.sum(grid ** 2, 1, keepdims=True)) * grid
-            return _rms_px(pred, true)
+            r2 = np.sum(x ** 2, 1, keepdims=True)
+            return _rms_px(f * (1 + k * r2) * x, truth["f"] * (1 + truth["k1"] * r2) * x)
 
         # 0.1 px RMS: the least-squares fit of 2 parameters to 200 points with 0.2 px noise is off by
         # ~0.02 px; stopping far from the optimum or a wrong model gives several px.
@@ -531,10 +530,6 @@ def cases_fit_focal_k1(rng) -> list[Case]:
 
 # ============================================================ hint models ====
 # Each hint recognises a known mistake by computing what that mistake would return.
-
-def _pp_args(case):
-    return case.args  # (X, K, R, t, dist)
-
 
 def _bug_R_transposed(case):
     X, K, R, t, dist = case.args
