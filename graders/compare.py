@@ -48,3 +48,33 @@ def up_to_scale(A: np.ndarray, B: np.ndarray) -> float:
     a = np.ravel(A) / np.linalg.norm(A)
     b = np.ravel(B) / np.linalg.norm(B)
     return float(min(np.linalg.norm(a - b), np.linalg.norm(a + b)))
+
+
+def sampson_rms_px(F: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> float:
+    """RMS Sampson distance in pixels of correspondences x1 <-> x2: (N, 2) under F: (3, 3).
+
+    The Sampson distance |x2h^T F x1h| / |(F x1h)_12, (F^T x2h)_12| is the first-order geometric
+    (reprojection) error of a match; it judges an F by what it predicts on held-out matches, which
+    is scale- and sign-free, unlike comparing entries. Its square is cv2.sampsonDistance.
+    """
+    x1h = np.c_[np.asarray(x1, float), np.ones(len(x1))]
+    x2h = np.c_[np.asarray(x2, float), np.ones(len(x2))]
+    F = np.asarray(F, float)
+    Fx1, Ftx2 = x1h @ F.T, x2h @ F
+    num = np.sum(x2h * Fx1, axis=1)
+    den = Fx1[:, 0] ** 2 + Fx1[:, 1] ** 2 + Ftx2[:, 0] ** 2 + Ftx2[:, 1] ** 2
+    return float(np.sqrt(np.mean(num ** 2 / np.maximum(den, 1e-300)))) if len(x1h) else 0.0
+
+
+def unordered(A: list, B: list, metric) -> float:
+    """Distance between two collections whose order means nothing (the real solutions of a minimal
+    solver, the four decompositions of E): the largest `metric` over the one-to-one pairing that
+    minimises the total (Hungarian assignment). Both must have the same length (ValueError if not)."""
+    from scipy.optimize import linear_sum_assignment
+    if len(A) != len(B):
+        raise ValueError(f"{len(A)} elements against {len(B)}")
+    if not len(A):
+        return 0.0
+    cost = np.array([[metric(a, b) for b in B] for a in A], float)
+    rows, cols = linear_sum_assignment(cost)
+    return float(cost[rows, cols].max())

@@ -34,6 +34,10 @@ class Case:
     metric(output, expected) -> error (float, in `unit`); the case passes if error <= tol.
     shape: the required output shape (None: do not check). `check` may replace `convert`:
     it turns the raw output into the form the metric expects and raises OutputError otherwise.
+    call: optional; how to call the learner's function when `fn(*args, **kwargs)` is not enough:
+    `call(fn)` runs it inside grader machinery (e.g. the learner's solver inside the grader's
+    RANSAC, or the learner's RANSAC with a callback that counts samples) and returns the output.
+    It runs under the same sandbox (time limit, captured output, exceptions reported).
     """
     name: str
     args: tuple
@@ -46,6 +50,7 @@ class Case:
     weight: float = 1.0
     convert: Callable[[Any, "Case"], Any] | None = None
     info: dict = field(default_factory=dict)  # anything hints need (e.g. the scene)
+    call: Callable[[Callable], Any] | None = None
 
 
 @dataclass
@@ -103,6 +108,9 @@ class Exercise:
 _REGISTRY: dict[str, Exercise] = {}
 CHAPTER_MODULES = {  # chapter number -> module that defines its exercises
     "1": "graders.ch01_camera_models",
+    "2": "graders.ch02_epipolar",
+    "3": "graders.ch03_features",
+    "5": "graders.ch05_bundle_adjustment",
 }
 
 
@@ -200,7 +208,8 @@ def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None) -> ExerciseRe
 
 def _judge_case(ex: Exercise, fn: Callable, case: Case) -> CaseResult | None:
     row = CaseResult(name=case.name, tol=case.tol, unit=case.unit)
-    outcome = safe_call(fn, case.args, case.kwargs, timeout=ex.timeout, names=ex.arg_names)
+    target = fn if case.call is None else (lambda *args, **kwargs: case.call(fn))
+    outcome = safe_call(target, case.args, case.kwargs, timeout=ex.timeout, names=ex.arg_names)
     if outcome.kind == "not_implemented":
         return None
     row.stdout = outcome.stdout + (f"\n… {outcome.stdout_truncated} more characters of output dropped"
