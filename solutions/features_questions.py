@@ -1,0 +1,21 @@
+"""Chapter 3 — answers to the CONCEPT and DESIGN questions, computed from their formulas."""
+import numpy as np
+
+# 3.1  eigenvalues (250, 180), (300, 2), (0.6, 0.3): both large, one large, both small
+patch_types = ["corner", "edge", "flat"]
+
+# 3.2  M = [[12, 3], [3, 8]], k = 0.04: R = det M - k tr(M)^2
+_M = np.array([[12.0, 3.0], [3.0, 8.0]])
+harris_R = float(np.linalg.det(_M) - 0.04 * np.trace(_M) ** 2)
+
+# 3.3  SIFT: 128 float32; ORB: 256 bits
+descriptor_bytes = [128 * 4, 256 // 8]
+
+# 3.4  N x N x D multiply-adds
+flops_per_pair = 2000 * 2000 * 128
+
+# 3.17  100 images exhaustive: N (N - 1) / 2 pairs, each 2000 x 2000 x 128
+exhaustive_100 = [100 * 99 / 2, 100 * 99 / 2 * 2000 * 2000 * 128]
+
+# 3.18  10k exhaustive, 10k with top-50 retrieval, 1M with top-20 learned retrieval
+pairs_at_scale = [10_000 * 9_999 / 2, 10_000 * 50, 1_000_000 * 20]

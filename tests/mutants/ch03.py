@@ -1,0 +1,334 @@
+"""Chapter 3 mutant catalogue: realistic wrong implementations, one per known mistake.
+
+Each entry is (exercise id, short name, function, hint fragment or None). The grader must take
+points off every one of them; where a hint exists for the mistake it must fire. They are built
+from the reference with one thing broken (no NMS, (row, col) output, no orientation, Hamming on
+bytes, ratio inverted or squared, ...), the mistakes of the chapter's DEBUG material.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+from solutions import features as F
+
+
+# ----------------------------------------------------------------- 3.5 detect_corners
+
+def corners_no_nms(img, n=500, method="harris", k=0.04, sigma=1.5, radius=3):
+    Sxx, Sxy, Syy = F.structure_tensor(img, sigma)
+    R = Sxx * Syy - Sxy ** 2 - k * (Sxx + Syy) ** 2
+    R[:8], R[-8:], R[:, :8], R[:, -8:] = 0, 0, 0, 0
+    idx = np.argsort(-R.ravel())[:n]  # the strongest pixels: clumps around every corner
+    ys, xs = np.unravel_index(idx, R.shape)
+    return np.c_[xs, ys].astype(float)
+
+
+def corners_row_col(img, n=500, method="harris", **kw):
+    return F.detect_corners(img, n, method, **kw)[:, ::-1]  # np.argwhere order (y, x)
+
+
+def corners_threshold_only(img, n=500, method="harris", k=0.04, sigma=1.5, radius=3):
+    # the seed's sketch: R > 0.01 R.max(), no NMS, then the first n in raster order
+    Sxx, Sxy, Syy = F.structure_tensor(img, sigma)
+    R = Sxx * Syy - Sxy ** 2 - k * (Sxx + Syy) ** 2
+    R[:8], R[-8:], R[:, :8], R[:, -8:] = 0, 0, 0, 0
+    return np.argwhere(R > 0.01 * R.max())[:, ::-1][:n].astype(float)
+
+
+# ----------------------------------------------------------------- 3.6 fast_detect
+
+def fast_no_nms(img, threshold=20, nms=True):
+    return F.fast_detect(img, threshold, nms=False)
+
+
+def fast_12(img, threshold=20, nms=True):
+    s = F.fast_score(img, arc=12)
+    s = np.where(s > threshold, s, 0)
+    keep = s > 0
+    if nms:
+        keep &= s == ndimage.maximum_filter(s, 3)
+    ys, xs = np.nonzero(keep)
+    return np.c_[xs, ys].astype(float)
+
+
+def fast_no_wrap(img, threshold=20, nms=True):
+    I = np.asarray(img).astype(np.int32)
+    H, W = I.shape
+    c = I[3:H - 3, 3:W - 3]
+    d = np.stack([I[3 + dy:H - 3 + dy, 3 + dx:W - 3 + dx] - c for dx, dy in F.CIRCLE16])
+    lo, hi = d[:8].copy(), d[:8].copy()  # arcs never cross from pixel 15 back to pixel 0
+    for j in range(1, 9):
+        lo, hi = np.minimum(lo, d[j:j + 8]), np.maximum(hi, d[j:j + 8])
+    score = np.maximum(lo.max(0), (-hi).max(0))
+    s = np.zeros((H, W), np.int32)
+    s[3:H - 3, 3:W - 3] = np.where(score > threshold, score, 0)
+    keep = s > 0
+    if nms:
+        p = np.pad(s, 1)
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                if dx or dy:
+                    keep &= s > p[1 + dy:1 + dy + H, 1 + dx:1 + dx + W]
+    ys, xs = np.nonzero(keep)
+    return np.c_[xs, ys].astype(float)
+
+
+def fast_row_col(img, threshold=20, nms=True):
+    return F.fast_detect(img, threshold, nms)[:, ::-1]
+
+
+# ----------------------------------------------------------------- 3.7 orb_descriptors
+
+def _orb(img, kps, pattern, angle):
+    I = F._gray(img)
+    S = ndimage.uniform_filter(I, size=5, mode="nearest")
+    kps = np.asarray(kps, float)
+    theta = angle(I, kps)
+    c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
+    P = np.asarray(pattern, float)
+
+    def at(px, py):
+        x = np.clip(np.rint(kps[:, 0:1] + c * px - s * py).astype(int), 0, S.shape[1] - 1)
+        y = np.clip(np.rint(kps[:, 1:2] + s * px + c * py).astype(int), 0, S.shape[0] - 1)
+        return S[y, x]
+
+    return np.packbits(at(P[:, 0], P[:, 1]) < at(P[:, 2], P[:, 3]), axis=1)
+
+
+def orb_no_orientation(img, kps, pattern):
+    return _orb(img, kps, pattern, lambda I, k: np.zeros(len(k)))
+
+
+def orb_atan2_swapped(img, kps, pattern):
+    return _orb(img, kps, pattern, lambda I, k: np.pi / 2 - F.orientation_centroid(I, k))  # atan2(m10, m01)
+
+
+def orb_unpacked(img, kps, pattern):
+    return np.unpackbits(F.orb_descriptors(img, kps, pattern), axis=1)  # (N, 256) bits
+
+
+def orb_rotated_backwards(img, kps, pattern):
+    return _orb(img, kps, pattern, lambda I, k: -F.orientation_centroid(I, k))
+
+
+# ----------------------------------------------------------------- 3.8 hamming_distances
+
+def hamming_bytes(D1, D2):
+    return (D1[:, None, :] != D2[None]).sum(2)  # differing bytes, not bits
+
+
+def hamming_xor_sum(D1, D2):
+    return (D1[:, None, :] ^ D2[None]).sum(2, dtype=np.int64)  # XOR values added as numbers
+
+
+def hamming_first_word(D1, D2):
+    # viewed as uint64 words for speed, then only the first word compared (the sum over words forgotten)
+    a, b = D1.view(np.uint64), D2.view(np.uint64)
+    return np.bitwise_count(a[:, None, 0] ^ b[None, :, 0]).astype(np.int64)
+
+
+# ----------------------------------------------------------------- 3.9 dog_detect
+
+def dog_integer(img, n_features=1000):
+    k = F.dog_detect(img, n_features)
+    k[:, :2] = np.rint(k[:, :2])  # no sub-pixel refinement
+    return k
+
+
+def dog_row_col(img, n_features=1000):
+    k = F.dog_detect(img, n_features)
+    return k[:, [1, 0, 2]]
+
+
+def dog_octave_coordinates(img, n_features=1000):
+    # forgot to scale the coordinates of coarser octaves back to the image: x / 2^o
+    k = F.dog_detect(img, n_features)
+    octave = np.floor(np.log2(np.maximum(k[:, 2] / 1.6, 1) + 1e-9))
+    k[:, :2] /= 2.0 ** octave[:, None]
+    return k
+
+
+# ----------------------------------------------------------------- 3.10 sift_descriptors
+
+def sift_no_orientation(img, kps):
+    I = F._gray(img)
+    kps = np.asarray(kps, float)
+    pyr = F._pyramid(I, 5)
+    P = F._sample_patches(pyr, kps, np.zeros(len(kps)), 18, 0.75)
+    return _histograms(P)
+
+
+def sift_fixed_size(img, kps):
+    # the window ignores the keypoint's scale: 16 x 16 pixels for every keypoint
+    kps = np.array(kps, float)
+    kps[:, 2] = 1.6
+    return F.sift_descriptors(img, kps)
+
+
+def sift_unnormalised(img, kps):
+    d = F.sift_descriptors(img, kps)
+    return d * np.random.default_rng(0).uniform(1, 50, (len(d), 1))  # e.g. raw histogram sums
+
+
+def _histograms(P, swap=False):
+    gy, gx = np.gradient(P, axis=(1, 2))
+    gy, gx = gy[:, 1:-1, 1:-1], gx[:, 1:-1, 1:-1]
+    if swap:
+        gx, gy = gy, gx
+    mag = np.hypot(gx, gy)
+    o = ((np.arctan2(gy, gx) % (2 * np.pi)) / (2 * np.pi) * 8).astype(int) % 8
+    N = len(P)
+    cell = (np.arange(16)[:, None] // 4) * 4 + np.arange(16)[None, :] // 4
+    idx = np.arange(N)[:, None, None] * 128 + cell[None] * 8 + o
+    d = np.bincount(idx.ravel(), mag.ravel(), N * 128).reshape(N, 128)
+    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+    d = np.minimum(d, 0.2)
+    return d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+
+
+# ----------------------------------------------------------------- 3.11 match_descriptors
+
+def _nn(D1, D2):
+    d = F.squared_distances(D1, D2)
+    s = np.sort(d, 1)
+    return d, d.argmin(1), np.sqrt(s[:, 0]), np.sqrt(s[:, 1])
+
+
+def match_squared_ratio(D1, D2, ratio=0.8, mutual=False):
+    d, j, d1, d2 = _nn(D1, D2)
+    keep = np.ones(len(d), bool) if ratio is None else d1 ** 2 < ratio * d2 ** 2
+    if mutual:
+        keep &= d.argmin(0)[j] == np.arange(len(d))
+    return np.c_[np.nonzero(keep)[0], j[keep]]
+
+
+def match_ratio_inverted(D1, D2, ratio=0.8, mutual=False):
+    d, j, d1, d2 = _nn(D1, D2)
+    keep = np.ones(len(d), bool) if ratio is None else d1 / d2 > ratio
+    if mutual:
+        keep &= d.argmin(0)[j] == np.arange(len(d))
+    return np.c_[np.nonzero(keep)[0], j[keep]]
+
+
+def match_no_mutual(D1, D2, ratio=0.8, mutual=False):
+    return F.match_descriptors(D1, D2, ratio, mutual=False)
+
+
+def match_columns_swapped(D1, D2, ratio=0.8, mutual=False):
+    return F.match_descriptors(D1, D2, ratio, mutual)[:, ::-1]
+
+
+# ----------------------------------------------------------------- 3.12 distribute_keypoints
+
+def distribute_top_n(kps, scores, image_size, n, cells=(8, 8)):
+    return np.argsort(-np.asarray(scores))[:n]
+
+
+def distribute_one_per_cell(kps, scores, image_size, n, cells=(8, 8)):
+    sel = F.distribute_keypoints(kps, scores, image_size, n, cells)
+    cell = F.distribute_keypoints  # noqa: F841 — the quota stops after the first round
+    W, H = image_size
+    c = (np.floor((np.asarray(kps)[sel, 1] + 0.5) * cells[1] / H) * cells[0]
+         + np.floor((np.asarray(kps)[sel, 0] + 0.5) * cells[0] / W))
+    _, first = np.unique(c, return_index=True)
+    return sel[np.sort(first)]
+
+
+def distribute_random(kps, scores, image_size, n, cells=(8, 8)):
+    return np.random.default_rng(0).permutation(len(kps))[:n]
+
+
+# ----------------------------------------------------------------- DEBUG fixes that do not fix
+
+def too_few_ratio_only(case):
+    return dict(case["settings"], ratio=0.95)
+
+
+def too_few_unchanged(case):
+    return dict(case["settings"])
+
+
+def repetitive_looser(case):
+    return dict(case["settings"], ratio=0.99)
+
+
+def repetitive_unchanged(case):
+    return dict(case["settings"])
+
+
+def too_slow_unchanged(case):
+    return dict(case["settings"])
+
+
+def too_slow_few(case):
+    return dict(case["settings"], n_features=100)
+
+
+def clustered_more_features(case):
+    return dict(case["settings"], n_features=2000)  # over the 200-keypoint budget
+
+
+def clustered_unchanged(case):
+    return dict(case["settings"])
+
+
+# ----------------------------------------------------------------- 3.19 train_descriptor
+
+def descriptor_untrained(P1, P2, seconds=20):
+    return F.train_descriptor(P1, P2, seconds=0.0)  # the loop never runs: random convolutions
+
+
+def descriptor_raw_pixels(P1, P2, seconds=20):
+    def describe(P):
+        X = np.asarray(P, float).reshape(len(P), -1)
+        return X / np.linalg.norm(X, axis=1, keepdims=True)  # no mean removed, no learning
+    return describe
+
+
+def descriptor_wrong_pairs(P1, P2, seconds=20):
+    # positives shuffled: P1[i] paired with a random P2[j] (an indexing slip when batching)
+    perm = np.random.default_rng(0).permutation(len(P2))
+    return F.train_descriptor(P1, P2[perm], seconds=seconds)
+
+
+MUTANTS = [
+    ("3.5", "no NMS: strongest pixels", corners_no_nms, "non-maximum suppression"),
+    ("3.5", "(row, col) returned", corners_row_col, "(row, col)"),
+    ("3.5", "seed sketch: threshold, raster order", corners_threshold_only, None),
+    ("3.6", "no NMS", fast_no_nms, "before non-maximum suppression"),
+    ("3.6", "FAST-12", fast_12, None),
+    ("3.6", "arc does not wrap", fast_no_wrap, None),
+    ("3.6", "(row, col) returned", fast_row_col, "(row, col)"),
+    ("3.7", "no orientation", orb_no_orientation, "not turned"),
+    ("3.7", "atan2(m10, m01)", orb_atan2_swapped, "atan2(m01, m10)"),
+    ("3.7", "bits not packed", orb_unpacked, None),
+    ("3.7", "rotated backwards", orb_rotated_backwards, "wrong way"),
+    ("3.8", "differing bytes", hamming_bytes, "differing bytes"),
+    ("3.8", "XOR summed as numbers", hamming_xor_sum, "set bits"),
+    ("3.8", "first 64-bit word only", hamming_first_word, None),
+    ("3.9", "no sub-pixel refinement", dog_integer, "whole pixels"),
+    ("3.9", "(row, col) returned", dog_row_col, "(row, col)"),
+    ("3.9", "octave coordinates not scaled", dog_octave_coordinates, None),
+    ("3.10", "no orientation", sift_no_orientation, None),
+    ("3.10", "scale ignored", sift_fixed_size, "zoomed"),
+    ("3.10", "not normalised", sift_unnormalised, None),
+    ("3.11", "ratio on squared distances", match_squared_ratio, "squared distances"),
+    ("3.11", "ratio inverted", match_ratio_inverted, "inverted"),
+    ("3.11", "mutual ignored", match_no_mutual, "mutual=True"),
+    ("3.11", "(j, i) returned", match_columns_swapped, "(i, j)"),
+    ("3.12", "strongest n", distribute_top_n, "strongest n"),
+    ("3.12", "one per cell", distribute_one_per_cell, None),
+    ("3.12", "random", distribute_random, None),
+    ("3.13", "ratio loosened only", too_few_ratio_only, None),
+    ("3.13", "unchanged", too_few_unchanged, None),
+    ("3.14", "ratio loosened", repetitive_looser, None),
+    ("3.14", "unchanged", repetitive_unchanged, None),
+    ("3.15", "unchanged", too_slow_unchanged, None),
+    ("3.15", "too few features", too_slow_few, None),
+    ("3.16", "more features, over budget", clustered_more_features, None),
+    ("3.16", "unchanged", clustered_unchanged, None),
+    ("3.19", "untrained", descriptor_untrained, None),
+    ("3.19", "raw pixels", descriptor_raw_pixels, None),
+    ("3.19", "positives shuffled", descriptor_wrong_pairs, None),
+]
