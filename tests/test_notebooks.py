@@ -24,6 +24,9 @@ NOTEBOOKS = sorted((ROOT / "notebooks").glob("[0-9][0-9]_*.ipynb"))
 # Where the reference answers of each chapter live (instructor-only package).
 SOLUTION_MODULES = {
     "01": ["solutions.camera_models", "solutions.camera_debug", "solutions.camera_questions"],
+    "02": ["solutions.epipolar", "solutions.epipolar_debug", "solutions.epipolar_questions"],
+    "03": ["solutions.features", "solutions.features_debug", "solutions.features_questions"],
+    "05": ["solutions.bundle_adjustment", "solutions.bundle_adjustment_debug", "solutions.bundle_adjustment_questions"],
 }
 BUDGET_S = 60.0
 PLOT_CALL = re.compile(r"\b(plt|ax|axes|fig)\.\w*(plot|imshow|scatter|quiver|hist|bar|contour)\w*\(")
