@@ -15,7 +15,7 @@ from scipy.optimize import least_squares
 
 from . import datasets, scene
 from .compare import max_abs, max_angle_deg, max_distance, relative
-from .engine import Case, Exercise, Hint, OutputError, as_array, like, register
+from .engine import Case, Exercise, Hint, OutputError, as_array, like, numeric_question, register, value_hint
 
 # ============================================================ oracles and ground truth ====
 
@@ -350,10 +350,6 @@ def gt_fix_frame_convention(case: dict) -> list[tuple[np.ndarray, np.ndarray]]:
 
 # ============================================================ case generators ====
 
-def _value_case(name, expected, metric, tol, unit="", shape=()):
-    return Case(name=name, args=(), expected=np.asarray(expected, float), metric=metric, tol=tol,
-                unit=unit, shape=shape)
-
 
 def cases_project_points(rng) -> list[Case]:
     out = []
@@ -653,31 +649,26 @@ ROLLING_HINTS = [
 
 # ============================================================ the exercises ====
 
-def _v(id, title, name, kind, expected, tol, unit, shape, metric, explanation, hints=()):
-    return Exercise(id, title, name, kind, points=1, value=True,
-                    cases=lambda rng: [_value_case("your answer", expected, metric, tol, unit, shape)],
-                    hints=list(hints), explanation=explanation)
-
-
-def _hint_value(wrong, text):
-    return like(lambda c: np.asarray(wrong, float), text, factor=1.0)
-
 
 register(
     # ---------------------------------------------------------------- CONCEPT
-    _v("1.1", "Project a point by hand", "pixel_1_1", "concept", [480, 560], 0.5, "px", (2,), max_abs,
-       "x_c = (1, 2, 5); x/z = 0.2, y/z = 0.4; u = 800·0.2 + 320 = 480, v = 800·0.4 + 240 = 560.",
-       [_hint_value([160, 320], "the principal point (cx, cy) was not added.")]),
-    _v("1.2", "How far does k1 move a corner?", "corner_shift_px", "concept", 25.6, 0.3, "px", (), max_abs,
-       "Corner pixel (0, 0) → normalised (−0.64, −0.48), r = 0.8. The radius becomes r(1 + k1 r²), so the "
-       "shift is f·k1·r³ = 1000 · 0.05 · 0.512 = 25.6 px; at the centre it is 0: distortion grows with r³.",
-       [_hint_value(32.0, "k1·r² is the relative change; the shift in pixels is f·k1·r²·r.")]),
-    _v("1.3", "Stereo depth uncertainty", "sigma_Z_m", "concept", 25 * 0.25 / (700 * 0.12), 0.001, "m", (), max_abs,
-       "Z = f B / d, so dZ/dd = −Z²/(f B) and σZ = Z² σ_d / (f B) = 25 · 0.25 / 84 = 0.0744 m.",
-       [_hint_value(5 * 0.25 / (700 * 0.12), "depth error grows with Z², not Z (differentiate Z = fB/d).")]),
-    _v("1.4", "OpenCV → ROS camera axes", "R_cv_to_ros", "concept", gt_frame_change("opencv", "ros"), 1e-9, "", (3, 3),
-       max_abs, "ROS x = forward = OpenCV z; ROS y = left = −OpenCV x; ROS z = up = −OpenCV y.",
-       [_hint_value(gt_frame_change("ros", "opencv"), "transposed: that matrix maps ROS vectors to OpenCV.")]),
+    numeric_question(
+        "1.1", "Project a point by hand", "pixel_1_1", "concept", [480, 560], 0.5, "px", (2,), max_abs,
+        "x_c = (1, 2, 5); x/z = 0.2, y/z = 0.4; u = 800·0.2 + 320 = 480, v = 800·0.4 + 240 = 560.",
+        [value_hint([160, 320], "the principal point (cx, cy) was not added.")]),
+    numeric_question(
+        "1.2", "How far does k1 move a corner?", "corner_shift_px", "concept", 25.6, 0.3, "px", (), max_abs,
+        "Corner pixel (0, 0) → normalised (−0.64, −0.48), r = 0.8. The radius becomes r(1 + k1 r²), so the "
+        "shift is f·k1·r³ = 1000 · 0.05 · 0.512 = 25.6 px; at the centre it is 0: distortion grows with r³.",
+        [value_hint(32.0, "k1·r² is the relative change; the shift in pixels is f·k1·r²·r.")]),
+    numeric_question(
+        "1.3", "Stereo depth uncertainty", "sigma_Z_m", "concept", 25 * 0.25 / (700 * 0.12), 0.001, "m", (), max_abs,
+        "Z = f B / d, so dZ/dd = −Z²/(f B) and σZ = Z² σ_d / (f B) = 25 · 0.25 / 84 = 0.0744 m.",
+        [value_hint(5 * 0.25 / (700 * 0.12), "depth error grows with Z², not Z (differentiate Z = fB/d).")]),
+    numeric_question(
+        "1.4", "OpenCV → ROS camera axes", "R_cv_to_ros", "concept", gt_frame_change("opencv", "ros"), 1e-9, "", (3, 3),
+        max_abs, "ROS x = forward = OpenCV z; ROS y = left = −OpenCV x; ROS z = up = −OpenCV y.",
+        [value_hint(gt_frame_change("ros", "opencv"), "transposed: that matrix maps ROS vectors to OpenCV.")]),
     # ---------------------------------------------------------------- CODE
     Exercise("1.5", "Batch projection with Brown-Conrady distortion", "project_points", "code", 4,
              cases_project_points, PROJECT_HINTS, fallback=cv_project, arg_names=("X", "K", "R", "t", "dist")),
@@ -707,20 +698,23 @@ register(
              _debug_cases(debug_frame_convention, _metric_poses, 0.01, convert=_convert_poses),
              fallback=gt_fix_frame_convention),
     # ---------------------------------------------------------------- DESIGN
-    _v("1.15", "Rolling-shutter skew", "rs_skew_px", "design", 800 * np.tan(np.radians(90 * 0.033)), 0.02 * 41.5,
-       "px", (), max_abs,
-       "In 33 ms at 90°/s the camera turns 2.97°; at f = 800 px that moves the bottom rows by "
-       "800·tan(2.97°) ≈ 41.5 px relative to the top — the pinhole model is badly violated.",
-       [_hint_value(800 * 90 * 0.033, "degrees must be converted to radians before multiplying by f.")]),
-    _v("1.16", "Rotation budget for a rolling shutter", "max_rate_deg_s", "design",
-       np.degrees(np.arctan(1 / 600) / 0.010), 0.02 * 9.55, "°/s", (), max_abs,
-       "Skew ≤ 1 px means f·tan(ω·t_r) ≤ 1, so ω ≤ atan(1/600)/0.010 s = 0.167 rad/s ≈ 9.5°/s: slower than a "
-       "walking robot turns, which is why moving robots use global-shutter cameras."),
-    _v("1.17", "Pixels per degree: pinhole vs fisheye", "px_per_deg", "design",
-       [640 / np.tan(np.radians(45)) * np.pi / 180, 640 / np.radians(95) * np.pi / 180], 0.02, "rel.", (2,),
-       relative,
-       "Pinhole with 90° HFOV: f = 640/tan 45° = 640 px, so 11.2 px/° at the centre. Equidistant fisheye, "
-       "190° across 1280 px: f = 640/1.658 rad = 386 px, 6.7 px/° everywhere: 1.7× coarser, 2× the field."),
+    numeric_question(
+        "1.15", "Rolling-shutter skew", "rs_skew_px", "design", 800 * np.tan(np.radians(90 * 0.033)), 0.02 * 41.5,
+        "px", (), max_abs,
+        "In 33 ms at 90°/s the camera turns 2.97°; at f = 800 px that moves the bottom rows by "
+        "800·tan(2.97°) ≈ 41.5 px relative to the top — the pinhole model is badly violated.",
+        [value_hint(800 * 90 * 0.033, "degrees must be converted to radians before multiplying by f.")]),
+    numeric_question(
+        "1.16", "Rotation budget for a rolling shutter", "max_rate_deg_s", "design",
+        np.degrees(np.arctan(1 / 600) / 0.010), 0.02 * 9.55, "°/s", (), max_abs,
+        "Skew ≤ 1 px means f·tan(ω·t_r) ≤ 1, so ω ≤ atan(1/600)/0.010 s = 0.167 rad/s ≈ 9.5°/s: slower than a "
+        "walking robot turns, which is why moving robots use global-shutter cameras."),
+    numeric_question(
+        "1.17", "Pixels per degree: pinhole vs fisheye", "px_per_deg", "design",
+        [640 / np.tan(np.radians(45)) * np.pi / 180, 640 / np.radians(95) * np.pi / 180], 0.02, "rel.", (2,),
+        relative,
+        "Pinhole with 90° HFOV: f = 640/tan 45° = 640 px, so 11.2 px/° at the centre. Equidistant fisheye, "
+        "190° across 1280 px: f = 640/1.658 rad = 386 px, 6.7 px/° everywhere: 1.7× coarser, 2× the field."),
     # ---------------------------------------------------------------- FRONTIER
     Exercise("1.18", "A differentiable camera learns f and k1", "fit_focal_k1", "frontier", 3,
              cases_fit_focal_k1, fallback=scipy_fit_focal_k1, timeout=30.0,

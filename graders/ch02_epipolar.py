@@ -20,7 +20,7 @@ import numpy as np
 
 from . import datasets, scene
 from .compare import max_abs, max_angle_deg, relative, rotation_angle_deg, sampson_rms_px, unordered, up_to_scale
-from .engine import Case, Exercise, Hint, OutputError, as_array, like, register
+from .engine import Case, Exercise, Hint, OutputError, as_array, like, numeric_question, register, value_hint
 
 # ============================================================ ground truth and oracles ====
 
@@ -467,10 +467,6 @@ def _convert_lines(out, case):
 
 
 # ============================================================ CODE case generators ====
-
-def _value_case(name, expected, metric, tol, unit="", shape=()):
-    return Case(name=name, args=(), expected=np.asarray(expected, float), metric=metric, tol=tol,
-                unit=unit, shape=shape)
 
 
 def cases_skew(rng) -> list[Case]:
@@ -1402,7 +1398,7 @@ def _sampson_bug(kind):
     def bug(c):
         F, x1, x2 = c.args
         x1h, x2h = _h(x1), _h(x2)
-        Fx1, Ftx2 = x1h @ F.T, x2h @ F
+        Fx1 = x1h @ F.T
         num = np.abs(np.sum(x2h * Fx1, 1))
         if kind == "squared":
             return cv_sampson(F, x1, x2) ** 2
@@ -1555,15 +1551,6 @@ WEIGHTED_HINTS = [Hint("the weights are ignored: minimise Σ w_i r_i², i.e. the
 
 # ============================================================ the exercises ====
 
-def _v(id, title, name, kind, expected, tol, unit, shape, metric, explanation, hints=(), points=1):
-    return Exercise(id, title, name, kind, points=points, value=True,
-                    cases=lambda rng: [_value_case("your answer", expected, metric, tol, unit, shape)],
-                    hints=list(hints), explanation=explanation)
-
-
-def _hint_value(wrong, text):
-    return like(lambda c: np.asarray(wrong, float), text, factor=1.0)
-
 
 def _k(w, s, p=0.99):
     return np.log(1 - p) / np.log(1 - w ** s)
@@ -1617,30 +1604,34 @@ MODEL_CHOICE = Exercise(
 
 register(
     # ---------------------------------------------------------------- CONCEPT
-    _v("2.1", "The worked example: an epipolar line by hand", "l2_2_1", "concept", [0.0, -1.0, 0.3], 1e-6, "",
-       (3,), up_to_scale,
-       "[t]× = [[0, 0, 0], [0, 0, −1], [0, 1, 0]] and R = I, so E = [t]×; l2 = E x1 = (0, −1, 0.3): the line "
-       "−y + 0.3 = 0, i.e. y = 0.3 — horizontal, because the camera moved sideways (rectified stereo).",
-       [_hint_value([0.5, 0.3, 1.0], "that is the point x1; its epipolar line in image 2 is l2 = E x1."),
-        _hint_value([0.0, 1.0, 0.3], "a sign slipped: [t]× has −t_x at (1, 2) and +t_x at (2, 1).")]),
-    _v("2.2", "Degrees of freedom of E, F and H", "dof_E_F_H", "concept", [5, 7, 8], 0.01, "", (3,), max_abs,
-       "E = [t]× R: 3 (rotation) + 3 (translation) − 1 (scale of t cannot be seen) = 5. F: 9 entries − 1 (scale) − "
-       "1 (det F = 0) = 7. H: 9 − 1 (scale) = 8. Hence 5-, 7- and 4-point minimal solvers (H: 2 equations per match).",
-       [_hint_value([6, 7, 8], "E: translation is only known up to scale, so 3 + 3 − 1 = 5."),
-        _hint_value([5, 8, 8], "F: also det F = 0 (rank 2) removes one: 9 − 1 − 1 = 7."),
-        _hint_value([5, 7, 9], "H is homogeneous: defined up to scale, 9 − 1 = 8.")]),
-    _v("2.3", "Where is the epipole?", "epipole_2_3", "concept", [370.0, 265.0], 0.5, "px", (2,), max_abs,
-       "The epipole e1 is the image of camera 2's centre in camera 1: e1 ~ K1 C2 = K1 (0.1, 0.05, 1) → "
-       "(500·0.1 + 320, 500·0.05 + 240) = (370, 265). Moving forward, every epipolar line passes through it: "
-       "it is the focus of expansion, inside the image.",
-       [_hint_value([50.0, 25.0], "add the principal point: u = f X/Z + c_x.")]),
-    _v("2.4", "RANSAC iterations for the 5-point algorithm", "k_2_4", "concept", 448.0, 0.7, "iterations", (),
-       max_abs,
-       "k = log(1 − 0.99) / log(1 − 0.4⁵) = −4.605 / log(0.98976) = 447.4 → 448 samples. (At w = 0.3 it is 1,893 "
-       "and at w = 0.2 it is 14,389: the count explodes as w⁻ˢ.)",
-       [_hint_value(_k(0.4, 8), "that is the 8-point count (s = 8); the 5-point algorithm samples s = 5."),
-        _hint_value(_k(0.4, 1), "every point of the sample must be an inlier: use wˢ, not w."),
-        _hint_value(435.0, "435 is a mis-print in a widely copied table; compute log(0.01) / log(1 − 0.4⁵).")]),
+    numeric_question(
+        "2.1", "The worked example: an epipolar line by hand", "l2_2_1", "concept", [0.0, -1.0, 0.3], 1e-6, "",
+        (3,), up_to_scale,
+        "[t]× = [[0, 0, 0], [0, 0, −1], [0, 1, 0]] and R = I, so E = [t]×; l2 = E x1 = (0, −1, 0.3): the line "
+        "−y + 0.3 = 0, i.e. y = 0.3 — horizontal, because the camera moved sideways (rectified stereo).",
+        [value_hint([0.5, 0.3, 1.0], "that is the point x1; its epipolar line in image 2 is l2 = E x1."),
+         value_hint([0.0, 1.0, 0.3], "a sign slipped: [t]× has −t_x at (1, 2) and +t_x at (2, 1).")]),
+    numeric_question(
+        "2.2", "Degrees of freedom of E, F and H", "dof_E_F_H", "concept", [5, 7, 8], 0.01, "", (3,), max_abs,
+        "E = [t]× R: 3 (rotation) + 3 (translation) − 1 (scale of t cannot be seen) = 5. F: 9 entries − 1 (scale) − "
+        "1 (det F = 0) = 7. H: 9 − 1 (scale) = 8. Hence 5-, 7- and 4-point minimal solvers (H: 2 equations per match).",
+        [value_hint([6, 7, 8], "E: translation is only known up to scale, so 3 + 3 − 1 = 5."),
+         value_hint([5, 8, 8], "F: also det F = 0 (rank 2) removes one: 9 − 1 − 1 = 7."),
+         value_hint([5, 7, 9], "H is homogeneous: defined up to scale, 9 − 1 = 8.")]),
+    numeric_question(
+        "2.3", "Where is the epipole?", "epipole_2_3", "concept", [370.0, 265.0], 0.5, "px", (2,), max_abs,
+        "The epipole e1 is the image of camera 2's centre in camera 1: e1 ~ K1 C2 = K1 (0.1, 0.05, 1) → "
+        "(500·0.1 + 320, 500·0.05 + 240) = (370, 265). Moving forward, every epipolar line passes through it: "
+        "it is the focus of expansion, inside the image.",
+        [value_hint([50.0, 25.0], "add the principal point: u = f X/Z + c_x.")]),
+    numeric_question(
+        "2.4", "RANSAC iterations for the 5-point algorithm", "k_2_4", "concept", 448.0, 0.7, "iterations", (),
+        max_abs,
+        "k = log(1 − 0.99) / log(1 − 0.4⁵) = −4.605 / log(0.98976) = 447.4 → 448 samples. (At w = 0.3 it is 1,893 "
+        "and at w = 0.2 it is 14,389: the count explodes as w⁻ˢ.)",
+        [value_hint(_k(0.4, 8), "that is the 8-point count (s = 8); the 5-point algorithm samples s = 5."),
+         value_hint(_k(0.4, 1), "every point of the sample must be an inlier: use wˢ, not w."),
+         value_hint(435.0, "435 is a mis-print in a widely copied table; compute log(0.01) / log(1 − 0.4⁵).")]),
     # ---------------------------------------------------------------- CODE
     Exercise("2.5", "The cross-product matrix [v]×", "skew", "code", 1, cases_skew, SKEW_HINTS,
              fallback=gt_skew, arg_names=("v",)),
@@ -1676,23 +1667,26 @@ register(
     Exercise("2.20", "Wrong R, t", "fix_cheirality", "debug", 2, cases_fix_cheirality, FIX_CHEIRALITY_HINTS,
              fallback=cv_fix_cheirality),
     # ---------------------------------------------------------------- DESIGN
-    _v("2.21", "Iteration budget at 1 ms per iteration", "ransac_budget_ms", "design",
-       [np.ceil(_k(0.5, 8)), np.ceil(_k(0.5, 5))], 0.01, "rel.", (2,), relative,
-       "w = 0.5, p = 0.99: 8-point k = log(0.01)/log(1 − 0.5⁸) = 1,177 → 1.18 s; 5-point k = log(0.01)/log(1 − 0.5⁵) "
-       "= 146 → 0.15 s. Same matches, 8× less time, only because the sample is smaller.",
-       [_hint_value([np.ceil(_k(0.5, 5)), np.ceil(_k(0.5, 8))], "swapped: the 8-point needs more samples, [8-point, 5-point]."),
-        _hint_value([np.ceil(_k(0.5, 7)), np.ceil(_k(0.5, 5))], "the 8-point algorithm samples s = 8 (7 is the 7-point).")]),
-    _v("2.22", "Minimum inlier ratio for a 50 ms budget", "min_inlier_ratio", "design",
-       (1 - 0.01 ** (1 / 50)) ** (1 / 5), 0.01, "rel.", (), relative,
-       "k ≤ 50 ⇔ 1 − w⁵ ≤ 0.01^(1/50) = 0.912 ⇔ w⁵ ≥ 0.088 ⇔ w ≥ 0.088^(1/5) = 0.615. Below ~62 % inliers the 5-point "
-       "RANSAC cannot guarantee 99 % success in 50 ms: improve the matcher, not RANSAC.",
-       [_hint_value(1 - 0.01 ** (1 / 50), "that is w⁵; take the fifth root.")]),
+    numeric_question(
+        "2.21", "Iteration budget at 1 ms per iteration", "ransac_budget_ms", "design",
+        [np.ceil(_k(0.5, 8)), np.ceil(_k(0.5, 5))], 0.01, "rel.", (2,), relative,
+        "w = 0.5, p = 0.99: 8-point k = log(0.01)/log(1 − 0.5⁸) = 1,177 → 1.18 s; 5-point k = log(0.01)/log(1 − 0.5⁵) "
+        "= 146 → 0.15 s. Same matches, 8× less time, only because the sample is smaller.",
+        [value_hint([np.ceil(_k(0.5, 5)), np.ceil(_k(0.5, 8))], "swapped: the 8-point needs more samples, [8-point, 5-point]."),
+         value_hint([np.ceil(_k(0.5, 7)), np.ceil(_k(0.5, 5))], "the 8-point algorithm samples s = 8 (7 is the 7-point).")]),
+    numeric_question(
+        "2.22", "Minimum inlier ratio for a 50 ms budget", "min_inlier_ratio", "design",
+        (1 - 0.01 ** (1 / 50)) ** (1 / 5), 0.01, "rel.", (), relative,
+        "k ≤ 50 ⇔ 1 − w⁵ ≤ 0.01^(1/50) = 0.912 ⇔ w⁵ ≥ 0.088 ⇔ w ≥ 0.088^(1/5) = 0.615. Below ~62 % inliers the 5-point "
+        "RANSAC cannot guarantee 99 % success in 50 ms: improve the matcher, not RANSAC.",
+        [value_hint(1 - 0.01 ** (1 / 50), "that is w⁵; take the fifth root.")]),
     MODEL_CHOICE,
-    _v("2.24", "Why matching quality is the bottleneck", "matcher_speedup", "design", _k(0.4, 5) / _k(0.6, 5), 0.02,
-       "rel.", (), relative,
-       "k(0.4) / k(0.6) = 447.4 / 56.9 = 7.9: raising the inlier ratio from 40 % to 60 % (a better matcher, e.g. "
-       "LightGlue instead of brute force + ratio test) makes 5-point RANSAC ~8× faster at the same confidence.",
-       [_hint_value((0.6 / 0.4) ** 5, "(0.6/0.4)⁵ = 7.6 is the small-w approximation; use the exact k = log(1 − p) / "
+    numeric_question(
+        "2.24", "Why matching quality is the bottleneck", "matcher_speedup", "design", _k(0.4, 5) / _k(0.6, 5), 0.02,
+        "rel.", (), relative,
+        "k(0.4) / k(0.6) = 447.4 / 56.9 = 7.9: raising the inlier ratio from 40 % to 60 % (a better matcher, e.g. "
+        "LightGlue instead of brute force + ratio test) makes 5-point RANSAC ~8× faster at the same confidence.",
+        [value_hint((0.6 / 0.4) ** 5, "(0.6/0.4)⁵ = 7.6 is the small-w approximation; use the exact k = log(1 − p) / "
                                       "log(1 − w⁵).")]),
     # ---------------------------------------------------------------- FRONTIER
     Exercise("2.25", "Weighted 8-point for learned inlier weights", "weighted_eight_point", "frontier", 3,

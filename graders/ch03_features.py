@@ -24,7 +24,7 @@ import numpy as np
 
 from . import datasets, scene
 from .compare import max_abs, relative
-from .engine import Case, Exercise, Hint, OutputError, as_array, like, register
+from .engine import Case, Exercise, Hint, OutputError, as_array, like, numeric_question, register, value_hint
 
 # ============================================================ images with a known homography ====
 
@@ -1096,20 +1096,6 @@ def cases_frontier(rng) -> list[Case]:
 
 # ============================================================ value questions ====
 
-def _value_case(name, expected, metric, tol, unit, shape):
-    return Case(name, (), np.asarray(expected, float), metric, tol, unit, shape=shape)
-
-
-def _v(id, title, name, kind, expected, tol, unit, shape, metric, explanation, hints=()):
-    return Exercise(id, title, name, kind, points=1, value=True,
-                    cases=lambda rng: [_value_case("your answer", expected, metric, tol, unit, shape)],
-                    hints=list(hints), explanation=explanation)
-
-
-def _hint_value(wrong, text):
-    return like(lambda c: np.asarray(wrong, float), text, factor=1.0, rel=0.0)
-
-
 CLASSES = ("corner", "edge", "flat")
 
 
@@ -1142,20 +1128,23 @@ register(
                          "both large is a corner.", lambda c, out: out[1] == 0)],
              explanation="Eigenvalues: (250, 180) both large → corner; (300, 2) one large, one small → edge (all "
                          "the gradient is along y: a horizontal edge); (0.6, 0.3) both small → flat."),
-    _v("3.2", "Harris' R without eigenvalues", "harris_R", "concept", _R_32, 0.01, "", (), max_abs,
-       "det M = 12·8 − 3² = 87, tr M = 20, R = 87 − 0.04·400 = 71 > 0: a corner. det = λ1λ2 and tr = λ1 + λ2, "
-       "so R never needs the eigenvalues.",
-       [_hint_value(96 - 0.04 * 400, "det M = Sxx·Syy − Sxy²: the off-diagonal term matters."),
-        _hint_value(87 - 0.04 * 20, "k multiplies tr(M)², not tr(M).")]),
-    _v("3.3", "Bytes per descriptor: SIFT vs ORB", "descriptor_bytes", "concept", [512, 32], 0.0, "bytes", (2,),
-       max_abs, "SIFT: 128 float32 = 512 bytes (often quantised to 128 uint8); ORB: 256 bits = 32 bytes. 16× less "
-       "memory, and a distance is 4 XOR + popcount of 64-bit words instead of 128 multiply-adds.",
-       [_hint_value([128, 256], "those are the numbers of dimensions and bits: convert to bytes (float32 = 4 bytes, "
+    numeric_question(
+        "3.2", "Harris' R without eigenvalues", "harris_R", "concept", _R_32, 0.01, "", (), max_abs,
+        "det M = 12·8 − 3² = 87, tr M = 20, R = 87 − 0.04·400 = 71 > 0: a corner. det = λ1λ2 and tr = λ1 + λ2, "
+        "so R never needs the eigenvalues.",
+        [value_hint(96 - 0.04 * 400, "det M = Sxx·Syy − Sxy²: the off-diagonal term matters."),
+         value_hint(87 - 0.04 * 20, "k multiplies tr(M)², not tr(M).")]),
+    numeric_question(
+        "3.3", "Bytes per descriptor: SIFT vs ORB", "descriptor_bytes", "concept", [512, 32], 0.0, "bytes", (2,),
+        max_abs, "SIFT: 128 float32 = 512 bytes (often quantised to 128 uint8); ORB: 256 bits = 32 bytes. 16× less "
+        "memory, and a distance is 4 XOR + popcount of 64-bit words instead of 128 multiply-adds.",
+        [value_hint([128, 256], "those are the numbers of dimensions and bits: convert to bytes (float32 = 4 bytes, "
                                 "8 bits = 1 byte).")]),
-    _v("3.4", "Brute-force matching cost of one pair", "flops_per_pair", "concept", 2000 * 2000 * 128, 0.01, "rel.",
-       (), relative, "Every one of 2,000 descriptors against every one of 2,000, 128 multiply-adds each: "
-       "2,000 × 2,000 × 128 = 512 M multiply-adds per image pair (1.02 GFLOP if you count the add separately).",
-       [_hint_value(2000 * 128, "that is one descriptor against all; every descriptor of image 1 needs it.")]),
+    numeric_question(
+        "3.4", "Brute-force matching cost of one pair", "flops_per_pair", "concept", 2000 * 2000 * 128, 0.01, "rel.",
+        (), relative, "Every one of 2,000 descriptors against every one of 2,000, 128 multiply-adds each: "
+        "2,000 × 2,000 × 128 = 512 M multiply-adds per image pair (1.02 GFLOP if you count the add separately).",
+        [value_hint(2000 * 128, "that is one descriptor against all; every descriptor of image 1 needs it.")]),
     # ---------------------------------------------------------------- CODE
     Exercise("3.5", "Harris and Shi-Tomasi corners with non-maximum suppression", "detect_corners", "code", 3,
              cases_corners, CORNER_HINTS, fallback=lambda img, n=500, method="harris", **kw: cv_corners(img, n, method),
@@ -1185,16 +1174,18 @@ register(
     Exercise("3.16", "Features clustered on one region", "fix_clustered", "debug", 2, _debug_cases(debug_clustered),
              fallback=fix_clustered_standin, timeout=30.0),
     # ---------------------------------------------------------------- DESIGN
-    _v("3.17", "Exhaustive matching of 100 images", "exhaustive_100", "design", [4950, 4950 * 512e6], 0.02, "rel.",
-       (2,), relative, "100·99/2 = 4,950 pairs (≈ 5K); × 512 M multiply-adds = 2.5 T per reconstruction — minutes "
-       "on a CPU core, fine for 100 images, hopeless for 10,000 (50 M pairs, 25.6 P).",
-       [_hint_value([10000, 10000 * 512e6], "each unordered pair is matched once: N(N − 1)/2, not N².")]),
-    _v("3.18", "Pairs to match at 10k and 1M images", "pairs_at_scale", "design",
-       [10000 * 9999 / 2, 10000 * 50, 1e6 * 20], 0.02, "rel.", (3,), relative,
-       "Exhaustive at 10k: 49,995,000 pairs. A vocabulary tree's top-50 per image: 10,000 × 50 = 500,000 (100× "
-       "fewer). At 1M images, learned global descriptors (NetVLAD, CosPlace) and top-20: 20 M pairs, against "
-       "5·10¹¹ exhaustive.",
-       [_hint_value([1e8, 10000 * 50, 1e6 * 20], "exhaustive: N(N − 1)/2 unordered pairs, not N².")]),
+    numeric_question(
+        "3.17", "Exhaustive matching of 100 images", "exhaustive_100", "design", [4950, 4950 * 512e6], 0.02, "rel.",
+        (2,), relative, "100·99/2 = 4,950 pairs (≈ 5K); × 512 M multiply-adds = 2.5 T per reconstruction — minutes "
+        "on a CPU core, fine for 100 images, hopeless for 10,000 (50 M pairs, 25.6 P).",
+        [value_hint([10000, 10000 * 512e6], "each unordered pair is matched once: N(N − 1)/2, not N².")]),
+    numeric_question(
+        "3.18", "Pairs to match at 10k and 1M images", "pairs_at_scale", "design",
+        [10000 * 9999 / 2, 10000 * 50, 1e6 * 20], 0.02, "rel.", (3,), relative,
+        "Exhaustive at 10k: 49,995,000 pairs. A vocabulary tree's top-50 per image: 10,000 × 50 = 500,000 (100× "
+        "fewer). At 1M images, learned global descriptors (NetVLAD, CosPlace) and top-20: 20 M pairs, against "
+        "5·10¹¹ exhaustive.",
+        [value_hint([1e8, 10000 * 50, 1e6 * 20], "exhaustive: N(N − 1)/2 unordered pairs, not N².")]),
     # ---------------------------------------------------------------- FRONTIER
     Exercise("3.19", "A tiny learned descriptor, trained on CPU", "train_descriptor", "frontier", 3, cases_frontier,
              fallback=cv_train_descriptor, timeout=60.0, arg_names=("P1", "P2", "seconds")),

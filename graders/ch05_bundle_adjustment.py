@@ -29,7 +29,7 @@ from scipy.spatial.transform import Rotation
 
 from . import datasets, scene
 from .compare import max_abs, relative
-from .engine import Case, Exercise, Hint, OutputError, like, register
+from .engine import Case, Exercise, Hint, OutputError, like, numeric_question, register, value_hint
 
 F = np.diag([1.0, -1.0, -1.0])  # OpenCV camera axes <-> BAL camera axes (both ways: F = F^-1)
 
@@ -1676,21 +1676,6 @@ BA_HINTS = [
 
 # ============================================================ value questions ====
 
-def _value_case(name, expected, metric, tol, unit="", shape=()):
-    return Case(name=name, args=(), expected=np.asarray(expected, float), metric=metric, tol=tol,
-                unit=unit, shape=shape)
-
-
-def _v(id, title, name, kind, expected, tol, unit, shape, metric, explanation, hints=()):
-    return Exercise(id, title, name, kind, points=1, value=True,
-                    cases=lambda rng: [_value_case("your answer", expected, metric, tol, unit, shape)],
-                    hints=list(hints), explanation=explanation)
-
-
-def _hint_value(wrong, text):
-    return like(lambda c: np.asarray(wrong, float), text, factor=1.0)
-
-
 def _lm_answer():
     JtJ, g, lam = np.array([[4.0, 0.0], [0.0, 1.0]]), np.array([2.0, -1.0]), 1.0
     dx = np.linalg.solve(JtJ + lam * np.eye(2), -g)
@@ -1705,36 +1690,40 @@ LM_ANSWER = _lm_answer()
 
 register(
     # ---------------------------------------------------------------- CONCEPT
-    _v("5.1", "How sparse is the BA Jacobian?", "jacobian_zero_pct", "concept", 100 * (1 - 9 / 30_600), 0.002, "%",
-       (), max_abs,
-       "J has 2M rows and 100·6 + 10,000·3 = 30,600 columns; each row touches one camera (6) and one point (3): "
-       "9 nonzeros. Zeros: 1 − 9/30,600 = 99.9706 % — 18 M nonzeros out of 61.2 billion entries.",
-       [_hint_value(100 * 9 / 30_600, "that is the share of nonzeros; the question asks for zeros."),
-        _hint_value(100 * (1 - 12 / 30_600), "a row has 6 + 3 = 9 nonzeros in this question (poses only).")]),
-    _v("5.2", "Full Hessian vs reduced camera system", "hessian_memory", "concept",
-       [30_600**2 * 8 / 1e9, 600**2 * 8 / 1e6], 0.02, "rel.", (2,), relative,
-       "Full: 30,600² entries × 8 B = 7.49 GB. Reduced: 600² × 8 B = 2.88 MB. The Schur complement shrinks the "
-       "system by (30,600/600)² = 2,601×, and V⁻¹ costs only 10,000 independent 3×3 inverses.",
-       [_hint_value([30_600**2 / 1e9, 600**2 / 1e6], "that counts entries; each float64 takes 8 bytes."),
-        _hint_value([30_600**2 * 8 / 2**30, 600**2 * 8 / 2**20], "GiB and MiB: use 1 GB = 1e9 B and 1 MB = 1e6 B.")]),
-    _v("5.3", "One Levenberg-Marquardt step by hand", "lm_step", "concept", LM_ANSWER, 2e-3, "", (4,), max_abs,
-       "Δ = −(JᵀJ + λI)⁻¹ g = −(2/5, −1/2) = (−0.4, 0.5). Predicted decrease ½Δᵀ(λΔ − g) = ½(0.96 + 0.75) = 0.855, so "
-       "ρ = 0.6 / 0.855 = 0.702 > 0: accept, and λ ← λ·max(1/3, 1 − (2ρ − 1)³) = 0.934 (Nielsen: a good but not "
-       "perfect model lowers λ only a little; the seed's ÷10 rule would be far more aggressive).",
-       [Hint("the step must go downhill: Δ = −(JᵀJ + λI)⁻¹ g.", lambda c, out: out[0] > 0 and out[1] < 0),
-        Hint("ρ is actual over predicted decrease (0.6 / 0.855), not the inverse.",
-             lambda c, out: abs(out[2] - 1 / LM_ANSWER[2]) < 2e-3),
-        Hint("that is the ÷10 / ×10 rule; this question uses Nielsen's update λ·max(1/3, 1 − (2ρ − 1)³).",
-             lambda c, out: abs(out[3] - 0.1) < 2e-3 or abs(out[3] - 10) < 2e-3),
-        Hint("the damping goes down after an accepted step with ρ > 0 (the model was trustworthy).",
-             lambda c, out: out[3] > 1.0)]),
-    _v("5.4", "Gauge freedom", "gauge_dof", "concept", [7, 6, 0], 1e-9, "", (3,), max_abs,
-       "Reprojection errors do not change under a similarity of the whole scene: 3 rotation + 3 translation + "
-       "1 scale = 7 DOF (monocular). A stereo rig with a known baseline fixes the scale: 6. Absolute positions of "
-       "the cameras (GPS-tagged, as a prior) fix all 7: 0. Without fixing them JᵀJ has a 7-dimensional null space.",
-       [Hint("monocular BA has 7: rotation, translation *and* scale are unobservable from images alone.",
-             lambda c, out: out[0] == 6),
-        Hint("a known baseline fixes the scale: only the rigid motion (6) remains.", lambda c, out: out[1] == 7)]),
+    numeric_question(
+        "5.1", "How sparse is the BA Jacobian?", "jacobian_zero_pct", "concept", 100 * (1 - 9 / 30_600), 0.002, "%",
+        (), max_abs,
+        "J has 2M rows and 100·6 + 10,000·3 = 30,600 columns; each row touches one camera (6) and one point (3): "
+        "9 nonzeros. Zeros: 1 − 9/30,600 = 99.9706 % — 18 M nonzeros out of 61.2 billion entries.",
+        [value_hint(100 * 9 / 30_600, "that is the share of nonzeros; the question asks for zeros."),
+         value_hint(100 * (1 - 12 / 30_600), "a row has 6 + 3 = 9 nonzeros in this question (poses only).")]),
+    numeric_question(
+        "5.2", "Full Hessian vs reduced camera system", "hessian_memory", "concept",
+        [30_600**2 * 8 / 1e9, 600**2 * 8 / 1e6], 0.02, "rel.", (2,), relative,
+        "Full: 30,600² entries × 8 B = 7.49 GB. Reduced: 600² × 8 B = 2.88 MB. The Schur complement shrinks the "
+        "system by (30,600/600)² = 2,601×, and V⁻¹ costs only 10,000 independent 3×3 inverses.",
+        [value_hint([30_600**2 / 1e9, 600**2 / 1e6], "that counts entries; each float64 takes 8 bytes."),
+         value_hint([30_600**2 * 8 / 2**30, 600**2 * 8 / 2**20], "GiB and MiB: use 1 GB = 1e9 B and 1 MB = 1e6 B.")]),
+    numeric_question(
+        "5.3", "One Levenberg-Marquardt step by hand", "lm_step", "concept", LM_ANSWER, 2e-3, "", (4,), max_abs,
+        "Δ = −(JᵀJ + λI)⁻¹ g = −(2/5, −1/2) = (−0.4, 0.5). Predicted decrease ½Δᵀ(λΔ − g) = ½(0.96 + 0.75) = 0.855, so "
+        "ρ = 0.6 / 0.855 = 0.702 > 0: accept, and λ ← λ·max(1/3, 1 − (2ρ − 1)³) = 0.934 (Nielsen: a good but not "
+        "perfect model lowers λ only a little; the seed's ÷10 rule would be far more aggressive).",
+        [Hint("the step must go downhill: Δ = −(JᵀJ + λI)⁻¹ g.", lambda c, out: out[0] > 0 and out[1] < 0),
+         Hint("ρ is actual over predicted decrease (0.6 / 0.855), not the inverse.",
+              lambda c, out: abs(out[2] - 1 / LM_ANSWER[2]) < 2e-3),
+         Hint("that is the ÷10 / ×10 rule; this question uses Nielsen's update λ·max(1/3, 1 − (2ρ − 1)³).",
+              lambda c, out: abs(out[3] - 0.1) < 2e-3 or abs(out[3] - 10) < 2e-3),
+         Hint("the damping goes down after an accepted step with ρ > 0 (the model was trustworthy).",
+              lambda c, out: out[3] > 1.0)]),
+    numeric_question(
+        "5.4", "Gauge freedom", "gauge_dof", "concept", [7, 6, 0], 1e-9, "", (3,), max_abs,
+        "Reprojection errors do not change under a similarity of the whole scene: 3 rotation + 3 translation + "
+        "1 scale = 7 DOF (monocular). A stereo rig with a known baseline fixes the scale: 6. Absolute positions of "
+        "the cameras (GPS-tagged, as a prior) fix all 7: 0. Without fixing them JᵀJ has a 7-dimensional null space.",
+        [Hint("monocular BA has 7: rotation, translation *and* scale are unobservable from images alone.",
+              lambda c, out: out[0] == 6),
+         Hint("a known baseline fixes the scale: only the rigid motion (6) remains.", lambda c, out: out[1] == 7)]),
     # ---------------------------------------------------------------- CODE
     Exercise("5.5", "Read a BAL problem file", "read_bal", "code", 2, _cached(cases_read_bal), READ_HINTS,
              fallback=gt_read_bal, arg_names=("path",)),
@@ -1778,31 +1767,35 @@ register(
              _debug_cases(debug_points_at_infinity, _metric_points, 2.0, _convert_fix_points),
              fallback=colmap_fix_points_at_infinity, timeout=60.0),
     # ---------------------------------------------------------------- DESIGN
-    _v("5.19", "The reduced camera system at 1,000 cameras", "schur_memory_mb", "design", 6000**2 * 8 / 1e6, 0.02,
-       "rel.", (), relative,
-       "1,000 cameras × 6 = 6,000 unknowns; 6,000² × 8 B = 288 MB: a dense Cholesky is still fine (a few seconds). "
-       "The unreduced system would have ~3 M unknowns: 72 TB dense.",
-       [_hint_value(6000**2 * 8 / 2**20, "MiB: use 1 MB = 1e6 bytes."),
-        _hint_value(9000**2 * 8 / 1e6, "the question counts 6 pose parameters per camera (intrinsics fixed).")]),
-    _v("5.20", "Choose the linear solver", "solver_choice", "design", [0, 1, 2], 1e-9, "", (3,), max_abs,
-       "(a) 20 keyframes: S is 120×120 (115 kB) — dense Schur, done in microseconds. (b) 600 images: S is "
-       "3,600² (104 MB dense) but each camera shares points with only a few dozen others, so S is sparse: sparse "
-       "Schur (sparse Cholesky). (c) 20,000 cameras: 120,000² × 8 B = 115 GB dense, and the fill-in of a sparse "
-       "factorisation explodes too: iterative Schur (PCG on S, never factorised). Ceres/COLMAP switch at about "
-       "50 and 1,000 images.",
-       [Hint("(c): a 120,000-unknown reduced system is 115 GB dense; only an iterative solver avoids "
-             "factorising it.", lambda c, out: out[2] != 2)]),
-    _v("5.21", "Local vs global BA in SLAM", "local_global_mb", "design", [60**2 * 8 / 1e6, 30_000**2 * 8 / 1e6],
-       0.02, "rel.", (2,), relative,
-       "Local BA: 10 keyframes × 6 = 60 unknowns, 60² × 8 B = 28.8 kB — solvable every keyframe in milliseconds. "
-       "Global BA: 30,000² × 8 B = 7.2 GB dense — seconds to minutes, so it runs only after a loop closure, in a "
-       "background thread, while tracking continues on the local map.",
-       [Hint("bytes: the answer is in MB (1e6 bytes).", lambda c, out: out[1] > 1e8)]),
-    _v("5.22", "Autodiff at 30 Hz", "autodiff_ms", "design", 0.4 * 20 + 0.6 * 20 * 2.5, 0.5, "ms", (), max_abs,
-       "Only the Jacobian evaluation slows down: 8 ms (linear algebra and the rest) + 12 ms × 2.5 = 38 ms > 33 ms: "
-       "autodiff breaks the 30 Hz budget that analytic Jacobians meet — why ORB-SLAM3 derives them by hand.",
-       [_hint_value(20 * 2.5, "only the Jacobian part (60 %) gets 2.5× slower; the linear solve does not."),
-        _hint_value(20 * 0.6 * 2.5, "add the 40 % that does not change (8 ms).")]),
+    numeric_question(
+        "5.19", "The reduced camera system at 1,000 cameras", "schur_memory_mb", "design", 6000**2 * 8 / 1e6, 0.02,
+        "rel.", (), relative,
+        "1,000 cameras × 6 = 6,000 unknowns; 6,000² × 8 B = 288 MB: a dense Cholesky is still fine (a few seconds). "
+        "The unreduced system would have ~3 M unknowns: 72 TB dense.",
+        [value_hint(6000**2 * 8 / 2**20, "MiB: use 1 MB = 1e6 bytes."),
+         value_hint(9000**2 * 8 / 1e6, "the question counts 6 pose parameters per camera (intrinsics fixed).")]),
+    numeric_question(
+        "5.20", "Choose the linear solver", "solver_choice", "design", [0, 1, 2], 1e-9, "", (3,), max_abs,
+        "(a) 20 keyframes: S is 120×120 (115 kB) — dense Schur, done in microseconds. (b) 600 images: S is "
+        "3,600² (104 MB dense) but each camera shares points with only a few dozen others, so S is sparse: sparse "
+        "Schur (sparse Cholesky). (c) 20,000 cameras: 120,000² × 8 B = 115 GB dense, and the fill-in of a sparse "
+        "factorisation explodes too: iterative Schur (PCG on S, never factorised). Ceres/COLMAP switch at about "
+        "50 and 1,000 images.",
+        [Hint("(c): a 120,000-unknown reduced system is 115 GB dense; only an iterative solver avoids "
+              "factorising it.", lambda c, out: out[2] != 2)]),
+    numeric_question(
+        "5.21", "Local vs global BA in SLAM", "local_global_mb", "design", [60**2 * 8 / 1e6, 30_000**2 * 8 / 1e6],
+        0.02, "rel.", (2,), relative,
+        "Local BA: 10 keyframes × 6 = 60 unknowns, 60² × 8 B = 28.8 kB — solvable every keyframe in milliseconds. "
+        "Global BA: 30,000² × 8 B = 7.2 GB dense — seconds to minutes, so it runs only after a loop closure, in a "
+        "background thread, while tracking continues on the local map.",
+        [Hint("bytes: the answer is in MB (1e6 bytes).", lambda c, out: out[1] > 1e8)]),
+    numeric_question(
+        "5.22", "Autodiff at 30 Hz", "autodiff_ms", "design", 0.4 * 20 + 0.6 * 20 * 2.5, 0.5, "ms", (), max_abs,
+        "Only the Jacobian evaluation slows down: 8 ms (linear algebra and the rest) + 12 ms × 2.5 = 38 ms > 33 ms: "
+        "autodiff breaks the 30 Hz budget that analytic Jacobians meet — why ORB-SLAM3 derives them by hand.",
+        [value_hint(20 * 2.5, "only the Jacobian part (60 %) gets 2.5× slower; the linear solve does not."),
+         value_hint(20 * 0.6 * 2.5, "add the 40 % that does not change (8 ms).")]),
     # ---------------------------------------------------------------- FRONTIER
     Exercise("5.23", "A differentiable BA layer: d(refined pose)/d(observations)", "differentiable_pose", "frontier", 3,
              _cached(cases_differentiable_pose),

@@ -13,7 +13,7 @@ from __future__ import annotations
 import importlib
 import secrets
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -105,11 +105,32 @@ class Exercise:
 
 # ---------------------------------------------------------------- registry ----------
 
+def numeric_question(id: str, title: str, name: str, kind: str, expected: Any, tol: float, unit: str,
+                     shape: tuple, metric: Callable[[Any, Any], float], explanation: str,
+                     hints: Sequence[Hint] = (), points: int = 1) -> Exercise:
+    """A CONCEPT/DESIGN question answered by a number or an array (the learner assigns `name`).
+
+    expected: the answer, computed in the grader from the seed lesson's numbers (never pasted);
+    metric(answer, expected) -> error in `unit`, passed if <= tol; shape: the answer's shape."""
+    def cases(rng: np.random.Generator) -> list[Case]:
+        return [Case("your answer", (), np.asarray(expected, float), metric, tol, unit, shape=shape)]
+
+    return Exercise(id, title, name, kind, points=points, value=True, cases=cases, hints=list(hints),
+                    explanation=explanation)
+
+
+def value_hint(wrong: Any, text: str) -> Hint:
+    """A hint for a numeric question: fires when the answer is `wrong`, the classic slip, within the
+    question's own tolerance (no magnitude allowance: the metric may already be relative)."""
+    return like(lambda case: np.asarray(wrong, float), text, factor=1.0, rel=0.0)
+
+
 _REGISTRY: dict[str, Exercise] = {}
 CHAPTER_MODULES = {  # chapter number -> module that defines its exercises
     "1": "graders.ch01_camera_models",
     "2": "graders.ch02_epipolar",
     "3": "graders.ch03_features",
+    "4": "graders.ch04_sfm",
     "5": "graders.ch05_bundle_adjustment",
 }
 

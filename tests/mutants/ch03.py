@@ -226,8 +226,8 @@ def distribute_top_n(kps, scores, image_size, n, cells=(8, 8)):
 
 
 def distribute_one_per_cell(kps, scores, image_size, n, cells=(8, 8)):
+    # The quota stops after the first round: one keypoint per occupied cell, fewer than n.
     sel = F.distribute_keypoints(kps, scores, image_size, n, cells)
-    cell = F.distribute_keypoints  # noqa: F841 — the quota stops after the first round
     W, H = image_size
     c = (np.floor((np.asarray(kps)[sel, 1] + 0.5) * cells[1] / H) * cells[0]
          + np.floor((np.asarray(kps)[sel, 0] + 0.5) * cells[0] / W))

@@ -1,0 +1,80 @@
+"""What every chapter's grader tests assert, written once.
+
+A chapter's `tests/test_chNN_graders.py` parametrises these over its exercises, seeds and mutant
+catalogue; the assertions (and their failure messages, which print the grade table and the seed)
+live here so that all chapters hold their graders to the same bar.
+"""
+from __future__ import annotations
+
+from types import ModuleType
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from graders import grade
+from graders.engine import Exercise
+
+
+def show(result) -> str:
+    return f"\n{result}"
+
+
+def reference(ex: Exercise, modules: Sequence[ModuleType]) -> Any:
+    """The reference answer for `ex`: the first of `modules` that defines the learner's name."""
+    for module in modules:
+        if hasattr(module, ex.name):
+            return getattr(module, ex.name)
+    raise LookupError(f"no reference for {ex.id} `{ex.name}`")
+
+
+def assert_full_marks(ex: Exercise, answer: Any, seed: int) -> None:
+    result = grade(ex, answer, seed=seed)
+    assert result.passed and result.score == ex.points, show(result)
+
+
+def assert_library_passes(ex: Exercise, fn: Callable, seed: int, cannot: dict[str, str] | None = None,
+                          cannot_must_fail: bool = False) -> None:
+    """A library-backed implementation passes every case except those in `cannot` (case name ->
+    why the library cannot answer it); with `cannot_must_fail` those must fail, documenting the limit."""
+    cannot = cannot or {}
+    result = grade(ex, fn, seed=seed)
+    for row in result.cases:
+        if row.name not in cannot:
+            assert row.passed, show(result)
+        elif cannot_must_fail:
+            assert not row.passed, f"expected the library to fail '{row.name}' ({cannot[row.name]})"
+
+
+def assert_fallback_passes(ex: Exercise, seed: int = 3) -> None:
+    # Demo cells run on the fallback until the learner's version passes, so it must be right.
+    result = grade(ex, ex.fallback, seed=seed)
+    assert result.passed, show(result)
+
+
+def assert_mutant_caught(ex: Exercise, name: str, mutant: Callable, hint: str | None, seeds: Sequence[int]) -> None:
+    """The mutant loses points with every seed, and where the catalogue names a hint, a hint or the
+    message of an output check (e.g. "F has rank 3") says it."""
+    for seed in seeds:
+        result = grade(ex, mutant, seed=seed)
+        assert result.score < ex.points, f"mutant '{name}' scored full marks with seed {seed}"
+        if hint:
+            said = [row.hint + " " + row.message for row in result.cases]
+            assert any(hint in s for s in said), f"hint '{hint}' did not fire with seed {seed}:{show(result)}"
+
+
+def assert_enough_mutants(exercises: dict[str, Exercise], mutants: Sequence[tuple]) -> None:
+    """At least three mutants per CODE and FRONTIER exercise, two per DEBUG exercise."""
+    for exercise_id, ex in exercises.items():
+        if ex.kind in ("code", "debug", "frontier"):
+            n = sum(m[0] == exercise_id for m in mutants)
+            minimum = 2 if ex.kind == "debug" else 3
+            assert n >= minimum, f"{exercise_id} has only {n} mutants"
+
+
+def assert_value_hints_quiet(ex: Exercise, answer: Any) -> None:
+    """No hint of a value question fires on the right answer, and the right answer passes."""
+    case = ex.cases(np.random.default_rng(0))[0]
+    out = case.convert(answer, case) if case.convert else np.asarray(answer, float)
+    for hint in ex.hints:
+        assert not hint.when(case, out), f"{ex.id}: hint fires on the right answer"
+    assert_full_marks(ex, answer, seed=0)
