@@ -442,12 +442,14 @@ def _apply_step(cameras, points, dc, dp):
 def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", scale: float = 1.0,
                   fix_gauge: bool = False, max_iter: int = 50, lambda0: float = 1e-4,
                   ftol: float = 1e-8, gtol: float = 1e-10, xtol: float = 1e-10, solver: str = "auto",
-                  verbose: bool = False):
+                  verbose: bool = False, fixed: np.ndarray | None = None, fixed_points: np.ndarray | None = None):
     """Levenberg-Marquardt bundle adjustment of BAL cameras and points with Schur elimination.
 
     cameras (nc, 9), points (np, 3), cam_idx, pt_idx (M,), obs (M, 2): the problem and the start.
     loss, scale: robust loss ('linear', 'huber', 'cauchy') and its scale in pixels (IRLS weights).
     fix_gauge: hold camera 0's pose and one translation component of camera 1 (see _gauge_mask).
+    fixed: optional (nc, 9) bool, camera parameters held constant (e.g. known intrinsics, or the
+    cameras outside a local BA window); fixed_points: optional (np,) bool, points held constant.
     Damping: Marquardt's scaled diagonal, H + lambda diag(H) (diag clipped to [1e-6, 1e32] as in
     Ceres), with Nielsen's update of lambda (Madsen, Nielsen & Tingleff 2004):
     accepted step (gain ratio rho > 0): lambda *= max(1/3, 1 - (2 rho - 1)^3), nu = 2;
@@ -461,7 +463,9 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
     pts = np.array(points, float)
     cam_idx, pt_idx, obs = np.asarray(cam_idx), np.asarray(pt_idx), np.asarray(obs, float)
     nc, n_pts = len(cams), len(pts)
-    fixed = _gauge_mask(cams) if fix_gauge else np.zeros(cams.shape, bool)
+    fixed_cams = _gauge_mask(cams) if fix_gauge else np.zeros(cams.shape, bool)
+    fixed = fixed_cams if fixed is None else fixed_cams | np.asarray(fixed, bool)
+    fixed_pts = None if fixed_points is None or not np.any(fixed_points) else np.asarray(fixed_points, bool)
     r = residuals(cams, pts, cam_idx, pt_idx, obs)
     cost = robust_cost(r, loss, scale)
     costs = [cost]
@@ -478,6 +482,10 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
             cam, par = fixed.nonzero()
             U[cam, par, par] = 1.0
             g_c[fixed] = 0.0
+        if fixed_pts is not None:  # the same for fixed points: identity block, no coupling, no gradient
+            W[fixed_pts[pt_idx]] = 0.0
+            V[fixed_pts] = np.eye(3)
+            g_p[fixed_pts] = 0.0
         if max(np.abs(g_c).max(), np.abs(g_p).max(initial=0.0)) < gtol:
             break
         dU = np.clip(np.einsum("nii->ni", U), 1e-6, 1e32)       # Marquardt's diagonal scaling
@@ -488,6 +496,8 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
             Vd[:, np.arange(3), np.arange(3)] += lam * dV
             dc, dp = schur_solve(Ud, Vd, W, g_c, g_p, cam_idx, pt_idx, method=solver)
             dc[fixed] = 0.0
+            if fixed_pts is not None:
+                dp[fixed_pts] = 0.0
             # Predicted decrease of the (IRLS) quadratic model: 0.5 dx^T (lambda D dx - g).
             predicted = 0.5 * (np.sum(dc * (lam * dU * dc - g_c)) + np.sum(dp * (lam * dV * dp - g_p)))
             new_cams, new_pts = _apply_step(cams, pts, dc, dp)

@@ -26,6 +26,8 @@ SOLUTION_MODULES = {
     "01": ["solutions.camera_models", "solutions.camera_debug", "solutions.camera_questions"],
     "02": ["solutions.epipolar", "solutions.epipolar_debug", "solutions.epipolar_questions"],
     "03": ["solutions.features", "solutions.features_debug", "solutions.features_questions"],
+    "04": ["solutions.sfm", "solutions.sfm_pipeline", "solutions.colmap_io", "solutions.sfm_debug",
+           "solutions.sfm_questions", "solutions.sfm_frontier"],
     "05": ["solutions.bundle_adjustment", "solutions.bundle_adjustment_debug", "solutions.bundle_adjustment_questions"],
 }
 BUDGET_S = 60.0

@@ -1,0 +1,657 @@
+"""Chapter 4 mutant catalogue: realistic wrong implementations, one per known mistake.
+
+Each entry is (exercise id, short name, function, hint fragment or None). The grader must take
+points off every one of them; where a hint exists for the mistake it must fire (in a row's hint or,
+for output-format mistakes such as a reflection instead of a rotation, in its message). The
+mistakes are the chapter's DEBUG material and the classics: an unnormalised DLT, a missing
+homogeneous divide, the wrong cheirality test, a P3P root mix-up, R not orthonormalised, RANSAC with
+a fixed iteration count, no final refinement, tracks that merge two 3D points, no bundle adjustment.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from graders import ch04_sfm as ch4
+
+# ----------------------------------------------------------------- small shared pieces
+
+
+def _h(x):
+    return np.c_[x, np.ones(len(x))]
+
+
+def _rows(P1, P2, x1, x2):
+    return np.stack([x1[:, :1] * P1[2] - P1[0], x1[:, 1:] * P1[2] - P1[1],
+                     x2[:, :1] * P2[2] - P2[0], x2[:, 1:] * P2[2] - P2[1]], 1)
+
+
+def _null(A):
+    return np.linalg.svd(A)[2][:, -1]
+
+
+def _normalised_K(x, K):
+    return np.linalg.solve(K, _h(x).T).T[:, :2]
+
+
+def _kabsch(A, B):
+    ma, mb = A.mean(0), B.mean(0)
+    U, _, Vt = np.linalg.svd((B - mb).T @ (A - ma))
+    D = np.diag([1, 1, np.linalg.det(U @ Vt)])
+    R = U @ D @ Vt
+    return R, mb - R @ ma
+
+
+# ----------------------------------------------------------------- 4.4-4.6 triangulation
+
+def tri_unnormalised(P1, P2, x1, x2):
+    Xh = _null(_rows(P1, P2, x1, x2))
+    return Xh[:, :3] / Xh[:, 3:]
+
+
+def tri_no_divide(P1, P2, x1, x2):
+    return _null(_rows(P1, P2, x1, x2))[:, :3]                                      # forgot / w
+
+
+def tri_homogeneous(P1, P2, x1, x2):
+    Xh = _null(_rows(P1, P2, x1, x2))
+    return Xh / Xh[:, 3:]                                                            # (N, 4)
+
+
+def tri_rows_mixed(P1, P2, x1, x2):
+    A = np.stack([x1[:, :1] * P1[2] - P1[0], x1[:, 1:] * P1[2] - P1[0],             # y row uses P1 row 0
+                  x2[:, :1] * P2[2] - P2[0], x2[:, 1:] * P2[2] - P2[1]], 1)
+    Xh = _null(A)
+    return Xh[:, :3] / Xh[:, 3:]
+
+
+def _rays(P, x):
+    M, p = P[:, :3], P[:, 3]
+    C = -np.linalg.solve(M, p)
+    d = np.linalg.solve(M, _h(x).T).T
+    return C, d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def mid_is_dlt(P1, P2, x1, x2):
+    return ch4.cv_triangulate(P1, P2, x1, x2)
+
+
+def mid_on_ray1(P1, P2, x1, x2):
+    C1, d1 = _rays(P1, x1)
+    Xm = ch4.gt_midpoint(P1, P2, x1, x2)
+    return C1 + np.sum((Xm - C1) * d1, 1)[:, None] * d1
+
+
+def mid_camera_frame_rays(P1, P2, x1, x2):
+    """Rays K⁻¹x left in the camera frame (not rotated into the world)."""
+    def ray(P, x):
+        M = P[:, :3]
+        C = -np.linalg.solve(M, P[:, 3])
+        Kq, Rq = _rq(M)
+        d = np.linalg.solve(Kq, _h(x).T).T
+        return C, d / np.linalg.norm(d, axis=1, keepdims=True)
+    (C1, d1), (C2, d2) = ray(P1, x1), ray(P2, x2)
+    b = C2 - C1
+    a11, a12, a22 = np.sum(d1 * d1, 1), -np.sum(d1 * d2, 1), np.sum(d2 * d2, 1)
+    r1, r2 = d1 @ b, -(d2 @ b)
+    det = a11 * a22 - a12 * a12
+    s1, s2 = (a22 * r1 - a12 * r2) / det, (a11 * r2 - a12 * r1) / det
+    return 0.5 * (C1 + s1[:, None] * d1 + C2 + s2[:, None] * d2)
+
+
+def _rq(M):
+    Q, R = np.linalg.qr(np.flipud(M).T)
+    R = np.flipud(R.T)[:, ::-1]
+    Q = Q.T[::-1]
+    S = np.diag(np.sign(np.diag(R)))
+    return R @ S, S @ Q
+
+
+def angles_radians(C1, C2, X):
+    return np.radians(ch4.gt_triangulation_angles(C1, C2, X))
+
+
+def angles_supplementary(C1, C2, X):
+    a, b = X - C1, C2 - X                              # one ray reversed
+    return np.degrees(np.arccos(np.clip(np.sum(a * b, 1) / np.linalg.norm(a, axis=1) / np.linalg.norm(b, axis=1),
+                                        -1, 1)))
+
+
+def angles_at_camera(C1, C2, X):
+    a, b = X - C1, C2 - C1                             # the angle at C1, not at X
+    return np.degrees(np.arccos(np.clip(np.sum(a * b, 1) / np.linalg.norm(a, axis=1) / np.linalg.norm(b), -1, 1)))
+
+
+# ----------------------------------------------------------------- 4.7 PnP by DLT
+
+def _pnp_P(X, x, K, normalise_rays=True, normalise_3d=True):
+    n = _normalised_K(x, K) if normalise_rays else np.asarray(x, float)
+    T = ch4.hartley(n) if normalise_rays else np.eye(3)
+    n = (_h(n) @ T.T)[:, :2]
+    U = np.eye(4)
+    if normalise_3d:
+        mu = X.mean(0)
+        s = np.sqrt(3) / np.linalg.norm(X - mu, axis=1).mean()
+        U = np.diag([s, s, s, 1.0])
+        U[:3, 3] = -s * mu
+    Xn = _h(X) @ U.T
+    z = np.zeros_like(Xn)
+    A = np.r_[np.c_[Xn, z, -n[:, :1] * Xn], np.c_[z, Xn, -n[:, 1:] * Xn]]
+    P = np.linalg.svd(A)[2][-1].reshape(3, 4)
+    return np.linalg.solve(T, P) @ U
+
+
+def pnp_no_scale(X, x, K):
+    P = _pnp_P(X, x, K)
+    if np.median(_h(X) @ P[2]) < 0:
+        P = -P
+    U, S, Vt = np.linalg.svd(P[:, :3])
+    return U @ Vt, P[:, 3]                              # t not divided by the scale
+
+
+def epnp_returns_centre_dlt(X, x, K):
+    R, t = ch4.gt_pnp_dlt(X, x, K)
+    return R, -R.T @ t
+
+
+def pnp_unnormalised(X, x, K):
+    """Rays K⁻¹x, but neither they nor the 3D points are normalised before the SVD."""
+    n = _normalised_K(x, K)
+    Xh = _h(X)
+    z = np.zeros_like(Xh)
+    A = np.r_[np.c_[Xh, z, -n[:, :1] * Xh], np.c_[z, Xh, -n[:, 1:] * Xh]]
+    P = np.linalg.svd(A)[2][-1].reshape(3, 4)
+    if np.median(Xh @ P[2]) < 0:
+        P = -P
+    U, S, Vt = np.linalg.svd(P[:, :3])
+    return U @ Vt, P[:, 3] / S.mean()
+
+
+def pnp_pixels(X, x, K):
+    """The seed's sketch with pixels instead of K⁻¹ x: the 3x3 block is K R, not R."""
+    P = _pnp_P(X, x, K, normalise_rays=False)
+    P = P / np.linalg.norm(P[2, :3])
+    if np.median(_h(X) @ P[2]) < 0:
+        P = -P
+    U, S, Vt = np.linalg.svd(P[:, :3])
+    R = U @ Vt
+    if np.linalg.det(R) < 0:
+        R = -R
+    return R, P[:, 3] / S.mean()
+
+
+def pnp_not_orthonormal(X, x, K):
+    P = _pnp_P(X, x, K)
+    if np.median(_h(X) @ P[2]) < 0:
+        P = -P
+    S = np.linalg.svd(P[:, :3], compute_uv=False)
+    return P[:, :3] / S.mean(), P[:, 3] / S.mean()      # R not projected onto SO(3)
+
+
+# ----------------------------------------------------------------- 4.8 P3P
+
+def p3p_first_only(X, x, K):
+    return ch4.cv_p3p(X, x, K)[:1]
+
+
+def p3p_root_mixup(X, x, K):
+    """Right distances, but paired with the wrong points (d2 and d3 swapped) before the alignment."""
+    f = _h(_normalised_K(x, K))
+    f /= np.linalg.norm(f, axis=1, keepdims=True)
+    out = []
+    for R, t in ch4.cv_p3p(X, x, K):
+        d = np.linalg.norm(X @ R.T + t, axis=1)
+        Pc = d[[0, 2, 1], None] * f
+        out.append(_kabsch(X, Pc))
+    return out
+
+
+def p3p_with_duplicates(X, x, K):
+    sols = ch4.cv_p3p(X, x, K)
+    return sols + sols[:1]
+
+
+# ----------------------------------------------------------------- 4.9 EPnP
+
+def epnp_forgot_K(X, x, K):
+    ok, r, t = cv2.solvePnP(X, _h(x)[:, :2] / 1.0, np.eye(3), None, flags=cv2.SOLVEPNP_EPNP)
+    return cv2.Rodrigues(r)[0], t.ravel()
+
+
+def epnp_camera_to_world(X, x, K):
+    R, t = ch4.cv_epnp(X, x, K)
+    return R.T, -R.T @ t
+
+
+def epnp_returns_centre(X, x, K):
+    R, t = ch4.cv_epnp(X, x, K)
+    return R, -R.T @ t
+
+
+# ----------------------------------------------------------------- 4.10 PnP RANSAC
+
+def _ransac(X, x, K, thresh_px=4.0, seed=0, iters=None, refine=True, squared=False):
+    rng = np.random.default_rng(seed)
+    n = len(X)
+    best, best_cnt, k, i = None, -1, 10_000, 0
+    limit = iters if iters is not None else 10_000
+    while i < (limit if iters is not None else min(k, limit)):
+        i += 1
+        idx = rng.choice(n, 3, replace=False)
+        for R, t in ch4.cv_p3p(X[idx], x[idx], K):
+            uv, z = ch4.project(X, K, R, t)
+            r = np.linalg.norm(uv - x, axis=1)
+            inl = (z > 0) & ((r ** 2 if squared else r) < thresh_px)
+            if inl.sum() > best_cnt:
+                best, best_cnt = (R, t), int(inl.sum())
+                w = best_cnt / n
+                k = np.log(0.01) / np.log(max(1 - w ** 3, 1e-12)) if w < 1 else 1
+    R, t = best
+    uv, z = ch4.project(X, K, R, t)
+    r = np.linalg.norm(uv - x, axis=1)
+    inl = (z > 0) & ((r ** 2 if squared else r) < thresh_px)
+    if refine and inl.sum() >= 4:
+        rv, tv = cv2.solvePnPRefineLM(X[inl], x[inl], K, None, cv2.Rodrigues(R)[0], t.reshape(3, 1))
+        R, t = cv2.Rodrigues(rv)[0], tv.ravel()
+        uv, z = ch4.project(X, K, R, t)
+        r = np.linalg.norm(uv - x, axis=1)
+        inl = (z > 0) & ((r ** 2 if squared else r) < thresh_px)
+    return R, t, inl
+
+
+def ransac_fixed_100(X, x, K, thresh_px=4.0, seed=0):
+    return _ransac(X, x, K, thresh_px, seed, iters=100)
+
+
+def ransac_no_refinement(X, x, K, thresh_px=4.0, seed=0):
+    return _ransac(X, x, K, thresh_px, seed, refine=False)
+
+
+def ransac_squared_threshold(X, x, K, thresh_px=4.0, seed=0):
+    return _ransac(X, x, K, thresh_px, seed, squared=True)        # r² < 4 means r < 2 px
+
+
+# ----------------------------------------------------------------- 4.11 tracks
+
+def _components(matches):
+    parent = {}
+
+    def find(a):
+        while parent.setdefault(a, a) != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+    for (i, j), m in matches.items():
+        for a, b in np.asarray(m).reshape(-1, 2):
+            ra, rb = find((i, int(a))), find((j, int(b)))
+            if ra != rb:
+                parent[ra] = rb
+    groups = {}
+    for node in list(parent):
+        groups.setdefault(find(node), []).append(node)
+    return list(groups.values())
+
+
+def tracks_keep_inconsistent(matches):
+    out = []
+    for nodes in _components(matches):
+        out.append({i: k for i, k in nodes})            # a second keypoint of an image overwrites the first
+    return [t for t in out if len(t) >= 2]
+
+
+def tracks_drop_duplicate_image_only(matches):
+    out = []
+    for nodes in _components(matches):
+        imgs = [i for i, _ in nodes]
+        keep = {i: k for i, k in nodes if imgs.count(i) == 1}   # drops only the conflicting observations
+        if len(keep) >= 2:
+            out.append(keep)
+    return out
+
+
+def tracks_no_merge(matches):
+    """Greedy: a match joins the track of its first endpoint; two existing tracks are never merged."""
+    owner, tracks = {}, []
+    for (i, j), m in matches.items():
+        for a, b in np.asarray(m).reshape(-1, 2):
+            u, v = (i, int(a)), (j, int(b))
+            if u in owner:
+                k = owner[u]
+            elif v in owner:
+                k = owner[v]
+            else:
+                k = len(tracks)
+                tracks.append({})
+            for node in (u, v):
+                if node not in owner:
+                    owner[node] = k
+                    tracks[k].setdefault(node[0], node[1])
+    return [t for t in tracks if len(t) >= 2]
+
+
+def tracks_pairwise(matches):
+    return [{int(i): int(a), int(j): int(b)} for (i, j), m in matches.items() for a, b in np.asarray(m).reshape(-1, 2)]
+
+
+# ----------------------------------------------------------------- 4.12 two-view initialisation
+
+def _two_view(x1, x2, K1, K2, choose):
+    n1, n2 = _normalised_K(x1, K1), _normalised_K(x2, K2)
+    E, mask = cv2.findEssentialMat(n1, n2, np.eye(3), cv2.USAC_MAGSAC, 0.999, 1.0 / K1[0, 0])
+    inl = mask.ravel().astype(bool)
+    E = ch4.refine_essential(E[:3], x1[inl], x2[inl], K1, K2)
+    R1, R2, t = cv2.decomposeEssentialMat(E)
+    t = t.ravel() / np.linalg.norm(t)
+    cands = [(R1, t), (R1, -t), (R2, t), (R2, -t)]
+    R, t = choose(cands, n1[inl], n2[inl])
+    X = ch4._dlt_normalised((np.eye(3), np.zeros(3)), (R, t), n1, n2)
+    z1, z2 = X[:, 2], (X @ R.T + t)[:, 2]
+    inl &= (z1 > 0) & (z2 > 0)
+    return R, t, X[inl], inl
+
+
+def _count(cands, a, b, both):
+    scores = []
+    for R, t in cands:
+        X = ch4._dlt_normalised((np.eye(3), np.zeros(3)), (R, t), a, b)
+        z1, z2 = X[:, 2], (X @ R.T + t)[:, 2]
+        scores.append(np.sum((z1 > 0) & (z2 > 0)) if both else np.sum(z1 > 0))
+    return scores
+
+
+def _last_best(scores):
+    best = 0
+    for k, sc in enumerate(scores):        # `>=`: the last of the tied candidates wins
+        if sc >= scores[best]:
+            best = k
+    return best
+
+
+def two_view_camera1_only(x1, x2, K1, K2):
+    return _two_view(x1, x2, K1, K2, lambda c, a, b: c[_last_best(_count(c, a, b, False))])
+
+
+def two_view_points_in_camera2(x1, x2, K1, K2):
+    R, t, X, inl = _two_view(x1, x2, K1, K2, lambda c, a, b: c[int(np.argmax(_count(c, a, b, True)))])
+    return R, t, X @ R.T + t, inl
+
+
+def two_view_first_candidate(x1, x2, K1, K2):
+    return _two_view(x1, x2, K1, K2, lambda c, a, b: c[0])
+
+
+def two_view_K1_for_both(x1, x2, K1, K2):
+    return _two_view(x1, x2, K1, K1, lambda c, a, b: c[int(np.argmax(_count(c, a, b, True)))])
+
+
+# ----------------------------------------------------------------- 4.13 ranking
+
+def rank_by_matches(stats):
+    return sorted(range(len(stats)), key=lambda i: -stats[i]["n_matches"])
+
+
+def rank_by_E_inliers(stats):
+    return sorted(range(len(stats)), key=lambda i: -stats[i]["n_inliers_E"])
+
+
+def rank_by_angle(stats):
+    return sorted(range(len(stats)), key=lambda i: -stats[i]["median_angle_deg"])
+
+
+def rank_no_H_check(stats):
+    return sorted(range(len(stats)), key=lambda i: (stats[i]["median_angle_deg"] < 1.5, -stats[i]["n_inliers_E"]))
+
+
+# ----------------------------------------------------------------- 4.14 incremental SfM
+
+def sfm_no_bundle_adjustment(problem):
+    return ch4.cv_incremental_sfm(problem, refine=False)
+
+
+def sfm_no_angle_filter(problem):
+    return ch4.cv_incremental_sfm(problem, min_angle=0.0)
+
+
+def sfm_initial_pair_only(problem):
+    return ch4.cv_incremental_sfm(problem, max_images=2)
+
+
+def sfm_points_out_of_order(problem):
+    rec = ch4.cv_incremental_sfm(problem)
+    rec["tracks"] = rec["tracks"][1:] + rec["tracks"][:1]
+    return rec
+
+
+# ----------------------------------------------------------------- 4.15 rotation averaging
+
+def rotavg_spanning_tree(R_rel, n):
+    Rs = [np.eye(3)]
+    for k in range(1, n):
+        Rs.append(R_rel[(k - 1, k)] @ Rs[-1])
+    return np.stack(Rs)
+
+
+def rotavg_transposed(R_rel, n):
+    return ch4.gt_rotation_averaging({k: v.T for k, v in R_rel.items()}, n)
+
+
+def rotavg_no_projection(R_rel, n):
+    m = 3 * n
+    rows = []
+    for (i, j), Rij in R_rel.items():
+        row = np.zeros((3, m))
+        row[:, 3 * j:3 * j + 3] = np.eye(3)
+        row[:, 3 * i:3 * i + 3] -= Rij
+        rows.append(row)
+    fix = np.zeros((3, m))
+    fix[:, :3] = np.eye(3)
+    A = np.r_[np.concatenate(rows), 10 * fix]
+    B = np.r_[np.zeros((A.shape[0] - 3, 3)), 10 * np.eye(3)]
+    Y = np.linalg.lstsq(A, B, rcond=None)[0]
+    return np.stack([Y[3 * i:3 * i + 3] for i in range(n)])
+
+
+# ----------------------------------------------------------------- 4.16-4.17 COLMAP text
+
+def _shift_pixels(recon, d):
+    recon = dict(recon)
+    shift = np.array([[0, 0, d], [0, 0, d], [0, 0, 0]])
+    recon["cameras"] = {i: dict(c, K=c["K"] + shift) for i, c in recon["cameras"].items()}
+    recon["keypoints"] = [np.asarray(k) + d for k in recon["keypoints"]]
+    return recon
+
+
+def write_no_half_pixel(recon, folder):
+    ch4.gt_write_colmap_text(_shift_pixels(recon, -0.5), folder)     # pixel centres written as corners
+
+
+def write_quaternion_xyzw(recon, folder):
+    from pathlib import Path
+    ch4.gt_write_colmap_text(recon, folder)
+    f = Path(folder) / "images.txt"
+    lines = f.read_text().splitlines()
+    data = [k for k, ln in enumerate(lines) if not ln.startswith("#")]
+    for k in data[0::2]:                                                # pose lines: qw qx qy qz -> qx qy qz qw
+        tok = lines[k].split()
+        tok[1:5] = tok[2:5] + tok[1:2]
+        lines[k] = " ".join(tok)
+    f.write_text("\n".join(lines) + "\n")
+
+
+def write_camera_to_world(recon, folder):
+    recon = dict(recon)
+    recon["cameras"] = {i: dict(c, R=c["R"].T, t=-c["R"].T @ c["t"]) for i, c in recon["cameras"].items()}
+    ch4.gt_write_colmap_text(recon, folder)
+
+
+def read_no_half_pixel(folder):
+    return _shift_pixels_read(ch4.colmap_read_text(folder), 0.5)
+
+
+def _shift_pixels_read(rec, d):
+    for c in rec["cameras"].values():
+        c["K"] = c["K"] + np.array([[0, 0, d], [0, 0, d], [0, 0, 0]])
+    rec["keypoints"] = {i: k + d for i, k in rec["keypoints"].items()}
+    return rec
+
+
+def read_quaternion_xyzw(folder):
+    from scipy.spatial.transform import Rotation
+    rec = ch4.colmap_read_text(folder)
+    for c in rec["cameras"].values():
+        x, y, z, w = Rotation.from_matrix(c["R"]).as_quat()
+        c["R"] = Rotation.from_quat([w, x, y, z]).as_matrix()             # scalar-first read as scalar-last
+    return rec
+
+
+def read_ids_not_shifted(folder):
+    rec = ch4.colmap_read_text(folder)
+    rec["cameras"] = {i + 1: c for i, c in rec["cameras"].items()}
+    rec["keypoints"] = {i + 1: k for i, k in rec["keypoints"].items()}
+    rec["tracks"] = [{i + 1: k for i, k in tr.items()} for tr in rec["tracks"]]
+    return rec
+
+
+# ----------------------------------------------------------------- 4.18-4.21 debug
+
+def components_all_edges(case):
+    return ch4.broken_components(case)
+
+
+def components_unordered(case):
+    return sorted(ch4.gt_components(case), key=lambda c: c[0])
+
+
+def components_largest_only(case):
+    return ch4.gt_components(case)[:1]
+
+
+def registration_unchanged(case):
+    return dict(case["settings"])
+
+
+def registration_threshold_only(case):
+    return dict(case["settings"], thresh_px=4.0)
+
+
+def registration_anything_goes(case):
+    return {"thresh_px": 50.0, "min_inliers": 5, "iterations": 1000}
+
+
+def drift_unchanged(case):
+    return ch4.broken_trajectory(case)
+
+
+def drift_gps_only(case):
+    return case["gps"].copy()
+
+
+def drift_global_sim3(case):
+    C = ch4.broken_trajectory(case)
+    s, R, t = ch4.gt_umeyama(C, case["gps"])
+    return s * C @ R.T + t
+
+
+def initial_most_matches(case):
+    return ch4.broken_initial_pair(case)
+
+
+def initial_widest_angle(case):
+    stats = [ch4.cv_pair_stats(p["x1"], p["x2"], case["K"]) for p in case["pairs"]]
+    return int(np.argmax([s["median_angle_deg"] for s in stats]))
+
+
+def initial_most_E_inliers(case):
+    stats = [ch4.cv_pair_stats(p["x1"], p["x2"], case["K"]) for p in case["pairs"]]
+    return int(np.argmax([s["n_inliers_E"] for s in stats]))
+
+
+# ----------------------------------------------------------------- 4.25 frontier
+
+def umeyama_transposed(X, Y):
+    mx, my = X.mean(0), Y.mean(0)
+    U, S, Vt = np.linalg.svd((Y - my).T @ (X - mx))
+    D = np.diag([1, 1, np.sign(np.linalg.det(U @ Vt))])
+    R = (U @ D @ Vt).T
+    s = np.trace(np.diag(S) @ D) / np.sum((X - mx) ** 2)
+    return s, R, my - s * R @ mx
+
+
+def umeyama_std_ratio(X, Y):
+    s, R, t = ch4.gt_umeyama(X, Y)
+    s2 = np.sqrt(np.sum((Y - Y.mean(0)) ** 2) / np.sum((X - X.mean(0)) ** 2))
+    return s2, R, Y.mean(0) - s2 * R @ X.mean(0)
+
+
+def umeyama_no_centroid(X, Y):
+    U, S, Vt = np.linalg.svd(Y.T @ X)
+    D = np.diag([1, 1, np.sign(np.linalg.det(U @ Vt))])
+    R = U @ D @ Vt
+    s = np.trace(np.diag(S) @ D) / np.sum(X ** 2)
+    return s, R, Y.mean(0) - s * R @ X.mean(0)
+
+
+MUTANTS = [
+    ("4.4", "unnormalised DLT", tri_unnormalised, "no normalisation"),
+    ("4.4", "homogeneous divide missed", tri_no_divide, "4th coordinate"),
+    ("4.4", "homogeneous (N, 4) returned", tri_homogeneous, "homogeneous?"),
+    ("4.4", "rows mixed up", tri_rows_mixed, None),
+    ("4.5", "DLT instead of midpoint", mid_is_dlt, "DLT point"),
+    ("4.5", "closest point on ray 1", mid_on_ray1, "lies on ray 1"),
+    ("4.5", "rays left in the camera frame", mid_camera_frame_rays, None),
+    ("4.6", "radians", angles_radians, "radians"),
+    ("4.6", "supplementary angle", angles_supplementary, "supplementary"),
+    ("4.6", "angle at the camera", angles_at_camera, None),
+    ("4.7", "t not divided by the scale", pnp_no_scale, "mean singular value"),
+    ("4.7", "camera centre instead of t", epnp_returns_centre_dlt, None),
+    ("4.7", "pixels instead of K⁻¹x", pnp_pixels, None),
+    ("4.7", "R not orthonormalised", pnp_not_orthonormal, "not a rotation"),
+    ("4.8", "only the first root", p3p_first_only, "every real root"),
+    ("4.8", "root mix-up", p3p_root_mixup, "pairing"),
+    ("4.8", "a solution returned twice", p3p_with_duplicates, "solution(s)"),
+    ("4.9", "forgot K", epnp_forgot_K, None),
+    ("4.9", "camera-to-world pose", epnp_camera_to_world, None),
+    ("4.9", "camera centre instead of t", epnp_returns_centre, None),
+    ("4.10", "fixed 100 iterations", ransac_fixed_100, "fixed number of iterations"),
+    ("4.10", "no final refinement", ransac_no_refinement, None),
+    ("4.10", "threshold on squared pixels", ransac_squared_threshold, None),
+    ("4.11", "tracks that merge two 3D points", tracks_keep_inconsistent, "join two 3D points"),
+    ("4.11", "only the conflicting observations dropped", tracks_drop_duplicate_image_only, None),
+    ("4.11", "existing tracks never merged", tracks_no_merge, "union-find"),
+    ("4.11", "one track per match", tracks_pairwise, "union-find"),
+    ("4.12", "X in camera 2's frame", two_view_points_in_camera2, "reproject"),
+    ("4.12", "first decomposition", two_view_first_candidate, None),
+    ("4.12", "K1 used for both images", two_view_K1_for_both, None),
+    ("4.13", "most matches", rank_by_matches, None),
+    ("4.13", "most E inliers", rank_by_E_inliers, "H/E"),
+    ("4.13", "widest angle", rank_by_angle, None),
+    ("4.13", "no H/E check", rank_no_H_check, None),
+    ("4.14", "no bundle adjustment", sfm_no_bundle_adjustment, None),
+    ("4.14", "stops after the initial pair", sfm_initial_pair_only, None),
+    ("4.14", "no triangulation-angle filter", sfm_no_angle_filter, "1.5°"),
+    ("4.14", "points and tracks out of order", sfm_points_out_of_order, None),
+    ("4.15", "chained along a spanning tree", rotavg_spanning_tree, "along a tree"),
+    ("4.15", "R_ij transposed", rotavg_transposed, "R_ij = R_j R_iᵀ"),
+    ("4.15", "no projection onto SO(3)", rotavg_no_projection, "not a rotation"),
+    ("4.16", "no half-pixel shift", write_no_half_pixel, "half a pixel"),
+    ("4.16", "quaternion written x y z w", write_quaternion_xyzw, "QW QX QY QZ"),
+    ("4.16", "camera-to-world pose", write_camera_to_world, None),
+    ("4.17", "no half-pixel shift", read_no_half_pixel, "half a pixel"),
+    ("4.17", "quaternion read as x y z w", read_quaternion_xyzw, "QW QX QY QZ"),
+    ("4.17", "ids not shifted", read_ids_not_shifted, "IMAGE_ID − 1"),
+    ("4.18", "BFS over every pair (the colleague's)", components_all_edges, "min_inliers"),
+    ("4.18", "not ordered by size", components_unordered, None),
+    ("4.18", "largest component only", components_largest_only, None),
+    ("4.19", "settings unchanged", registration_unchanged, "images still fail"),
+    ("4.19", "threshold fixed, 100 inliers still required", registration_threshold_only, "images still fail"),
+    ("4.19", "loose threshold, 5 inliers", registration_anything_goes, "another place"),
+    ("4.20", "the drifting chain", drift_unchanged, "drifting chain"),
+    ("4.20", "raw GPS", drift_gps_only, "raw GPS"),
+    ("4.20", "one global Sim(3)", drift_global_sim3, "global similarity"),
+    ("4.21", "most matches (the colleague's)", initial_most_matches, "turning on the spot"),
+    ("4.21", "widest angle", initial_widest_angle, None),
+    ("4.21", "most E inliers", initial_most_E_inliers, None),
+    ("4.25", "R transposed", umeyama_transposed, "transposed"),
+    ("4.25", "scale from the spreads", umeyama_std_ratio, "scale"),
+    ("4.25", "centroids not subtracted", umeyama_no_centroid, None),
+]

@@ -1,0 +1,222 @@
+"""Chapter 4 graders: the reference and the OpenCV/pycolmap-backed versions pass; every mutant fails.
+
+Seeds are fixed so a failure here is reproducible; the graders themselves draw fresh seeds for
+learners. Three seeds per exercise (two for the slow ones): the hidden-case generators are random,
+and a grader that only works for a lucky draw is a bug. References come from `solutions.sfm`,
+`solutions.sfm_pipeline`, `solutions.colmap_io` (helper "ch4-solutions") and `solutions.sfm_debug`,
+`solutions.sfm_questions`, `solutions.sfm_frontier`.
+"""
+from __future__ import annotations
+
+import importlib
+
+import numpy as np
+import pytest
+
+import grader_checks as checks
+from graders import ch04_sfm as ch4
+from graders import chapter, get, grade
+from graders.compare import rotation_angle_deg
+from mutants.ch04 import MUTANTS
+
+SEEDS = [0, 1, 2]
+SLOW = {"4.10", "4.14"}            # a few seconds per grade: two seeds
+EXERCISES = {ex.id: ex for ex in chapter(4)}
+REFERENCE_MODULES = ["solutions.sfm", "solutions.sfm_pipeline", "solutions.colmap_io", "solutions.sfm_debug",
+                     "solutions.sfm_questions", "solutions.sfm_frontier"]
+
+
+def _modules():
+    mods = []
+    for name in REFERENCE_MODULES:
+        try:
+            mods.append(importlib.import_module(name))
+        except ImportError:
+            pass
+    return mods
+
+
+MODULES = _modules()
+
+
+def reference(ex) -> object:
+    try:
+        return checks.reference(ex, MODULES)
+    except LookupError:
+        pytest.skip(f"no reference for {ex.id} `{ex.name}` yet (expected in one of {', '.join(REFERENCE_MODULES)})")
+
+
+def _seeds(exercise_id):
+    return SEEDS[:2] if exercise_id in SLOW else SEEDS
+
+
+# ----------------------------------------------------------------- library-backed implementations
+
+def colmap_pnp_ransac(X, x, K, thresh_px=4.0, seed=0):
+    """pycolmap's LO-RANSAC + refinement (the image size only bounds the principal point)."""
+    w, h = int(2 * K[0, 2]) + 2, int(2 * K[1, 2]) + 2
+    R, t, inl = ch4.colmap_pnp(X, x, K, w, h, thresh_px)
+    uv, z = ch4.project(X, K, R, t)
+    return R, t, (z > 0) & (np.linalg.norm(uv - x, axis=1) < thresh_px)
+
+
+def colmap_p3p_free(X, x, K):
+    """OpenCV's AP3P (a different P3P solver from the oracle's P3P)."""
+    import cv2
+    return ch4.cv_p3p(X, x, K, cv2.SOLVEPNP_AP3P)
+
+
+def sqpnp(X, x, K):
+    return ch4.cv_sqpnp(X, x, K)
+
+
+LIBRARY = {
+    "4.4": [("OpenCV", ch4.cv_triangulate)],
+    "4.5": [("grader closed form", ch4.gt_midpoint)],
+    "4.6": [("pycolmap", ch4.colmap_triangulation_angles)],
+    "4.7": [("grader DLT", ch4.gt_pnp_dlt)],
+    "4.8": [("OpenCV P3P", ch4.cv_p3p), ("OpenCV AP3P", colmap_p3p_free)],
+    "4.9": [("OpenCV EPnP", ch4.cv_epnp)],
+    "4.10": [("OpenCV", ch4.cv_pnp_ransac), ("pycolmap", colmap_pnp_ransac)],
+    "4.11": [("scipy csgraph", ch4.gt_build_tracks)],
+    "4.12": [("OpenCV", ch4.cv_two_view_init)],
+    "4.14": [("OpenCV + scipy BA", ch4.cv_incremental_sfm)],
+    "4.15": [("grader chordal L2", ch4.gt_rotation_averaging)],
+    "4.21": [("OpenCV", ch4.cv_fix_initial_pair)],
+    "4.25": [("OpenCV estimateAffine3D", ch4.cv_umeyama)],
+}
+LIBRARY_CASES = [(i, name, fn) for i, impls in LIBRARY.items() for name, fn in impls]
+
+
+# ----------------------------------------------------------------- the graders
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("exercise_id", list(EXERCISES))
+def test_reference_gets_full_marks(exercise_id, seed):
+    if seed not in _seeds(exercise_id):
+        pytest.skip("slow exercise: two seeds")
+    ex = EXERCISES[exercise_id]
+    checks.assert_full_marks(ex, reference(ex), seed)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("exercise_id, library, fn", LIBRARY_CASES, ids=[f"{i}-{n}" for i, n, _ in LIBRARY_CASES])
+def test_library_backed_implementation_passes(exercise_id, library, fn, seed):
+    if seed not in _seeds(exercise_id):
+        pytest.skip("slow exercise: two seeds")
+    checks.assert_library_passes(get(exercise_id), fn, seed)
+
+
+@pytest.mark.parametrize("exercise_id", [i for i, ex in EXERCISES.items() if ex.fallback is not None])
+def test_fallback_passes(exercise_id):
+    checks.assert_fallback_passes(EXERCISES[exercise_id])
+
+
+@pytest.mark.parametrize("exercise_id, name, mutant, hint", MUTANTS, ids=[f"{m[0]}-{m[1]}" for m in MUTANTS])
+def test_mutant_is_caught(exercise_id, name, mutant, hint):
+    checks.assert_mutant_caught(EXERCISES[exercise_id], name, mutant, hint, _seeds(exercise_id))
+
+
+def test_every_code_debug_and_frontier_exercise_has_mutants():
+    checks.assert_enough_mutants(EXERCISES, MUTANTS)
+
+
+@pytest.mark.parametrize("exercise_id", [i for i, ex in EXERCISES.items() if ex.value])
+def test_value_hints_name_the_classic_slip(exercise_id):
+    ex = EXERCISES[exercise_id]
+    checks.assert_value_hints_quiet(ex, reference(ex))
+
+
+def test_seed_worked_numbers():
+    # The seed's worked example: Z = 5 m, f = 800 px, σ = 0.5 px, B = 0.5 m → 3.1 cm; B = 1 m → 1.6 cm.
+    assert abs(ch4.sigma_z(5, 800, 0.5, 0.5) - 0.03125) < 1e-12
+    assert round(ch4.sigma_z(5, 800, 0.5, 1.0) * 100, 1) == 1.6
+    assert grade(EXERCISES["4.3"], [4950, 49_995_000], seed=0).passed
+    assert grade(EXERCISES["4.23"], ["Incremental", "GLOBAL", "global", "incremental"], seed=0).passed
+
+
+# ----------------------------------------------------------------- oracles agree with each other
+
+def test_midpoint_is_halfway_along_the_common_perpendicular():
+    # pycolmap.triangulate_mid_point differs from the textbook midpoint by ~1e-4 (it is not the same
+    # estimator), so the oracle is checked by its definition: X ± e/2 lie on the two rays, e ⊥ both.
+    s = ch4.two_view(np.random.default_rng(4), 30, noise=1.0, held_out=1)
+    P1 = s["K1"] @ np.c_[np.eye(3), np.zeros(3)]
+    P2 = s["K2"] @ np.c_[s["R"], s["t"]]
+    X = ch4.gt_midpoint(P1, P2, s["x1"], s["x2"])
+    C2 = ch4.centre(s["R"], s["t"])
+    d1 = np.linalg.solve(s["K1"], ch4._h(s["x1"]).T).T
+    d2 = (s["R"].T @ np.linalg.solve(s["K2"], ch4._h(s["x2"]).T)).T
+    n = np.cross(d1, d2)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    for k in range(30):
+        # the point of ray 1 and of ray 2 closest to each other, by the 3x3 system a d1 − b d2 + c n = C2
+        a, b, c = np.linalg.solve(np.c_[d1[k], -d2[k], n[k]], C2)
+        assert np.linalg.norm(0.5 * (a * d1[k] + C2 + b * d2[k]) - X[k]) < 1e-9 * np.linalg.norm(X[k])
+
+
+def test_triangulation_angles_agree_with_pycolmap():
+    rng = np.random.default_rng(1)
+    C1, C2, X = rng.normal(size=3), rng.normal(size=3), rng.normal(size=(20, 3)) * 5
+    assert np.abs(ch4.gt_triangulation_angles(C1, C2, X) - ch4.colmap_triangulation_angles(C1, C2, X)).max() < 1e-9
+
+
+def test_p3p_oracle_contains_the_true_pose():
+    rng = np.random.default_rng(2)
+    for _ in range(10):
+        s = ch4.pnp_scene(rng, 3, held_out=1)
+        sols = ch4.cv_p3p(s["X"], s["x"], s["K"])
+        assert min(ch4.pose_error(p, (s["R"], s["t"]), s["depth"]) for p in sols) < 1e-5
+
+
+def test_umeyama_and_rotation_averaging_oracles_are_exact():
+    rng = np.random.default_rng(3)
+    p = ch4.pointmap_pair(rng, 50, noise=0.0)
+    s, R, t = ch4.gt_umeyama(p["X1"], p["X2"])
+    assert abs(s - p["s"]) < 1e-9 and rotation_angle_deg(R, p["R"]) < 1e-6 and np.abs(t - p["t"]).max() < 1e-9
+    Rs, R_rel = ch4.rotation_graph(rng, 10, 0.3)
+    assert ch4.align_rotations(ch4.gt_rotation_averaging(R_rel, 10), Rs).max() < 1e-4
+
+
+def test_build_tracks_oracle_drops_merged_points():
+    m = {(0, 1): np.array([[0, 0], [1, 1]]), (1, 2): np.array([[0, 5], [1, 5]])}   # two points meet in image 2
+    assert ch4.gt_build_tracks(m) == []
+    m = {(0, 1): np.array([[0, 3]]), (1, 2): np.array([[3, 7]]), (2, 3): np.array([[7, 1]])}
+    assert ch4.gt_build_tracks(m) == [{0: 0, 1: 3, 2: 7, 3: 1}]
+
+
+def test_debug_symptoms_are_real():
+    # Each DEBUG case shows its symptom with the colleague's code/settings, on the case learners get.
+    case, truth = ch4.debug_components(np.random.default_rng(0))
+    assert len(truth["components"]) >= 2 and len(ch4.broken_components(case)) == 1
+    case, truth = ch4.debug_registration(np.random.default_rng(0))
+    assert ch4._metric_registration(ch4.BROKEN_SETTINGS, dict(truth, case=case)) > 0.5
+    case, truth = ch4.debug_drift(np.random.default_rng(0))
+    assert ch4._metric_traj(ch4.broken_trajectory(case), truth) > 5 * ch4._metric_traj(ch4.gt_fix_drift(case), truth)
+    case, truth = ch4.debug_initial_pair(np.random.default_rng(0))
+    assert truth["kinds"][ch4.broken_initial_pair(case)] == "rotation"
+
+
+def test_recon_errors_are_gauge_free():
+    s = ch4.sfm_scene(np.random.default_rng(5), n_cams=5, n_points=150)
+    t = s["truth"]
+    Q, o, k = ch4.scene.random_rotation(np.random.default_rng(1)), np.array([3.0, -1, 2]), 2.5
+    # the truth seen in another world frame X' = k Q X + o: R' = R Qᵀ, t' = k t − R' o
+    cams = {i: (R @ Q.T, k * tt - R @ Q.T @ o) for i, (R, tt) in enumerate(zip(t["Rs"], t["ts"]))}
+    owners = t["kp_index"]
+    tracks = [{i: int(owners[i][p]) for i in range(5) if owners[i][p] >= 0} for p in range(150)]
+    keep = [j for j, tr in enumerate(tracks) if len(tr) >= 2]
+    rec = {"cameras": cams, "points": (k * t["X"] @ Q.T + o)[keep], "tracks": [tracks[j] for j in keep]}
+    err = ch4.recon_errors(rec, t)
+    assert err["registered"] == 1 and err["rot"] < 1e-5 and err["pos"] < 1e-9 and err["pts"] < 1e-9
+
+
+def test_frontier_reference_recovers_the_pose_from_pointmaps():
+    # solutions.sfm_frontier holds the chapter's own Umeyama (solutions.sfm has one too, found first by
+    # `reference`), and the robust pointmap-to-pose step the notebook's experiment performs.
+    sfm_frontier = pytest.importorskip("solutions.sfm_frontier")
+    assert grade(EXERCISES["4.25"], sfm_frontier.umeyama, seed=0).passed
+    p = ch4.pointmap_pair(np.random.default_rng(9), 1000, noise=0.02, outliers=0.2)
+    s, R, t, inliers = sfm_frontier.pose_from_pointmaps(p["X1"], p["X2"])
+    assert rotation_angle_deg(R, p["R"]) < 1.0 and abs(s / p["s"] - 1) < 0.02
+    assert np.mean(inliers[~p["bad"]]) > 0.9 and np.mean(inliers[p["bad"]]) < 0.2
