@@ -87,7 +87,8 @@ def triangulate_dlt(P1: np.ndarray, P2: np.ndarray, x1: np.ndarray, x2: np.ndarr
     P1, P2: (3, 4) projection matrices; x1, x2: (N, 2) pixels. Each view gives two rows of A Xh = 0:
     x (p3 . Xh) - p1 . Xh = 0 and y (p3 . Xh) - p2 . Xh = 0. Pixels are first normalised
     (x' = T x, P' = T P) so that the four rows have comparable size. Xh is the eigenvector of the
-    smallest eigenvalue of A^T A (4 x 4 per point, batched). Returns X: (N, 3).
+    smallest singular value of A (4 x 4 per point, batched SVD: A^T A would square its condition
+    number, which matters for scenes far from the world origin). Returns X: (N, 3).
     """
     x1n, T1 = normalise_points(x1)
     x2n, T2 = normalise_points(x2)
@@ -95,8 +96,7 @@ def triangulate_dlt(P1: np.ndarray, P2: np.ndarray, x1: np.ndarray, x2: np.ndarr
     A = np.stack([x1n[:, :1] * P1n[2] - P1n[0], x1n[:, 1:] * P1n[2] - P1n[1],
                   x2n[:, :1] * P2n[2] - P2n[0], x2n[:, 1:] * P2n[2] - P2n[1]], axis=1)   # (N, 4, 4)
     A = A / np.linalg.norm(A, axis=2, keepdims=True)          # equal weight per row
-    _, V = np.linalg.eigh(np.swapaxes(A, 1, 2) @ A)            # ascending eigenvalues
-    Xh = V[:, :, 0]                                             # (N, 4)
+    Xh = np.linalg.svd(A)[2][:, -1]                             # (N, 4)
     return Xh[:, :3] / Xh[:, 3:]
 
 
@@ -184,7 +184,7 @@ def pnp_dlt(X: np.ndarray, x: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np
     X: (N, 3) world points; x: (N, 2) pixels; K: (3, 3). On normalised coordinates xn = K^-1 xh the
     camera is P = [s R | s t]; P comes from the 2N x 12 system (both sides Hartley-normalised),
     then its left 3 x 3 block is projected onto s SO(3) by SVD: R = U V^T, s = mean singular value.
-    The sign of P is chosen so that the points lie in front of the camera. Returns (R, t (3,)).
+    t is then solved by least squares for that R. Returns (R, t (3,)).
     """
     X, x = np.asarray(X, float), np.asarray(x, float)
     xn = np.linalg.solve(K, _h(x).T).T[:, :2]
@@ -195,14 +195,29 @@ def pnp_dlt(X: np.ndarray, x: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np
     A = np.concatenate([np.concatenate([Xh, z, -x2[:, :1] * Xh], 1),
                         np.concatenate([z, Xh, -x2[:, 1:] * Xh], 1)])          # (2N, 12)
     _, _, Vt = np.linalg.svd(A, full_matrices=False)
-    P = np.linalg.solve(T2, Vt[-1].reshape(3, 4) @ T3)                         # undo both normalisations
-    U, S, Vt3 = np.linalg.svd(P[:, :3])
+    Pn = np.linalg.solve(T2, Vt[-1].reshape(3, 4))            # camera in the normalised 3D frame
+    U, S, Vt3 = np.linalg.svd(Pn[:, :3])
     scale = S.mean() * np.sign(np.linalg.det(U @ Vt3))
-    R = project_to_so3(P[:, :3] / scale)
-    t = P[:, 3] / scale
-    if np.median(X @ R[2] + t[2]) < 0:        # P was found up to sign: put the points in front
-        R, t = project_to_so3(-P[:, :3] / scale), -t
-    return R, t
+    R = project_to_so3(Pn[:, :3] / scale)
+    # M / scale has det > 0 whatever the sign of the DLT's null vector, so R needs no sign fix.
+    return R, _translation_given_R(R, X, xn)
+
+
+def _translation_given_R(R: np.ndarray, X: np.ndarray, xn: np.ndarray) -> np.ndarray:
+    """Least-squares t for a known R: u (R X + t)_z = (R X + t)_x, v (R X + t)_z = (R X + t)_y.
+
+    X: (N, 3); xn: (N, 2) normalised image points. Solved for t' = R mu + t with the points centred
+    on their centroid mu: t read off the DLT's 4th column would carry R's residual error times the
+    distance to the world origin (10 px at 100 m, 100 px at 1 km). Returns t: (3,).
+    """
+    mu = X.mean(0)
+    Y = (X - mu) @ R.T
+    u, v = xn[:, 0], xn[:, 1]
+    one, zero = np.ones_like(u), np.zeros_like(u)
+    A = np.r_[np.c_[one, zero, -u], np.c_[zero, one, -v]]                   # (2N, 3)
+    b = np.r_[u * Y[:, 2] - Y[:, 0], v * Y[:, 2] - Y[:, 1]]
+    t_c = np.linalg.lstsq(A, b, rcond=None)[0]
+    return t_c - R @ mu
 
 
 def _kabsch(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -74,7 +74,7 @@ LIBRARY = {
     "4.4": [("OpenCV", ch4.cv_triangulate)],
     "4.5": [("grader closed form", ch4.gt_midpoint)],
     "4.6": [("pycolmap", ch4.colmap_triangulation_angles)],
-    "4.7": [("grader DLT", ch4.gt_pnp_dlt)],
+    "4.7": [("grader DLT", ch4.gt_pnp_dlt), ("OpenCV SQPnP", sqpnp)],
     "4.8": [("OpenCV P3P", ch4.cv_p3p), ("OpenCV AP3P", colmap_p3p_free)],
     "4.9": [("OpenCV EPnP", ch4.cv_epnp)],
     "4.10": [("OpenCV", ch4.cv_pnp_ransac), ("pycolmap", colmap_pnp_ransac)],

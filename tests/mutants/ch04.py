@@ -149,6 +149,10 @@ def pnp_no_scale(X, x, K):
     return U @ Vt, P[:, 3]                              # t not divided by the scale
 
 
+def pnp_t_from_column(X, x, K):
+    return ch4.gt_pnp_dlt(X, x, K, t_from="column")
+
+
 def epnp_returns_centre_dlt(X, x, K):
     R, t = ch4.gt_pnp_dlt(X, x, K)
     return R, -R.T @ t
@@ -604,6 +608,7 @@ MUTANTS = [
     ("4.6", "angle at the camera", angles_at_camera, None),
     ("4.7", "t not divided by the scale", pnp_no_scale, "mean singular value"),
     ("4.7", "camera centre instead of t", epnp_returns_centre_dlt, None),
+    ("4.7", "t read off P's 4th column (far from the origin)", pnp_t_from_column, "4th column"),
     ("4.7", "pixels instead of K⁻¹x", pnp_pixels, None),
     ("4.7", "R not orthonormalised", pnp_not_orthonormal, "not a rotation"),
     ("4.8", "only the first root", p3p_first_only, "every real root"),
