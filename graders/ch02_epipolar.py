@@ -20,7 +20,8 @@ import numpy as np
 
 from . import datasets, scene
 from .compare import max_abs, max_angle_deg, relative, rotation_angle_deg, sampson_rms_px, unordered, up_to_scale
-from .engine import Case, Exercise, Hint, OutputError, as_array, like, numeric_question, register, value_hint
+from .engine import (Case, Exercise, Hint, OutputError, as_array, choice_question, like, numeric_question, register,
+                     value_hint)
 
 # ============================================================ ground truth and oracles ====
 
@@ -1566,36 +1567,14 @@ MODEL_SCENARIOS = [
 ]
 
 
-def _convert_choices(out, case):
-    try:
-        choices = [str(c).strip().upper() for c in out]
-    except TypeError:
-        raise OutputError('expected a list of six letters, e.g. ["E", "F", ...]') from None
-    if len(choices) != len(MODEL_SCENARIOS) or not set(choices) <= {"E", "F", "H"}:
-        raise OutputError(f'expected {len(MODEL_SCENARIOS)} answers, each "E", "F" or "H"; got {out!r}')
-    return choices
-
-
-def _count_wrong(choices, expected) -> float:
-    return float(sum(a != b for a, b in zip(choices, expected)))
-
-
-def _choice_hint(index, text):
-    return Hint(text, lambda c, out: out[index] != c.expected[index])
-
-
-MODEL_CHOICE = Exercise(
-    "2.23", "E, F or H?", "model_choice", "design", points=2, value=True,
-    cases=lambda rng: [Case("six scenarios", (), [s[2] for s in MODEL_SCENARIOS], _count_wrong, 0, "wrong",
-                            convert=_convert_choices)],
-    hints=[_choice_hint(3, "(d) a camera turning on the spot has no baseline: t = 0, so E = [t]× R = 0 and F is "
-                           "undefined — but every match obeys x2 ~ K R K⁻¹ x1, a homography."),
-           _choice_hint(2, "(c) at 100 m the field is a plane to within centimetres: F is degenerate, H is exact."),
-           _choice_hint(5, "(f) a zoom lens changes K between frames: without K there is no E; use F."),
-           _choice_hint(0, "(a)/(e) calibrated cameras and a 3D scene: use E — 5 DOF, 5-point samples, far fewer "
-                           "RANSAC iterations than F's 7 or 8."),
-           _choice_hint(4, "(a)/(e) calibrated cameras and a 3D scene: use E — 5 DOF, 5-point samples, far fewer "
-                           "RANSAC iterations than F's 7 or 8.")],
+_AE = "(a)/(e) calibrated cameras and a 3D scene: use E — 5 DOF, 5-point samples, far fewer RANSAC iterations than F's 7 or 8."
+MODEL_CHOICE = choice_question(
+    "2.23", "E, F or H?", "model_choice", "design", [s[2] for s in MODEL_SCENARIOS], ["E", "F", "H"], points=2,
+    hints={3: "(d) a camera turning on the spot has no baseline: t = 0, so E = [t]× R = 0 and F is "
+              "undefined — but every match obeys x2 ~ K R K⁻¹ x1, a homography.",
+           2: "(c) at 100 m the field is a plane to within centimetres: F is degenerate, H is exact.",
+           5: "(f) a zoom lens changes K between frames: without K there is no E; use F.",
+           0: _AE, 4: _AE},
     explanation="(a) E: calibrated, general 3D scene. (b) F: unknown intrinsics. (c) H: a plane — F is degenerate. "
                 "(d) H: pure rotation, t = 0, E = 0; x2 ~ K R K⁻¹ x1. (e) E. (f) F: K changes with the zoom. "
                 "In practice fit both F (or E) and H and compare the matches each explains (ORB-SLAM's ratio "

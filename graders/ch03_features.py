@@ -24,7 +24,8 @@ import numpy as np
 
 from . import datasets, scene
 from .compare import max_abs, relative
-from .engine import Case, Exercise, Hint, OutputError, as_array, like, numeric_question, register, value_hint
+from .engine import (Case, Exercise, Hint, OutputError, as_array, choice_question, like, numeric_question, register,
+                     value_hint)
 
 # ============================================================ images with a known homography ====
 
@@ -1096,23 +1097,6 @@ def cases_frontier(rng) -> list[Case]:
 
 # ============================================================ value questions ====
 
-CLASSES = ("corner", "edge", "flat")
-
-
-def _classes(out, case):
-    if isinstance(out, str) or not hasattr(out, "__len__") or len(out) != 3:
-        raise OutputError("expected a list of three words, e.g. ['edge', 'flat', 'corner']")
-    words = [str(w).strip().lower() for w in out]
-    bad = [w for w in words if w not in CLASSES]
-    if bad:
-        raise OutputError(f"unknown class {bad[0]!r}; use 'corner', 'edge' or 'flat'")
-    return np.array([CLASSES.index(w) for w in words], float)
-
-
-def _count_wrong(out, exp):
-    return float(np.sum(np.asarray(out) != np.asarray(exp)))
-
-
 # Structure tensors of three patches (3.1): eigenvalues (250, 180), (300, 2), (0.6, 0.3)
 _M_31 = [np.array([[215.0, 35.0], [35.0, 215.0]]), np.array([[2.0, 0.0], [0.0, 300.0]]),
          np.array([[0.45, 0.15], [0.15, 0.45]])]
@@ -1121,13 +1105,12 @@ _R_32 = float(np.linalg.det(_M_32) - 0.04 * np.trace(_M_32) ** 2)
 
 register(
     # ---------------------------------------------------------------- CONCEPT
-    Exercise("3.1", "What the structure tensor's eigenvalues say", "patch_types", "concept", 1, value=True,
-             cases=lambda rng: [Case("your answer", (), np.array([0.0, 1.0, 2.0]), _count_wrong, 0.0, "wrong",
-                                     convert=_classes)],
-             hints=[Hint("one large and one small eigenvalue is an edge (intensity changes across it only); "
-                         "both large is a corner.", lambda c, out: out[1] == 0)],
-             explanation="Eigenvalues: (250, 180) both large → corner; (300, 2) one large, one small → edge (all "
-                         "the gradient is along y: a horizontal edge); (0.6, 0.3) both small → flat."),
+    choice_question("3.1", "What the structure tensor's eigenvalues say", "patch_types", "concept",
+                    ["corner", "edge", "flat"], ["corner", "edge", "flat"],
+                    hints={1: "one large and one small eigenvalue is an edge (intensity changes across it only); "
+                              "both large is a corner."},
+                    explanation="Eigenvalues: (250, 180) both large → corner; (300, 2) one large, one small → edge "
+                                "(all the gradient is along y: a horizontal edge); (0.6, 0.3) both small → flat."),
     numeric_question(
         "3.2", "Harris' R without eigenvalues", "harris_R", "concept", _R_32, 0.01, "", (), max_abs,
         "det M = 12·8 − 3² = 87, tr M = 20, R = 87 − 0.04·400 = 71 > 0: a corner. det = λ1λ2 and tr = λ1 + λ2, "

@@ -21,7 +21,7 @@ import numpy as np
 from . import scene
 from .ch02_epipolar import refine_essential, to_normalised, two_view
 from .compare import max_abs, relative, rotation_angle_deg, unordered
-from .engine import Case, Exercise, Hint, OutputError, like, numeric_question, register, value_hint
+from .engine import Case, Exercise, Hint, OutputError, choice_question, like, numeric_question, register, value_hint
 
 # ============================================================ small geometry ====
 
@@ -2191,36 +2191,17 @@ SFM_SCENARIOS = [
 ]
 
 
-def _convert_sfm_choices(out, case):
-    try:
-        choices = [str(c).strip().lower() for c in out]
-    except TypeError:
-        raise OutputError('expected a list of four answers, e.g. ["incremental", "global", ...]') from None
-    if len(choices) != len(SFM_SCENARIOS) or not set(choices) <= {"incremental", "global"}:
-        raise OutputError(f'expected {len(SFM_SCENARIOS)} answers, each "incremental" or "global"; got {out!r}')
-    return choices
-
-
-def _count_wrong(choices, expected) -> float:
-    return float(sum(a != b for a, b in zip(choices, expected)))
-
-
-def _choice_hint(index, text):
-    return Hint(text, lambda c, out: out[index] != c.expected[index])
-
-
-SFM_CHOICE = Exercise(
-    "4.23", "Incremental or global?", "sfm_choice", "design", points=2, value=True,
-    cases=lambda rng: [Case("four scenarios", (), [s[2] for s in SFM_SCENARIOS], _count_wrong, 0, "wrong",
-                            convert=_convert_sfm_choices)],
-    hints=[_choice_hint(0, "(a) wrong pairs from symmetric facades become wrong relative rotations; global SfM "
-                           "averages them into every camera, incremental SfM rejects them one image at a time."),
-           _choice_hint(1, "(b) clean, dense, well-connected: global SfM solves all rotations, then all positions, "
-                           "then one bundle adjustment — much faster than thousands of incremental BA rounds."),
-           _choice_hint(2, "(c) a long video with loop closures: rotation averaging uses every loop at once and "
-                           "does not drift; incremental SfM is slow at 20,000 frames and accumulates error."),
-           _choice_hint(3, "(d) weakly connected views: global translation averaging needs well-connected, "
-                           "accurate pairs; incremental registration with PnP against 3D points is more robust.")],
+SFM_CHOICE = choice_question(
+    "4.23", "Incremental or global?", "sfm_choice", "design", [s[2] for s in SFM_SCENARIOS],
+    ["incremental", "global"], points=2,
+    hints={0: "(a) wrong pairs from symmetric facades become wrong relative rotations; global SfM averages them "
+              "into every camera, incremental SfM rejects them one image at a time.",
+           1: "(b) clean, dense, well-connected: global SfM solves all rotations, then all positions, then one "
+              "bundle adjustment — much faster than thousands of incremental BA rounds.",
+           2: "(c) a long video with loop closures: rotation averaging uses every loop at once and does not "
+              "drift; incremental SfM is slow at 20,000 frames and accumulates error.",
+           3: "(d) weakly connected views: global translation averaging needs well-connected, accurate pairs; "
+              "incremental registration with PnP against 3D points is more robust."},
     explanation="(a) incremental: robust to outlier pairs (each image verified against 3D points). (b) global: "
                 "clean and dense, one BA. (c) global: loops constrain rotations at once, no drift, fast. "
                 "(d) incremental: weak, noisy connections break translation averaging. Global beats incremental "

@@ -125,6 +125,40 @@ def value_hint(wrong: Any, text: str) -> Hint:
     return like(lambda case: np.asarray(wrong, float), text, factor=1.0, rel=0.0)
 
 
+def choice_question(id: str, title: str, name: str, kind: str, answers: Sequence[str], options: Sequence[str],
+                    explanation: str, hints: dict[int, str] | None = None, points: int = 1) -> Exercise:
+    """A CONCEPT/DESIGN question answered by a list of choices, one per scenario (the learner assigns
+    `name`, e.g. ["E", "F", ...]); matching ignores case and surrounding spaces.
+
+    answers: the right choice for each scenario; options: the allowed choices; hints: scenario index ->
+    the hint shown when that scenario is answered wrongly. Scored by the number of wrong answers (0 to pass)."""
+    answers = [a.strip().lower() for a in answers]
+    allowed = {o.strip().lower() for o in options}
+    listed = ", ".join(f'"{o}"' for o in options)
+
+    def convert(out: Any, case: Case) -> list[str]:
+        if isinstance(out, str):
+            raise OutputError(f"expected a list of {len(answers)} answers, each one of {listed}; got a single string")
+        try:
+            choices = [str(c).strip().lower() for c in out]
+        except TypeError:
+            raise OutputError(f"expected a list of {len(answers)} answers, each one of {listed}") from None
+        if len(choices) != len(answers) or not set(choices) <= allowed:
+            raise OutputError(f"expected {len(answers)} answers, each one of {listed}; got {out!r}")
+        return choices
+
+    def n_wrong(choices: list[str], expected: list[str]) -> float:
+        return float(sum(a != b for a, b in zip(choices, expected)))
+
+    def hint(index: int, text: str) -> Hint:
+        return Hint(text, lambda case, out: out[index] != case.expected[index])
+
+    return Exercise(id, title, name, kind, points=points, value=True,
+                    cases=lambda rng: [Case(f"{len(answers)} scenarios", (), answers, n_wrong, 0, "wrong",
+                                            convert=convert)],
+                    hints=[hint(i, text) for i, text in (hints or {}).items()], explanation=explanation)
+
+
 _REGISTRY: dict[str, Exercise] = {}
 CHAPTER_MODULES = {  # chapter number -> module that defines its exercises
     "1": "graders.ch01_camera_models",

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from graders import Case, Exercise, check, grade, like, use
+from graders.engine import choice_question
 from graders.compare import max_abs, max_distance, up_to_scale, rotation_angle_deg, max_angle_deg
 from graders.sandbox import safe_call
 
@@ -100,6 +101,25 @@ def test_value_answer_none_is_not_attempted():
     assert grade(ex, None).status == "not_attempted"
     assert grade(ex, 3.05).status == "passed"
     assert grade(ex, 4).status == "failed"
+
+
+CHOICE = choice_question("0.3", "pick", "picks", "design", ["E", "H"], ["E", "F", "H"], "(a) E, (b) H.",
+                         hints={1: "(b) a plane: H."})
+
+
+@pytest.mark.parametrize("answer, status, phrase", [
+    (["e", " H "], "passed", None),                      # case and spaces do not matter
+    (["E", "F"], "failed", "(b) a plane: H."),          # the scenario's hint names the mistake
+    ("EH", "failed", "single string"),
+    (["E"], "failed", "expected 2 answers"),
+    (["E", "X"], "failed", "each one of"),
+    (3, "failed", "expected a list"),
+])
+def test_choice_question(answer, status, phrase):
+    r = grade(CHOICE, answer)
+    assert r.status == status
+    if phrase:
+        assert phrase in str(r)
 
 
 def test_seed_replays_the_same_cases():
