@@ -7,7 +7,6 @@ hidden calibrations for the DEBUG cases). Conventions: docs/CONVENTIONS.md.
 from __future__ import annotations
 
 from functools import lru_cache
-from typing import Any
 
 import cv2
 import numpy as np
@@ -15,7 +14,7 @@ from scipy.optimize import least_squares
 
 from . import datasets, scene
 from .compare import max_abs, max_angle_deg, max_distance, relative
-from .engine import Case, Exercise, Hint, OutputError, as_array, like, numeric_question, register, value_hint
+from .engine import Case, Exercise, Hint, OutputError, as_array, as_pose, like, numeric_question, register, value_hint
 
 # ============================================================ oracles and ground truth ====
 
@@ -237,19 +236,6 @@ def debug_frame_convention(rng) -> tuple[dict, dict]:
     return case, {"K": K, "poses": poses_cv, "size": (w, h), "target": target}
 
 
-def _as_pose(out: Any) -> tuple[np.ndarray, np.ndarray]:
-    try:
-        R, t = out
-        R, t = np.asarray(R, float), np.asarray(t, float).reshape(-1)
-    except Exception:
-        raise OutputError("expected a pair (R, t) with R: (3, 3) and t: (3,)") from None
-    if R.shape != (3, 3) or t.shape != (3,) or not (np.isfinite(R).all() and np.isfinite(t).all()):
-        raise OutputError(f"expected R: (3, 3), t: (3,) finite; got {R.shape}, {t.shape}")
-    if abs(np.linalg.det(R) - 1) > 1e-6 or np.abs(R.T @ R - np.eye(3)).max() > 1e-6:
-        raise OutputError("R is not a rotation matrix (R^T R = I, det R = +1)")
-    return R, t
-
-
 def _reproj_rms(uv_of: callable, X: np.ndarray, uv_true: np.ndarray, depth: np.ndarray) -> float:
     """RMS pixel error; a point put behind the camera counts as 1e4 px (projection is meaningless)."""
     uv = uv_of(X)
@@ -299,7 +285,7 @@ def _convert_K(out, case):
 
 def _convert_poses(out, case):
     try:
-        poses = [_as_pose(p) for p in out]
+        poses = [as_pose(p) for p in out]
     except TypeError:
         raise OutputError("expected a list of (R, t) pairs, one per camera") from None
     if len(poses) != case.info["n"]:
@@ -689,7 +675,7 @@ register(
     Exercise("1.11", "Edges warped", "fix_distortion", "debug", 2,
              _debug_cases(debug_distortion, _metric_dist, 0.3, shape=(5,)), fallback=cv_fix_distortion),
     Exercise("1.12", "Cameras disagree", "fix_extrinsics", "debug", 2,
-             _debug_cases(debug_extrinsics, _metric_extrinsics, 0.3, convert=lambda o, c: _as_pose(o)),
+             _debug_cases(debug_extrinsics, _metric_extrinsics, 0.3, convert=lambda o, c: as_pose(o)),
              fallback=cv_fix_extrinsics),
     Exercise("1.13", "Constant offset", "fix_principal_point", "debug", 2,
              _debug_cases(debug_principal_point, _metric_K, 0.3, convert=_convert_K, shape=(3, 3)),

@@ -20,8 +20,8 @@ import numpy as np
 
 from . import datasets, scene
 from .compare import max_abs, max_angle_deg, relative, rotation_angle_deg, sampson_rms_px, unordered, up_to_scale
-from .engine import (Case, Exercise, Hint, OutputError, as_array, choice_question, like, numeric_question, register,
-                     value_hint)
+from .engine import (Case, Exercise, Hint, OutputError, as_array, as_pose, choice_question, like, numeric_question,
+                     register, value_hint)
 
 # ============================================================ ground truth and oracles ====
 
@@ -411,17 +411,7 @@ def _convert_solutions(what: str, plural: str):
 
 
 def _as_pose(out: Any) -> tuple[np.ndarray, np.ndarray]:
-    try:
-        R, t = out
-        R, t = np.asarray(R, float), np.asarray(t, float).reshape(-1)
-    except Exception:
-        raise OutputError("expected a pair (R, t) with R: (3, 3) and t: (3,)") from None
-    if R.shape != (3, 3) or t.shape != (3,) or not (np.isfinite(R).all() and np.isfinite(t).all()):
-        raise OutputError(f"expected R: (3, 3), t: (3,) finite; got {R.shape}, {t.shape}")
-    if abs(np.linalg.det(R) + 1) < 1e-6:
-        raise OutputError("R has det −1: a reflection, not a rotation — flip the sign of U or V in the SVD")
-    if abs(np.linalg.det(R) - 1) > 1e-6 or np.abs(R.T @ R - np.eye(3)).max() > 1e-6:
-        raise OutputError("R is not a rotation matrix (R^T R = I, det R = +1)")
+    R, t = as_pose(out)
     if np.linalg.norm(t) < 1e-12:
         raise OutputError("t is zero: return the unit translation direction")
     return R, t

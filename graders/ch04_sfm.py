@@ -21,7 +21,8 @@ import numpy as np
 from . import scene
 from .ch02_epipolar import refine_essential, to_normalised, two_view
 from .compare import max_abs, relative, rotation_angle_deg, unordered
-from .engine import Case, Exercise, Hint, OutputError, choice_question, like, numeric_question, register, value_hint
+from .engine import (Case, Exercise, Hint, OutputError, as_pose, as_rotation, choice_question, like, numeric_question,
+                     register, value_hint)
 
 # ============================================================ small geometry ====
 
@@ -77,33 +78,8 @@ def gt_umeyama(X: np.ndarray, Y: np.ndarray, with_scale: bool = True) -> tuple[f
 
 # ============================================================ output conversion ====
 
-def _as_rotation(R: Any, what: str = "R") -> np.ndarray:
-    R = np.asarray(R, float)
-    if R.shape != (3, 3) or not np.isfinite(R).all():
-        raise OutputError(f"{what} must be a finite (3, 3) array, got shape {R.shape}")
-    if abs(np.linalg.det(R) + 1) < 1e-3:
-        raise OutputError(f"{what} has det −1: a reflection, not a rotation — fix the sign (det(U Vᵀ) = +1)")
-    if np.abs(R.T @ R - np.eye(3)).max() > 1e-6 or abs(np.linalg.det(R) - 1) > 1e-6:
-        raise OutputError(f"{what} is not a rotation (Rᵀ R = I, det R = +1): project it onto SO(3) with an SVD")
-    return R
-
-
-def _as_pose(out: Any) -> tuple[np.ndarray, np.ndarray]:
-    if out is None:
-        raise OutputError("returned None: is a `return` missing?")
-    try:
-        R, t = out
-        t = np.asarray(t, float).reshape(-1)
-    except Exception:
-        raise OutputError("expected a pair (R, t) with R: (3, 3) and t: (3,)") from None
-    R = _as_rotation(R)
-    if t.shape != (3,) or not np.isfinite(t).all():
-        raise OutputError(f"t must be a finite (3,) array, got shape {t.shape}")
-    return R, t
-
-
 def _convert_pose(out, case):
-    return _as_pose(out)
+    return as_pose(out)
 
 
 def _points(out: Any, n: int | None, what: str = "X") -> np.ndarray:
@@ -425,7 +401,7 @@ def _convert_p3p(out, case):
     if out is None:
         raise OutputError("returned None: is a `return` missing? (return [] when there is no solution)")
     try:
-        sols = [_as_pose(p) for p in out]
+        sols = [as_pose(p) for p in out]
     except TypeError:
         raise OutputError("expected a list of (R, t) pairs") from None
     if len(sols) > 4:
@@ -566,7 +542,7 @@ def _convert_ransac(out, case):
         R, t, inliers = out
     except Exception:
         raise OutputError("expected (R, t, inliers)") from None
-    R, t = _as_pose((R, t))
+    R, t = as_pose((R, t))
     inliers = np.asarray(inliers)
     n = case.info["n"]
     if inliers.dtype != bool or inliers.shape != (n,):
@@ -588,7 +564,7 @@ def _ransac_repeat(fn, s, seeds):
     for sd in seeds:
         out = fn(s["X"].copy(), s["x"].copy(), s["K"].copy(), 4.0, sd)
         try:
-            R, t = _as_pose(out[:2])
+            R, t = as_pose(out[:2])
             errs.append(held_out_px((R, t), s))
         except Exception:
             errs.append(1e6)
@@ -749,7 +725,7 @@ def _convert_two_view(out, case):
         R, t, X, inliers = out
     except Exception:
         raise OutputError("expected (R, t, X, inliers)") from None
-    R, t = _as_pose((R, t))
+    R, t = as_pose((R, t))
     if abs(np.linalg.norm(t) - 1) > 1e-6:
         raise OutputError(f"|t| = {np.linalg.norm(t):.4g}: two views fix t only up to scale; return ‖t‖ = 1")
     inliers = np.asarray(inliers)
@@ -948,7 +924,7 @@ def _convert_rotations(out, case):
     if Rs.shape != (n, 3, 3):
         raise OutputError(f"expected shape ({n}, 3, 3), got {Rs.shape}")
     for i, R in enumerate(Rs):
-        _as_rotation(R, f"R[{i}]")
+        as_rotation(R, f"R[{i}]")
     return Rs
 
 
@@ -1048,7 +1024,7 @@ def _convert_recon(out, case):
     cams = {}
     for i, c in out["cameras"].items():
         try:
-            R, t = _as_pose((c["R"], c["t"]))
+            R, t = as_pose((c["R"], c["t"]))
         except OutputError as e:
             raise OutputError(f"camera {i}: {e}") from None
         cams[int(i)] = (R, t)
@@ -1479,7 +1455,7 @@ def _convert_recon_io(out, case):
     cams = {}
     for i, c in out["cameras"].items():
         try:
-            R, t = _as_pose((c["R"], c["t"]))
+            R, t = as_pose((c["R"], c["t"]))
             K = np.asarray(c["K"], float).reshape(3, 3)
             k = np.asarray(c.get("k", np.zeros(2)), float).reshape(-1)[:2]
         except (OutputError, KeyError, ValueError) as e:
@@ -1937,7 +1913,7 @@ def _convert_sim3(out, case):
         t = np.asarray(t, float).reshape(-1)
     except Exception:
         raise OutputError("expected (s, R, t): a scale, a (3, 3) rotation and a (3,) translation") from None
-    R = _as_rotation(R)
+    R = as_rotation(R)
     if t.shape != (3,) or not np.isfinite(t).all() or not np.isfinite(s) or s <= 0:
         raise OutputError("s must be a positive number and t a finite (3,) vector")
     return s, R, t

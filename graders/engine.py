@@ -218,6 +218,36 @@ def as_array(out: Any, case: Case) -> np.ndarray:
     return arr
 
 
+def as_rotation(R: Any, what: str = "R") -> np.ndarray:
+    """A learner's rotation as a finite (3, 3) array in SO(3), or an OutputError that says what is wrong."""
+    try:
+        R = np.asarray(R, float)
+    except (TypeError, ValueError):
+        raise OutputError(f"{what} must be a (3, 3) numeric array") from None
+    if R.shape != (3, 3) or not np.isfinite(R).all():
+        raise OutputError(f"{what} must be a finite (3, 3) array, got shape {R.shape}")
+    if abs(np.linalg.det(R) + 1) < 1e-3:
+        raise OutputError(f"{what} has det −1: a reflection, not a rotation — fix the sign (det(U Vᵀ) = +1)")
+    if np.abs(R.T @ R - np.eye(3)).max() > 1e-6 or abs(np.linalg.det(R) - 1) > 1e-6:
+        raise OutputError(f"{what} is not a rotation (Rᵀ R = I, det R = +1): project it onto SO(3) with an SVD")
+    return R
+
+
+def as_pose(out: Any) -> tuple[np.ndarray, np.ndarray]:
+    """A learner's pose (R, t): R in SO(3), t a finite (3,) array (world-to-camera, x_c = R X + t)."""
+    if out is None:
+        raise OutputError("returned None: is a `return` missing?")
+    try:
+        R, t = out
+        t = np.asarray(t, float).reshape(-1)
+    except Exception:
+        raise OutputError("expected a pair (R, t) with R: (3, 3) and t: (3,)") from None
+    R = as_rotation(R)
+    if t.shape != (3,) or not np.isfinite(t).all():
+        raise OutputError(f"t must be a finite (3,) array, got shape {t.shape}")
+    return R, t
+
+
 def _not_attempted(value: Any) -> bool:
     return value is None or value is Ellipsis
 
