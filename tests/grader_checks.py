@@ -6,6 +6,7 @@ live here so that all chapters hold their graders to the same bar.
 """
 from __future__ import annotations
 
+import re
 from types import ModuleType
 from typing import Any, Callable, Sequence
 
@@ -51,12 +52,19 @@ def assert_fallback_passes(ex: Exercise, seed: int = 3) -> None:
     assert result.passed, show(result)
 
 
+_SIGNATURE_ERROR = re.compile(r"TypeError: .*(unexpected keyword argument|positional argument|required "
+                              r"(keyword-only |positional )?argument)")
+
+
 def assert_mutant_caught(ex: Exercise, name: str, mutant: Callable, hint: str | None, seeds: Sequence[int]) -> None:
     """The mutant loses points with every seed, and where the catalogue names a hint, a hint or the
     message of an output check (e.g. "F has rank 3") says it."""
     for seed in seeds:
         result = grade(ex, mutant, seed=seed)
         assert result.score < ex.points, f"mutant '{name}' scored full marks with seed {seed}"
+        # A mutant that cannot even be called (its signature lags the exercise's) proves nothing.
+        broken = [row.message for row in result.cases if _SIGNATURE_ERROR.search(row.message + row.traceback)]
+        assert not broken, f"mutant '{name}' fails on a signature mismatch, not on its bug: {broken[0]}"
         if hint:
             said = [row.hint + " " + row.message for row in result.cases]
             assert any(hint in s for s in said), f"hint '{hint}' did not fire with seed {seed}:{show(result)}"

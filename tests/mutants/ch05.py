@@ -228,7 +228,7 @@ def _schur(U, V, W, g_c, g_p, cam_idx, pt_idx, use_V=False, sign=1.0, back=1.0, 
     return dc, (sign * dp if sign < 0 else dp)
 
 
-def schur_with_V(U, V, W, g_c, g_p, cam_idx, pt_idx):
+def schur_with_V(U, V, W, g_c, g_p, cam_idx, pt_idx, **solver_options):
     return _schur(U, V, W, g_c, g_p, cam_idx, pt_idx, use_V=True)
 
 
