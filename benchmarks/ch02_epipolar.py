@@ -3,10 +3,17 @@
 Synthetic: 500 matches, 30 % of them wrong, 0.5 px noise, five random two-view scenes (1280 x 960,
 different cameras for F, one camera for E); threshold 1 px on the Sampson distance. Real: the
 Graffiti pair graf1 -> graf3 (SIFT, ratio test 0.85, about half the matches wrong) against its
-published homography, five RANSAC seeds; threshold 2 px on the transfer error. Accuracy: rotation error (°), inlier F1 against
+published homography, fifteen RANSAC seeds; threshold 2 px on the transfer error. (The reference's
+H is bimodal on this pair: in ~1 run in 4 it settles on a competing structure — 83 matches in the
+bottom-left corner that sit 4-8 px off the published H — at a 6 % higher MSAC cost and 2.2 px on
+the wall; five seeds made the median a coin toss, fifteen make it the typical run. "H bad runs"
+below counts the runs over 1.5 px.) Accuracy: rotation error (°), inlier F1 against
 the planted outliers (for graf: against the matches within 3 px of the true H), held-out Sampson
 or transfer error (px); time: median wall time per call over the scenes; ratio = reference time /
-that method's time (< 1: the reference is faster). pycolmap runs with its default RANSACOptions
+that method's time (< 1: the reference is faster). The issue's goal is the same accuracy as OpenCV at
+no more than 5x its time; each OpenCV row gets a verdict: "err ×" = reference error / OpenCV's error
+on the task's main metric (F, H: held-out px; E: rotation error), "F1 Δ" = reference F1 − OpenCV's,
+"same accuracy" = err × ≤ 1.10 and F1 Δ ≥ −0.01, "time OK" = ref / it ≤ 5. pycolmap runs with its default RANSACOptions
 (confidence 0.9999, at least 1,000 trials) apart from max_error. Every number is the median over
 the five scenes (or seeds).
 """
@@ -22,7 +29,7 @@ from graders import datasets
 from graders.compare import max_angle_deg, rotation_angle_deg, sampson_rms_px
 from solutions import epipolar as ref
 
-N, OUTLIERS, NOISE, SCENES = 500, 0.3, 0.5, 5
+N, OUTLIERS, NOISE, SCENES, H_SEEDS = 500, 0.3, 0.5, 5, 15
 
 
 def _f1(inl: np.ndarray, is_outlier: np.ndarray) -> float:
@@ -83,22 +90,37 @@ def essential_methods(s):
             "OpenCV USAC_MAGSAC": cv(cv2.USAC_MAGSAC), "pycolmap LO-RANSAC": colmap}
 
 
-def _rows(task, per_method, ref_name):
-    """per_method: name -> dict of metric lists and times; one row per method, ratios vs reference."""
+ACCURACY_SLACK, TIME_GOAL, F1_SLACK = 1.10, 5.0, 0.01
+
+
+def _rows(task, per_method, ref_name, err_key):
+    """per_method: name -> dict of metric lists and times; one row per method, ratios vs reference,
+    and for OpenCV's methods the verdict against the goal (same accuracy, at most 5x the time)."""
     t_ref = np.median(per_method[ref_name]["time"])
+    e_ref, f1_ref = np.median(per_method[ref_name][err_key]), np.median(per_method[ref_name]["inlier F1"])
     rows = []
     for name, m in per_method.items():
         t = np.median(m["time"])
         row = {"task": task, "method": name, "median ms": f"{1e3 * t:.2f}", "ref / it": f"{t_ref / t:.2f}×"}
         for key, fmt in m["fmt"].items():
             row[key] = fmt.format(np.median(m[key]))
+        if name != ref_name:
+            err_ratio = e_ref / max(np.median(m[err_key]), 1e-12)
+            f1_delta = f1_ref - np.median(m["inlier F1"])
+            row["err ×"], row["F1 Δ"] = f"{err_ratio:.2f}", f"{f1_delta:+.3f}"
+            if name.startswith("OpenCV"):
+                same = err_ratio <= ACCURACY_SLACK and f1_delta >= -F1_SLACK
+                fast = t_ref / t <= TIME_GOAL
+                row["verdict"] = ("same accuracy" if same else "LESS ACCURATE") + ", " + \
+                                 ("time OK" if fast else f"OVER {TIME_GOAL:g}× TIME")
         rows.append(row)
     return rows
 
 
 def run() -> list[dict]:
     rows = []
-    columns = ["task", "method", "rot err °", "t dir °", "held-out px", "inlier F1", "median ms", "ref / it"]
+    columns = ["task", "method", "rot err °", "t dir °", "held-out px", "inlier F1", "median ms", "ref / it",
+               "err ×", "F1 Δ", "verdict"]
 
     # ---- F on synthetic scenes
     per = {}
@@ -111,7 +133,8 @@ def run() -> list[dict]:
             m["held-out px"].append(sampson_rms_px(F, *s["held_out"]))
             m["inlier F1"].append(_f1(inl, s["is_outlier"]))
             m["time"].append(median_time(fn, repeat=5))
-    rows += _rows(f"F: {N} matches, {OUTLIERS:.0%} outliers", per, "reference LO-RANSAC (7-pt, MSAC)")
+    rows += _rows(f"F: {N} matches, {OUTLIERS:.0%} outliers", per, "reference LO-RANSAC (7-pt, MSAC)",
+                  "held-out px")
 
     # ---- E on synthetic scenes (one camera)
     per = {}
@@ -125,7 +148,8 @@ def run() -> list[dict]:
             m["t dir °"].append(max_angle_deg(np.asarray(t, float).reshape(1, 3), s["t"][None]))
             m["inlier F1"].append(_f1(inl, s["is_outlier"]))
             m["time"].append(median_time(fn, repeat=5))
-    rows += _rows(f"E: {N} matches, {OUTLIERS:.0%} outliers", per, "reference LO-RANSAC (5-pt, MSAC)")
+    rows += _rows(f"E: {N} matches, {OUTLIERS:.0%} outliers", per, "reference LO-RANSAC (5-pt, MSAC)",
+                  "rot err °")
 
     # ---- H on the real Graffiti pair
     if datasets.available("homography"):
@@ -135,7 +159,7 @@ def run() -> list[dict]:
         truth_out = ch2.transfer_px(H_true, a, b) >= 3.0
         grid = {"held_out": ch2._graf_grid(H_true)}
         per = {}
-        for seed in range(SCENES):              # one real pair: vary the RANSAC seeds instead of the scene
+        for seed in range(H_SEEDS):             # one real pair: vary the RANSAC seeds instead of the scene
             opts = pycolmap.RANSACOptions(max_error=2.0, random_seed=seed)
 
             def colmap():
@@ -160,12 +184,18 @@ def run() -> list[dict]:
                 m["inlier F1"].append(_f1(inl, truth_out))
                 m["time"].append(median_time(fn, repeat=5))
         rows += _rows(f"H: real graf1→graf3, {len(a)} SIFT matches ({truth_out.mean():.0%} off the true H)", per,
-                      "reference LO-RANSAC (4-pt DLT, MSAC)")
+                      "reference LO-RANSAC (4-pt DLT, MSAC)", "held-out px")
+        for row in rows[-len(per):]:
+            errs = np.asarray(per[row["method"]]["held-out px"])
+            row["verdict"] = (row.get("verdict", "") + f" (runs over 1.5 px: {np.sum(errs > 1.5)}/{len(errs)})").strip()
     else:
         print("(graf pair not available: python -m graders.datasets fetch homography)")
     print(table(rows, columns))
     print("held-out px: F — RMS Sampson distance of 300 held-out noise-free matches; H — RMS transfer error "
           "against the published homography on a 15 x 12 grid over graf1.")
+    print(f"err × = reference error / that method's (F, H: held-out px; E: rotation); F1 Δ = reference F1 − its; "
+          f"verdict: same accuracy = err × ≤ {ACCURACY_SLACK:.2f} and F1 Δ ≥ −{F1_SLACK}, time OK = ref / it ≤ "
+          f"{TIME_GOAL:g}×.")
     return rows
 
 

@@ -375,6 +375,14 @@ def ransac_fixed_iterations(n, s, solve, residuals, threshold, refit=None, confi
                         fixed=300)
 
 
+def _fixed(count):
+    def ransac_fixed(n, s, solve, residuals, threshold, refit=None, confidence=0.99, max_iters=10_000, rng=None):
+        # MSAC and LO, but the sample budget is a constant picked by hand.
+        return _loop_ransac(n, s, solve, residuals, threshold, refit, confidence, max_iters, rng, adaptive=False,
+                            fixed=count)
+    return ransac_fixed
+
+
 def ransac_no_local_optimisation(n, s, solve, residuals, threshold, refit=None, confidence=0.99, max_iters=10_000,
                                  rng=None):
     return _loop_ransac(n, s, solve, residuals, threshold, None, confidence, max_iters, rng, lo=False)
@@ -465,11 +473,11 @@ def weighted_no_rank2(x1, x2, w):
 
 MUTANTS = [
     ("2.5", "np.cross(v, I): transposed", skew_np_cross, "transposed"),
-    ("2.5", "indices mixed up", skew_mixed_indices, None),
-    ("2.5", "lower-triangle signs", skew_lower_signs, None),
+    ("2.5", "indices mixed up", skew_mixed_indices, "wrong places"),
+    ("2.5", "lower-triangle signs", skew_lower_signs, "antisymmetric"),
     ("2.6", "R [t]x", essential_wrong_order, "order"),
     ("2.6", "R transposed", essential_R_transposed, "transposed"),
-    ("2.6", "camera centre for t", essential_camera_centre, None),
+    ("2.6", "camera centre for t", essential_camera_centre, "camera centre"),
     ("2.7", "K2^-1 without transpose", fundamental_no_transpose, "transpose is missing"),
     ("2.7", "K1 and K2 swapped", fundamental_swapped_K, "swapped"),
     ("2.7", "K instead of K^-1", fundamental_not_inverted, "inverses"),
@@ -482,7 +490,7 @@ MUTANTS = [
     ("2.10", "no Hartley normalisation", eight_unnormalised, "normalisation"),
     ("2.10", "no rank-2 enforcement", eight_no_rank2, "rank 2"),
     ("2.10", "x1 and x2 swapped (transposed F)", eight_swapped, "transposed"),
-    ("2.10", "normalised but not undone", eight_not_denormalised, None),
+    ("2.10", "normalised but not undone", eight_not_denormalised, "undo the normalisation"),
     ("2.11", "first real root only", seven_first_root_only, "every real root"),
     ("2.11", "real parts of complex roots kept", seven_complex_real_parts, "every real root"),
     ("2.11", "transposed", seven_transposed, "transposed"),
@@ -490,11 +498,11 @@ MUTANTS = [
     ("2.12", "first solution only", five_first_only, "every real root"),
     ("2.12", "x1 and x2 swapped", five_swapped, "transposed"),
     ("2.12", "complex roots kept", five_complex_too, "every real root"),
-    ("2.12", "largest singular vectors as null space", five_largest_singular_vectors, None),
+    ("2.12", "largest singular vectors as null space", five_largest_singular_vectors, "null space"),
     ("2.12", "linear, projected to essential", five_linear_projected, "every real root"),
     ("2.13", "no det(U), det(V) fix", decompose_no_det_fix, "det −1"),
-    ("2.13", "+t only", decompose_plus_t_only, None),
-    ("2.13", "R1 and R1^T", decompose_one_rotation, None),
+    ("2.13", "+t only", decompose_plus_t_only, "same sign"),
+    ("2.13", "R1 and R1^T", decompose_one_rotation, "not R1ᵀ"),
     ("2.14", "first candidate", recover_first_candidate, "in front of"),
     ("2.14", "depth in camera 1 only", recover_camera1_only, "twisted pair"),
     ("2.14", "all points must be in front", recover_all_positive, "in front of"),
@@ -502,24 +510,27 @@ MUTANTS = [
     ("2.15", "no Hartley normalisation", dlt_unnormalised, "normalisation"),
     ("2.15", "x1 and x2 swapped (inverse)", dlt_swapped, "inverse"),
     ("2.15", "transposed", dlt_transposed, "transposed"),
-    ("2.15", "normalised but not undone", dlt_not_denormalised, None),
-    ("2.16", "the seed's sketch", ransac_seed_sketch, None),
+    ("2.15", "normalised but not undone", dlt_not_denormalised, "undo the normalisation"),
+    ("2.16", "the seed's sketch", ransac_seed_sketch, "fixed number of iterations"),
     ("2.16", "inlier counting, no MSAC", ransac_counting, "MSAC"),
     ("2.16", "fixed 300 iterations", ransac_fixed_iterations, "fixed number of iterations"),
+    ("2.16", "fixed 100 iterations", _fixed(100), "fixed number of iterations"),
+    ("2.16", "fixed 128 iterations", _fixed(128), "fixed number of iterations"),
+    ("2.16", "fixed 1,000 iterations", _fixed(1000), "fixed number of iterations"),
     ("2.16", "no local optimisation", ransac_no_local_optimisation, "refit"),
     ("2.17", "left unchanged", fix_F_unchanged, "unnormalised"),
-    ("2.17", "scaled, not centred", fix_F_scaled_not_centred, None),
+    ("2.17", "scaled, not centred", fix_F_scaled_not_centred, "not centred"),
     ("2.17", "no rank 2", fix_F_no_rank2, "rank 2"),
     ("2.18", "always F", fix_planar_always_F, "Fit H too"),
     ("2.18", "always H", fix_planar_always_H, "only a plane"),
-    ("2.19", "brute force left as is", fix_matcher_unchanged, None),
-    ("2.19", "mutual check only", fix_matcher_mutual_only, None),
-    ("2.19", "ratio 0.99", fix_matcher_loose_ratio, None),
+    ("2.19", "brute force left as is", fix_matcher_unchanged, "brute-force"),
+    ("2.19", "mutual check only", fix_matcher_mutual_only, "mutual check alone"),
+    ("2.19", "ratio 0.99", fix_matcher_loose_ratio, "too loose"),
     ("2.20", "colleague's pose", fix_cheirality_unchanged, "colleague"),
-    ("2.20", "camera 1 only", fix_cheirality_camera1, "which cameras"),
+    ("2.20", "camera 1 only", fix_cheirality_camera1, "cameras"),
     ("2.20", "all points in front", fix_cheirality_strict, "in front of"),
     ("2.25", "weights ignored", weighted_ignored, "ignored"),
-    ("2.25", "coordinates scaled by w", weighted_points_scaled, None),
-    ("2.25", "threshold at 0.5, unnormalised", weighted_threshold_unnormalised, None),
+    ("2.25", "coordinates scaled by w", weighted_points_scaled, "scaled the coordinates"),
+    ("2.25", "threshold at 0.5, unnormalised", weighted_threshold_unnormalised, "without Hartley normalisation"),
     ("2.25", "no rank 2", weighted_no_rank2, "rank 2"),
 ]
