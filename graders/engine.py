@@ -13,7 +13,7 @@ from __future__ import annotations
 import importlib
 import secrets
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -91,7 +91,7 @@ class Exercise:
     name: str
     kind: str
     points: float
-    cases: Callable[[np.random.Generator], list[Case]]
+    cases: Callable[[np.random.Generator], Iterable[Case]]   # a list, or a generator (lazy cases)
     hints: list[Hint] = field(default_factory=list)
     fallback: Callable | None = None
     value: bool = False
@@ -269,26 +269,43 @@ def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None) -> ExerciseRe
             result.message = f"`{ex.name}` should be a function, got {type(fn_or_value).__name__}"
             return result
         fn = fn_or_value
+    # `cases` may return a list or yield its cases one by one: a generator builds an expensive case
+    # (real photos, a library run) only once the learner's code has got that far.
+    weights = []
     try:
-        cases = ex.cases(np.random.default_rng(seed))
+        cases = iter(ex.cases(np.random.default_rng(seed)))
     except Exception as exc:  # a broken case generator is our bug, not the learner's; say so
-        result.status, result.message = "error", f"grader error while drawing cases ({exc!r}); please report it"
-        return result
-    total_weight = sum(c.weight for c in cases)
-    for case in cases:
+        cases = iter(_raise(exc))
+    while True:
+        try:
+            case = next(cases, None)
+        except Exception as exc:
+            result.status, result.cases = "error", []
+            result.message = f"grader error while drawing cases ({exc!r}); please report it"
+            return result
+        if case is None:
+            break
         row = _judge_case(ex, fn, case)
         if row is None:  # NotImplementedError on a case: the whole exercise is not attempted
-            result.status, result.message, result.cases = "not_attempted", "raises NotImplementedError: not attempted", []
+            result.status, result.cases = "not_attempted", []
+            result.message = "raises NotImplementedError: not attempted"
             return result
-        row.points = ex.points * case.weight / total_weight if row.passed else 0.0
-        row.max_points = ex.points * case.weight / total_weight
         result.cases.append(row)
+        weights.append(case.weight)
+    for row, weight in zip(result.cases, weights):
+        row.max_points = ex.points * weight / sum(weights)
+        row.points = row.max_points if row.passed else 0.0
     result.score = round(sum(r.points for r in result.cases), 6)
     result.status = ("passed" if all(r.passed for r in result.cases)
                      else "failed" if result.score == 0 else "partial")
     if ex.explanation:
         result.explanation = ex.explanation
     return result
+
+
+def _raise(exc: Exception):
+    raise exc
+    yield  # a generator that raises on the first next()
 
 
 def _judge_case(ex: Exercise, fn: Callable, case: Case) -> CaseResult | None:

@@ -149,3 +149,31 @@ def test_comparisons_respect_scale_sign_and_gauge():
     assert abs(rotation_angle_deg(np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]), np.eye(3)) - 2) < 1e-9
     v = np.array([[1.0, 0, 0]])
     assert abs(max_angle_deg(v, np.array([[1.0, 1e-8, 0]])) - np.degrees(1e-8)) < 1e-15
+
+
+def test_cases_may_be_generated_lazily():
+    built = []
+
+    def lazy_cases(rng):
+        for n in (5, 50):
+            built.append(n)
+            x = rng.normal(size=(n, 2))
+            yield Case(f"{n} points", (x,), 2 * x, max_distance, 1e-9, "px", shape=(n, 2))
+
+    lazy = Exercise("0.4", "double lazily", "double", "code", 2, lazy_cases, timeout=1.0)
+
+    def stub(x):
+        raise NotImplementedError
+
+    assert grade(lazy, stub).status == "not_attempted" and built == [5]   # the second case was never built
+    r = grade(lazy, good)
+    assert r.status == "passed" and [c.max_points for c in r.cases] == [1.0, 1.0]
+
+
+def test_a_case_generator_that_breaks_is_reported_as_our_error():
+    def broken(rng):
+        yield Case("fine", (np.ones((2, 2)),), 2 * np.ones((2, 2)), max_distance, 1e-9, shape=(2, 2))
+        raise RuntimeError("oops")
+
+    r = grade(Exercise("0.5", "broken", "double", "code", 1, broken, timeout=1.0), good)
+    assert r.status == "error" and "please report it" in r.message
