@@ -99,3 +99,52 @@ def test_every_code_and_debug_exercise_has_mutants():
 @pytest.mark.parametrize("exercise_id", [i for i, ex in EXERCISES.items() if ex.value])
 def test_value_hints_are_quiet_on_the_answer(exercise_id):
     checks.assert_value_hints_quiet(EXERCISES[exercise_id], reference(EXERCISES[exercise_id]))
+
+
+def test_pycolmap_bundle_adjustment_matches_the_graders_ceres_path():
+    # The issue names `pycolmap.bundle_adjustment(reconstruction, options)` as the oracle; the grader
+    # runs `create_default_bundle_adjuster(options, config, rec).solve()` to get at the config and the
+    # Ceres summary. Pin that the two are the same bundle adjustment: same start, same options, same
+    # gauge (TWO_CAMS_FROM_WORLD) -> the same final BAL cost. 1e-12 relative: the two runs agree
+    # exactly (measured: 0.0); another gauge or COLMAP's own tolerances already move it by ~1e-8 here,
+    # a different residual or loss by far more.
+    import pycolmap
+
+    prob = ch5.make_problem(np.random.default_rng(4), n_cams=6, n_points=80, noise=0.5)
+    args = ch5.problem_args(prob)
+    _, _, costs = ch5.colmap_bundle_adjust(*args, colmap_gauge="TWO_CAMS_FROM_WORLD")
+    rec, ids = ch5.bal_to_reconstruction(*args)
+    options = pycolmap.BundleAdjustmentOptions()
+    options.refine_principal_point = False
+    options.print_summary = False
+    so = options.ceres.solver_options
+    so.max_num_iterations = 50  # colmap_bundle_adjust's defaults: max_iter=50, Ceres' stock tolerances
+    so.function_tolerance, so.gradient_tolerance, so.parameter_tolerance = 1e-6, 1e-10, 1e-8
+    pycolmap.bundle_adjustment(rec, options)
+    cams, pts = ch5.reconstruction_to_bal(rec, ids, len(args[0]), args[1])
+    final = ch5.bal_cost(cams, pts, *args[2:])
+    assert costs[-1] < 0.01 * costs[0]  # both converged from a perturbed start
+    assert abs(final / costs[-1] - 1) < 1e-12, (final, costs[-1])
+
+
+def test_specific_hints_stay_quiet_on_other_mistakes():
+    # A hint names one mistake; a different mistake must not trigger it (the audit found 5.10's weights
+    # hint firing on any wrong W, and 5.23's "the pose is right" on a wrong pose).
+    from graders import grade
+
+    def w_sign_flipped(J_cam, J_pt, r, cam_idx, pt_idx, n_cams, n_points, weights=None):
+        U, V, W, g_c, g_p = bundle_adjustment.normal_equations(J_cam, J_pt, r, cam_idx, pt_idx, n_cams, n_points,
+                                                               weights)
+        return U, V, -W, g_c, g_p
+
+    result = grade(EXERCISES["5.10"], w_sign_flipped, seed=0)
+    assert result.score < EXERCISES["5.10"].points
+    assert not any("weight" in row.hint for row in result.cases), checks.show(result)
+
+    def pose_not_refined(X, uv, intrinsics, pose0, n_steps=10):
+        _, G = bundle_adjustment.differentiable_pose(X, uv, intrinsics, pose0, n_steps)
+        return np.asarray(pose0, float), G  # the start returned as the "refined" pose
+
+    result = grade(EXERCISES["5.23"], pose_not_refined, seed=0)
+    assert result.score < EXERCISES["5.23"].points  # the pose rows fail (the derivative rows are exact)
+    assert not any(row.hint for row in result.cases), checks.show(result)
