@@ -15,10 +15,10 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
-from .engine import Case, Exercise, Hint, chapter, get, grade, like
+from .engine import Case, Exercise, Hint, chapter, get, grade, like, raised
 from .report import ExerciseResult
 
-__all__ = ["check", "use", "answer_key", "Case", "Exercise", "Hint", "chapter", "get", "grade", "like"]
+__all__ = ["check", "use", "answer_key", "Case", "Exercise", "Hint", "chapter", "get", "grade", "like", "raised"]
 
 _last: dict[str, ExerciseResult] = {}  # this session's latest result per exercise id
 

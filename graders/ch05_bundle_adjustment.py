@@ -29,7 +29,7 @@ from scipy.spatial.transform import Rotation
 
 from . import datasets, scene
 from .compare import max_abs, relative
-from .engine import Case, Exercise, Hint, OutputError, as_array, like, numeric_question, register, value_hint
+from .engine import Case, Exercise, Hint, OutputError, as_array, like, numeric_question, raised, register, value_hint
 
 F = np.diag([1.0, -1.0, -1.0])  # OpenCV camera axes <-> BAL camera axes (both ways: F = F^-1)
 
@@ -1484,6 +1484,10 @@ DIVERGE_HINTS = [
          "along with the rest: removing their NaN observations is not enough, their other observations belong to "
          "no point at that place. Drop those points from the BA (every observation of them).",
          _failed_points_adjusted),
+    raised(r"LinAlgError|[Ss]ingular|NaN|did not converge",
+           "the linear algebra broke down (a singular or NaN system): the failed triangulations at (0, 0, 0) and "
+           "their NaN observations are still in the problem. Drop those points from the BA (every observation of "
+           "them), then start λ at τ · max diag(JᵀJ) with τ ≈ 1e-3 (Nielsen), not 1e-12."),
 ]
 
 OUTLIER_HINTS = [

@@ -11,6 +11,7 @@ Read docs/ENGINE.md for how a chapter adds exercises.
 from __future__ import annotations
 
 import importlib
+import re
 import secrets
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Sequence
@@ -55,9 +56,12 @@ class Case:
 
 @dataclass
 class Hint:
-    """A known mistake: `when(case, output)` is True if the output looks like that mistake."""
+    """A known mistake: `when(case, output)` is True if the output looks like that mistake; or, with
+    `raised` (a regex), the mistake is recognised by the error it causes — an exception from the
+    learner's code or an output the checks reject (see `raised()`)."""
     text: str
-    when: Callable[[Case, Any], bool]
+    when: Callable[[Case, Any], bool] | None = None
+    raised: str | None = None
 
 
 def like(bug: Callable[[Case], Any], text: str, factor: float = 1.0, rel: float = 1e-9) -> Hint:
@@ -73,6 +77,12 @@ def like(bug: Callable[[Case], Any], text: str, factor: float = 1.0, rel: float 
             return False
 
     return Hint(text, when)
+
+
+def raised(pattern: str, text: str) -> Hint:
+    """A hint for a mistake known by its error: fires when the learner's code raises, or its output is
+    rejected, with a message or traceback matching the regex `pattern`."""
+    return Hint(text, raised=pattern)
 
 
 @dataclass
@@ -303,6 +313,11 @@ def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None) -> ExerciseRe
     return result
 
 
+def _error_hint(ex: Exercise, error_text: str) -> str:
+    """The first `raised` hint whose pattern matches the error, or ''."""
+    return next((h.text for h in ex.hints if h.raised and re.search(h.raised, error_text)), "")
+
+
 def _raise(exc: Exception):
     raise exc
     yield  # a generator that raises on the first next()
@@ -319,12 +334,14 @@ def _judge_case(ex: Exercise, fn: Callable, case: Case) -> CaseResult | None:
     if outcome.kind != "ok":
         row.message = outcome.error
         row.traceback = outcome.traceback
+        row.hint = _error_hint(ex, row.message + "\n" + row.traceback)
         return row
     try:
         out = (case.convert or as_array)(outcome.value, case)
         row.error = float(case.metric(out, case.expected))
     except OutputError as exc:
         row.message = str(exc)
+        row.hint = _error_hint(ex, row.message)
         return row
     except Exception as exc:  # an output the metric cannot digest is a wrong output
         row.message = f"output could not be compared ({type(exc).__name__}: {exc})"
@@ -338,6 +355,8 @@ def _judge_case(ex: Exercise, fn: Callable, case: Case) -> CaseResult | None:
         row.message = f"modified its input {', '.join(outcome.mutated)} in place; work on a copy"
     if not row.passed:
         for hint in ex.hints:
+            if hint.when is None:
+                continue
             try:
                 fired = hint.when(case, out)
             except Exception:

@@ -177,3 +177,18 @@ def test_a_case_generator_that_breaks_is_reported_as_our_error():
 
     r = grade(Exercise("0.5", "broken", "double", "code", 1, broken, timeout=1.0), good)
     assert r.status == "error" and "please report it" in r.message
+
+
+def test_a_mistake_can_be_recognised_by_the_error_it_causes():
+    from graders.engine import raised
+
+    ex = Exercise("0.6", "double", "double", "code", 1, _double_cases, timeout=1.0,
+                  hints=[raised(r"LinAlgError", "a singular system: drop the failed points first."),
+                         raised(r"returned shape", "return one row per point.")])
+
+    def singular(x):
+        raise np.linalg.LinAlgError("Singular matrix")
+
+    assert "singular system" in grade(ex, singular).cases[0].hint
+    assert "one row per point" in grade(ex, lambda x: 2 * x[:3]).cases[0].hint
+    assert grade(ex, lambda x: 1 / 0).cases[0].hint == ""

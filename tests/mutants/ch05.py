@@ -558,7 +558,7 @@ MUTANTS = [
     ("5.14", "no gauge fix", ba_no_gauge_fix, "must stay put"),
     ("5.14", "rotation Jacobian sign", ba_jacobian_sign, "rotation Jacobian's sign"),
     ("5.15", "start left unchanged", fix_divergence_unchanged, "exactly the start's"),
-    ("5.15", "failed triangulations kept", fix_divergence_keep_failed_points, None),
+    ("5.15", "failed triangulations kept", fix_divergence_keep_failed_points, "linear algebra broke down"),
     ("5.15", "NaN observations dropped, failed points kept", fix_divergence_drop_nan_observations,
      "failed triangulations"),
     ("5.16", "start left unchanged", fix_outliers_unchanged, "exactly the start's"),
