@@ -8,12 +8,14 @@ generated here (two-view scenes from chapter 2, camera rings around point clouds
 Reconstructions are judged up to their gauge: camera positions after a Sim(3) (Umeyama) alignment,
 rotations after a global rotation, tracks as sets of (image, keypoint) sets, P3P solutions
 regardless of order. Conventions: docs/CONVENTIONS.md; poses world-to-camera `x_c = R X + t`.
-The interface (learner names and signatures) is docs/ch04_contract.md.
+The interface (learner names, signatures, return types) is stated in each stub of
+notebooks/04_structure_from_motion.ipynb and in the `Exercise(...)` entries at the end of this file.
 """
 from __future__ import annotations
 
 import copy
-from typing import Any, Callable
+import functools
+from typing import Any, Callable, Iterator
 
 import cv2
 import numpy as np
@@ -329,7 +331,7 @@ def gt_pnp_dlt(X: np.ndarray, x: np.ndarray, K: np.ndarray, t_from: str = "lstsq
     Xn = _h(X) @ U.T
     z = np.zeros_like(Xn)
     A = np.r_[np.c_[Xn, z, -n[:, :1] * Xn], np.c_[z, Xn, -n[:, 1:] * Xn]]
-    P = np.linalg.svd(A)[2][-1].reshape(3, 4)
+    P = np.linalg.svd(A, full_matrices=False)[2][-1].reshape(3, 4)     # (2N, 12): no 2N x 2N U needed
     P = np.linalg.solve(T, P) @ U                   # back to normalised camera and world units
     if np.median(_h(X) @ P[2]) < 0:
         P = -P
@@ -456,7 +458,7 @@ def cases_pnp_dlt(rng) -> list[Case]:
                      ("12 MP camera, 50 points, 1 px noise", dict(n=50, noise=1.0, width=4000, height=3000,
                                                                  hfov_deg=(50, 70)))]:
         s = pnp_scene(rng, kw.pop("n"), **kw)
-        exp = dict(K=s["K"], held_out=s["held_out"])
+        exp = dict(K=s["K"], held_out=s["held_out"], R=s["R"], t=s["t"])
         ref = held_out_px(gt_pnp_dlt(s["X"], s["x"], s["K"], t_from="column"), exp)
         # Held-out reprojection RMS vs the grader's textbook normalised DLT: 1.5 x its error + 0.1 px.
         # Other normalisations move it by tens of percent (solving t for the final R is ~3x better);
@@ -472,7 +474,8 @@ def cases_pnp_dlt(rng) -> list[Case]:
     ref = held_out_px(gt_pnp_dlt(s["X"] - s["C"], s["x"], s["K"], t_from="column"),
                       dict(K=s["K"], held_out=(Xh - s["C"], xh)))
     out.append(Case("100 points, 1 px noise, 2 km from the world origin", (s["X"], s["x"], s["K"]),
-                    dict(K=s["K"], held_out=s["held_out"]), held_out_px, 1.5 * ref + 0.1, "px (held-out RMS)",
+                    dict(K=s["K"], held_out=s["held_out"], R=s["R"], t=s["t"]), held_out_px, 1.5 * ref + 0.1,
+                    "px (held-out RMS)",
                     convert=_convert_pose, info={"ref": ref}))
     return out
 
@@ -578,12 +581,12 @@ def cases_pnp_ransac(rng) -> list[Case]:
     exp = dict(K=s["K"], held_out=s["held_out"], is_outlier=s["is_outlier"])
     ref = held_out_px(col[:2], exp)
     args = (s["X"], s["x"], s["K"], 4.0, 0)
+    f1 = _f1(col[2], s["is_outlier"])
     # Held-out reprojection RMS vs pycolmap's LO-RANSAC + refinement: 1.3 x + 0.1 px. Without the final
     # refinement on all inliers the best minimal sample is 2-10x worse.
     out.append(Case(f"300 matches, 30 % wrong, 1 px: held-out reprojection (pycolmap: {ref:.3f} px)", args, exp,
                     lambda o, e: held_out_px(o[:2], e), 1.3 * ref + 0.1, "px", convert=_convert_ransac,
-                    info={"n": 300}))
-    f1 = _f1(col[2], s["is_outlier"])
+                    info={"n": 300, "f1_tol": (1 - f1) + 0.03}))
     # 1 − F1 of the inlier mask vs the planted wrong matches: pycolmap's + 0.03 (a 4 px threshold keeps
     # ~99.97 % of 1 px-noise inliers; a 1-NN outlier within 4 px of its true point is rare).
     out.append(Case(f"the same matches: 1 − inlier F1 (pycolmap: {1 - f1:.3f})", args, exp,
@@ -734,6 +737,18 @@ def _convert_two_view(out, case):
         raise OutputError(f"inliers must be a boolean mask of shape ({n},), got {inliers.dtype} {inliers.shape}")
     X = _points(X, int(inliers.sum()), "X (one point per inlier)")
     s = case.info["scene"]
+    # The true matches triangulated with the returned pose: the true pose puts ≥ 90 % in front of both
+    # cameras (only matches with parallax under the noise fall behind); (R, −t) and the twisted pair put
+    # nearly none there. Below 50 %: a wrong choice among the four decompositions of E.
+    good = ~s["is_outlier"]
+    Y = _dlt_normalised((np.eye(3), np.zeros(3)), (R, t), to_normalised(s["x1"][good], s["K1"]),
+                        to_normalised(s["x2"][good], s["K2"]))
+    front = float(np.mean((Y[:, 2] > 0) & ((Y @ R.T + t)[:, 2] > 0)))
+    if front < 0.5:
+        raise OutputError(f"cheirality: points must be in front of BOTH cameras — with this (R, t) only "
+                          f"{100 * front:.0f} % of the true matches are. Of the four decompositions of E keep the "
+                          f"one with most points at positive depth in camera 1 AND camera 2 (the twisted pair "
+                          f"passes a camera-1-only test)")
     if inliers.sum() < 0.5 * np.sum(~s["is_outlier"]):
         raise OutputError(f"only {int(inliers.sum())} inliers of ~{int(np.sum(~s['is_outlier']))} true matches")
     uv1, z1 = project(X, s["K1"], np.eye(3), np.zeros(3))
@@ -759,21 +774,38 @@ def colmap_two_view(s) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(pose.rotation.matrix()), t / np.linalg.norm(t)
 
 
-def cv_two_view_init(x1, x2, K1, K2):
-    """OpenCV-backed `two_view_init`: E by USAC_MAGSAC on normalised coordinates (1 px), pose by
-    cv2.recoverPose (cheirality over the inliers), points by cv_triangulate; points behind a
-    camera or with a triangulation angle under 1.5° are marked not inlier. (H is fitted too: if it
-    explains > 80 % of E's inliers the pair is reported degenerate by a warning, as COLMAP does.)"""
+def cv_two_view_init(x1, x2, K1, K2, thresh_px: float = 2.0):
+    """OpenCV-backed `two_view_init`: E by USAC_MAGSAC on normalised coordinates (`thresh_px`, 2 px:
+    the hidden cases have up to 1 px noise per image; 3 px lets wrong matches bias E by ~2°), LM
+    refinement on the inliers, pose by cv2.recoverPose (cheirality in both cameras, over the inliers).
+    H by USAC_MAGSAC at the same threshold: when it explains more than 80 % of E's inliers (a plane, or a
+    pure rotation) the pose comes from cv2.decomposeHomographyMat instead — the decomposition with most
+    H inliers in front of both cameras and seen under ≥ 1.5°. Points by cv_triangulate; points behind a camera, seen under a
+    triangulation angle below 1.5° or reprojecting more than 4 px off are marked not inlier."""
     x1, x2 = np.asarray(x1, float), np.asarray(x2, float)
     n1, n2 = to_normalised(x1, K1), to_normalised(x2, K2)
     f = 0.5 * (K1[0, 0] + K2[0, 0])
-    E, mask = cv2.findEssentialMat(n1, n2, np.eye(3), cv2.USAC_MAGSAC, 0.999, 1.0 / f)
+    E, mask = cv2.findEssentialMat(n1, n2, np.eye(3), cv2.USAC_MAGSAC, 0.999, thresh_px / f)
     if E is None:
         raise ValueError("no essential matrix")
     inl = mask.ravel().astype(bool)
     E = refine_essential(E[:3], x1[inl], x2[inl], K1, K2)      # LM on the Sampson distance (chapter 2)
     _, R, t, _ = cv2.recoverPose(E, n1[inl], n2[inl], np.eye(3))
     t = t.ravel() / np.linalg.norm(t)
+    H, hmask = cv2.findHomography(x1, x2, cv2.USAC_MAGSAC, thresh_px)
+    if H is not None and hmask.sum() > 0.8 * inl.sum():       # E vs H model selection (COLMAP's 0.8)
+        inl = hmask.ravel().astype(bool)
+        _, Rs, ts, _ = cv2.decomposeHomographyMat(np.linalg.solve(K2, H @ K1), np.eye(3))
+        best = -1
+        for Rh, th in zip(Rs, ts):
+            th = th.ravel() / max(np.linalg.norm(th), 1e-12)
+            Y = _dlt_normalised((np.eye(3), np.zeros(3)), (Rh, th), n1[inl], n2[inl])
+            ang = gt_triangulation_angles(np.zeros(3), centre(Rh, th), Y)
+            # two decompositions put every point in front of both cameras; the wrong one sees them under
+            # smaller angles (it explains the same H with a flatter geometry): count points ≥ 1.5° as well
+            front = int(np.sum((Y[:, 2] > 0) & ((Y @ Rh.T + th)[:, 2] > 0) & (ang >= 1.5)))
+            if front > best:
+                best, R, t = front, Rh, th
     P1, P2 = K1 @ np.c_[np.eye(3), np.zeros(3)], K2 @ np.c_[R, t]
     X = cv_triangulate(P1, P2, x1, x2)
     z1, z2 = X[:, 2], (X @ R.T + t)[:, 2]
@@ -783,15 +815,48 @@ def cv_two_view_init(x1, x2, K1, K2):
     return R, t, X[inl], inl
 
 
+def _near_epipole(rng, s: dict, k: int, radius_px: float, depth: tuple[float, float], noise: float) -> dict:
+    """Append k true matches whose pixels in image 1 lie within radius_px of the epipole (the image of camera
+    2's centre: inside the image when the camera moves forward). Their parallax is about r·B/Z px, below the
+    noise, so a few triangulate behind *both* cameras with the true pose — and in front of camera 1 with the
+    twisted pair (camera 2 turned 180° about the baseline), which then wins a camera-1-only count."""
+    s = dict(s)
+    e = s["K1"] @ centre(s["R"], s["t"])
+    e = e[:2] / e[2]
+    r, a = radius_px * np.sqrt(rng.random(k)), rng.uniform(0, 2 * np.pi, k)
+    u1 = e + np.c_[r * np.cos(a), r * np.sin(a)]
+    X = np.c_[to_normalised(u1, s["K1"]), np.ones(k)] * rng.uniform(*depth, (k, 1))
+    u2 = project(X, s["K2"], s["R"], s["t"])[0]
+    s["x1"] = np.r_[s["x1"], scene.add_noise(rng, u1, noise)]
+    s["x2"] = np.r_[s["x2"], scene.add_noise(rng, u2, noise)]
+    s["is_outlier"] = np.r_[s["is_outlier"], np.zeros(k, bool)]
+    s["X"] = np.r_[s["X"], X]
+    return s
+
+
 def cases_two_view_init(rng) -> list[Case]:
     out = []
     for name, kw in [("300 matches, 20 % wrong, 0.5 px", dict(n=300, noise=0.5, outliers=0.2)),
                      ("sideways motion, 200 matches, 10 % wrong", dict(n=200, noise=0.5, outliers=0.1,
                                                                        motion="sideways")),
                      ("different cameras, 400 matches, 30 % wrong", dict(n=400, noise=0.5, outliers=0.3,
-                                                                         hfov_deg=(40, 80)))]:
-        n = kw.pop("n")
+                                                                         hfov_deg=(40, 80))),
+                     # Driving forward (twice): the epipole is inside the image and 40 matches lie within 5 px
+                     # of it (parallax ~r·B/Z < 1.7 px, about the 1 px noise). With the true pose a few of them
+                     # land behind both cameras; the twisted pair puts them in front of camera 1, so a
+                     # cheirality test on camera 1 only picks it (on 29-30 of 30 draws per case, whichever
+                     # candidate it meets first), while a test on both cameras keeps the true pose.
+                     ("forward motion, epipole inside the image, 340 matches, 15 % wrong, 1 px",
+                      dict(n=300, noise=1.0, outliers=0.15, motion="forward", near=40)),
+                     ("forward motion again, other cameras, 340 matches, 15 % wrong, 1 px",
+                      dict(n=300, noise=1.0, outliers=0.15, motion="forward", near=40, hfov_deg=(40, 80)))]:
+        # No planar pair: two decompositions of its H put every point in front of both cameras, and on some
+        # draws nothing tells them apart (the reference and the stand-in both pick the wrong one, 16-59° off).
+        n, near = kw.pop("n"), kw.pop("near", 0)
         s = two_view(rng, n, held_out=1, depth=(3.0, 8.0), **kw)
+        if near:
+            s = _near_epipole(rng, s, near, 5.0, (3.0, 8.0), kw["noise"])
+            n += near
         R_col, t_col = colmap_two_view(s)
         err_col = _two_view_metric((R_col, t_col), s)
         # max(rotation error, translation-direction error) vs the truth: max(1°, 5 x pycolmap's).
@@ -891,8 +956,8 @@ def gt_rotation_averaging(R_rel: dict, n: int) -> np.ndarray:
     fix[:, :3] = np.eye(3)
     A = np.r_[A, 10.0 * fix]
     B = np.r_[np.zeros((A.shape[0] - 3, 3)), 10.0 * np.eye(3)]
-    Xs = np.linalg.lstsq(A, B, rcond=None)[0]
-    return np.stack([project_to_SO3(Xs[3 * i:3 * i + 3]) for i in range(n)])
+    Xs = np.linalg.solve(A.T @ A, A.T @ B)      # normal equations (3n x 3n, well conditioned by the gauge rows):
+    return np.stack([project_to_SO3(Xs[3 * i:3 * i + 3]) for i in range(n)])   # lstsq's SVD is ~100x slower
 
 
 def align_rotations(Rs: np.ndarray, Rs_true: np.ndarray) -> np.ndarray:
@@ -1055,8 +1120,8 @@ def recon_errors(rec: dict, truth: dict) -> dict:
     pts = np.asarray(rec["points"], float).reshape(-1, 3)
     # far background points (a skyline) are judged by `low_angle_fraction`, not here: their depth is noise
     centroid = np.mean([centre(R, t) for R, t in zip(truth["Rs"], truth["ts"])], 0)
-    spread = float(np.median(np.linalg.norm(C0 - C0.mean(0), axis=1))) or 1.0
-    near = np.linalg.norm(truth["X"] - centroid, axis=1) < 10 * spread
+    radius = float(np.median(np.linalg.norm(C0 - C0.mean(0), axis=1))) or 1.0     # the scene's scale
+    near = np.linalg.norm(truth["X"] - centroid, axis=1) < 10 * radius
     far = np.flatnonzero((match >= 0) & ~near[np.maximum(match, 0)])
     keep_pts = np.setdiff1d(np.arange(len(pts)), far)
     pts, match = pts[keep_pts], match[keep_pts]
@@ -1065,7 +1130,6 @@ def recon_errors(rec: dict, truth: dict) -> dict:
     if len(A) < 3:
         return dict(res, rot=180.0, pos=1.0, pts=1.0, n_points=len(pts))
     s, Q, tau = gt_umeyama(A, B)
-    radius = float(np.median(np.linalg.norm(C0 - C0.mean(0), axis=1))) or 1.0
     res["rot"] = max(rotation_angle_deg(rec["cameras"][i][0] @ Q.T, truth["Rs"][i]) for i in ids)
     res["pos"] = float(np.max(np.linalg.norm(s * C @ Q.T + tau - C0, axis=1)) / radius)
     errs = np.ones(len(pts))                       # points made of wrong matches or clutter count as 1.0
@@ -1103,7 +1167,7 @@ def _sfm_call(memo: dict, problem: dict):
     return call
 
 
-def cases_incremental_sfm(rng) -> list[Case]:
+def cases_incremental_sfm(rng) -> Iterator[Case]:
     s = sfm_scene(rng, background=60)
     truth = s["truth"]
     memo: dict = {}
@@ -1117,7 +1181,7 @@ def cases_incremental_sfm(rng) -> list[Case]:
     # 0.5 px noise and 10 % wrong matches, from 12 draws: with a final bundle adjustment the reference
     # and the grader's OpenCV chain + scipy BA reach ≤ 0.055°, ≤ 0.15 % and ≤ 0.07 %; without BA the chain
     # is typically at 0.15-0.4°, 0.5-1.2 % and 0.15-0.26 % (on lucky draws as low as 0.054°, 0.16 %, 0.1 %).
-    return [
+    known_K = [
         # every camera registered: 7 of 7 (0 missing)
         Case(f"{n} cameras, 400 points + 60 far away, 10 % wrong matches: fraction of cameras not registered", (),
              truth,
@@ -1138,42 +1202,392 @@ def cases_incremental_sfm(rng) -> list[Case]:
              lambda rec, exp: low_angle_fraction(rec, exp), 0.01, "of the points", convert=_convert_recon,
              call=call),
     ]
+    yield from known_K
+    yield from uncalibrated_sfm_cases(rng)   # K unknown
+    yield from real_sfm_cases()              # the Sacré-Cœur photos (with the dataset): built only if reached
+
+
+# ---------------------------------------------------------------- 4.14 on real photos: the Sacré-Cœur
+# The 10 photos of $COURSE_DATA/sfm/sacre_coeur, downscaled to 640 px, OpenCV SIFT, Lowe's ratio test and
+# F-RANSAC: keypoints and matches fixed once per process, so every pipeline (the learner's, the stand-in,
+# pycolmap) sees the same input. 4,000 features per image: with 1,500 the match graph is so thin that the
+# reference registers 7 images where pycolmap registers 9 (in two models), and with 2,500 pycolmap's
+# default initialisation (16° triangulation angle) finds a two-image model only.
+SACRE_COEUR_MAX_SIDE = 640
+SACRE_COEUR_FEATURES = 4000
+
+
+@functools.lru_cache(maxsize=1)
+def sacre_coeur_problem() -> dict:
+    """The real-photo problem of 4.14 (cached per process): each photo resized (area filter) so that its
+    larger side is 640 px, cv2.SIFT_create(nfeatures=4000), brute-force 2-NN matching with Lowe's ratio
+    0.8, cv2.findFundamentalMat USAC_MAGSAC (1.5 px, p = 0.9999) on each pair, pairs with ≥ 30 inliers
+    kept (their inliers only). Deterministic (USAC has a fixed seed). Returns dict(problem=incremental_sfm's
+    input with "K": None, names=file names); keypoints in our pixel convention (cv2's: centre of the
+    top-left pixel at (0, 0)). Raises datasets.DatasetMissing without the photos."""
+    from . import datasets
+
+    files = sorted(p for p in datasets.path("sacre_coeur").iterdir() if p.suffix.lower() == ".jpg")
+    sift, bf = cv2.SIFT_create(nfeatures=SACRE_COEUR_FEATURES), cv2.BFMatcher(cv2.NORM_L2)
+    kps, descs, sizes = [], [], []
+    for f in files:
+        img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE)
+        s = SACRE_COEUR_MAX_SIDE / max(img.shape)
+        img = cv2.resize(img, (round(img.shape[1] * s), round(img.shape[0] * s)), interpolation=cv2.INTER_AREA)
+        k, d = sift.detectAndCompute(img, None)
+        kps.append(np.array([p.pt for p in k], float).reshape(-1, 2))
+        descs.append(d)
+        sizes.append((img.shape[1], img.shape[0]))
+    matches = {}
+    for i in range(len(files)):
+        for j in range(i + 1, len(files)):
+            knn = bf.knnMatch(descs[i], descs[j], k=2)
+            m = np.array([(a.queryIdx, a.trainIdx) for a, b in knn if a.distance < 0.8 * b.distance], int)
+            m = m.reshape(-1, 2)
+            if len(m) < 30:
+                continue
+            F, mask = cv2.findFundamentalMat(kps[i][m[:, 0]], kps[j][m[:, 1]], cv2.USAC_MAGSAC, 1.5, 0.9999, 10_000)
+            if F is not None and mask is not None and mask.sum() >= 30:
+                matches[(i, j)] = m[mask.ravel().astype(bool)]
+    problem = {"keypoints": kps, "matches": matches, "image_sizes": sizes, "K": None}
+    return {"problem": problem, "names": [f.name for f in files]}
+
+
+@functools.lru_cache(maxsize=1)
+def colmap_sacre_coeur() -> dict:
+    """pycolmap.incremental_mapping on the same keypoints and matches as `sacre_coeur_problem` (cached per
+    process): a database written with pycolmap's Database API (one SIMPLE_RADIAL camera per image at
+    COLMAP's prior f = 1.2 max(w, h), its own rig and frame; keypoints + 0.5 for COLMAP's pixel corner),
+    our F-verified matches written as its two-view geometries (COLMAP's threaded `verify_matches` made the
+    model change between runs), default mapper options on one thread with a fixed seed (deterministic: two
+    runs agree to 1e-6°; with threads they differ by up to 2°).
+    The largest model is kept. Returns {"cameras": {i: {"R", "t", "f", "k1"}}, "reproj": mean px,
+    "points": n}; i indexes the problem's images."""
+    import tempfile
+    from pathlib import Path
+
+    import pycolmap
+
+    prob = sacre_coeur_problem()["problem"]
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        db = pycolmap.Database.open(tmp / "database.db")
+        for n, (w, h) in enumerate(prob["image_sizes"]):
+            cam = pycolmap.Camera.create_from_model_id(n + 1, pycolmap.CameraModelId.SIMPLE_RADIAL,
+                                                       1.2 * max(w, h), w, h)
+            db.write_camera(cam, use_camera_id=True)
+            rig = pycolmap.Rig(rig_id=n + 1)
+            rig.add_ref_sensor(cam.sensor_id)
+            db.write_rig(rig, use_rig_id=True)
+            image = pycolmap.Image(name=f"{n:02d}.png", camera_id=n + 1, image_id=n + 1)
+            frame = pycolmap.Frame(frame_id=n + 1, rig_id=n + 1)
+            frame.add_data_id(image.data_id)
+            db.write_frame(frame, use_frame_id=True)
+            image.frame_id = n + 1
+            db.write_image(image, use_image_id=True)
+            db.write_keypoints(n + 1, (prob["keypoints"][n] + 0.5).astype(np.float32))
+        for (i, j), m in prob["matches"].items():
+            m = np.asarray(m, np.uint32)
+            x1, x2 = prob["keypoints"][i][m[:, 0]] + 0.5, prob["keypoints"][j][m[:, 1]] + 0.5
+            F = cv2.findFundamentalMat(x1, x2, cv2.FM_8POINT)[0]
+            db.write_matches(i + 1, j + 1, m)
+            db.write_two_view_geometry(i + 1, j + 1, pycolmap.TwoViewGeometry(
+                config=pycolmap.TwoViewGeometryConfiguration.UNCALIBRATED, F=F, inlier_matches=m))
+        db.close()
+        (tmp / "images").mkdir()
+        pycolmap.set_random_seed(0)
+        opts = pycolmap.IncrementalPipelineOptions()
+        opts.num_threads = opts.mapper.num_threads = 1
+        opts.random_seed = opts.mapper.random_seed = opts.triangulation.random_seed = 0
+        recs = pycolmap.incremental_mapping(tmp / "database.db", tmp / "images", tmp / "sparse", opts)
+    if not recs:
+        return {"cameras": {}, "reproj": float("nan"), "points": 0}
+    rec = max(recs.values(), key=lambda r: r.num_reg_images())
+    cams = {}
+    for im in rec.images.values():
+        if im.has_pose:
+            pose, cam = im.cam_from_world(), rec.cameras[im.camera_id]
+            cams[im.image_id - 1] = {"R": pose.rotation.matrix(), "t": np.asarray(pose.translation, float),
+                                     "f": float(cam.params[0]), "k1": float(cam.params[3])}
+    return {"cameras": cams, "reproj": float(rec.compute_mean_reprojection_error()), "points": rec.num_points3D()}
+
+
+def _convert_recon_intrinsics(out, case):
+    """`_convert_recon` plus each camera's K (3, 3) and radial k = (k1, k2), needed to reproject."""
+    rec = _convert_recon(out, case)
+    rec["K"], rec["k"] = {}, {}
+    for i, c in out["cameras"].items():
+        try:
+            K, k = np.asarray(c["K"], float), np.asarray(c["k"], float).ravel()
+        except (KeyError, TypeError, ValueError):
+            raise OutputError(f'camera {i}: needs "K" (3, 3) and "k" (k1, k2), the refined intrinsics') from None
+        if K.shape != (3, 3) or k.shape != (2,) or not (np.all(np.isfinite(K)) and np.all(np.isfinite(k))):
+            raise OutputError(f'camera {i}: "K" must be a finite (3, 3) array and "k" a finite (k1, k2)')
+        rec["K"][int(i)], rec["k"][int(i)] = K, k
+    return rec
+
+
+def _radial(xn: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """The exercise's radial model on normalised points: x_d = x_n (1 + k1 r² + k2 r⁴). (N, 2)."""
+    r2 = np.sum(xn * xn, axis=-1, keepdims=True)
+    return xn * (1 + k[0] * r2 + k[1] * r2 * r2)
+
+
+def _unradial(xd: np.ndarray, k: np.ndarray, iters: int = 10) -> np.ndarray:
+    """Invert `_radial` by fixed-point iteration (mild distortion)."""
+    if not np.any(k):
+        return xd
+    xn = xd.copy()
+    for _ in range(iters):
+        r2 = np.sum(xn * xn, axis=-1, keepdims=True)
+        xn = xd / (1 + k[0] * r2 + k[1] * r2 * r2)
+    return xn
+
+
+def _focal_from_F(F: np.ndarray, K1: np.ndarray, K2: np.ndarray, factors=np.geomspace(0.33, 3.0, 41)):
+    """Mendonça–Cipolla self-calibration on a grid: the focal lengths (f1, f2) that make K2ᵀ F K1 most
+    nearly essential (equal non-zero singular values), principal points known; all grid points in one
+    batched SVD. Weak for nearly coplanar optical axes: take the median over many pairs."""
+    Ka = np.tile(K1, (len(factors), 1, 1))
+    Kb = np.tile(K2, (len(factors), 1, 1))
+    Ka[:, 0, 0] = Ka[:, 1, 1] = K1[0, 0] * factors
+    Kb[:, 0, 0] = Kb[:, 1, 1] = K2[0, 0] * factors
+    S = np.linalg.svd(np.swapaxes(Kb, 1, 2)[None] @ F @ Ka[:, None], compute_uv=False)
+    a, b = np.unravel_index(np.argmin((S[..., 0] - S[..., 1]) / (S[..., 0] + S[..., 1])), S.shape[:2])
+    return Ka[a, 0, 0], Kb[b, 0, 0]
+
+
+def real_reprojection_px(rec: dict, problem: dict) -> float:
+    """Mean reprojection error (px) over every observation of the returned tracks, with each camera's
+    returned K and radial (k1, k2). An observation in an image that is not registered counts as 100 px."""
+    kps, errs = problem["keypoints"], []
+    for X, tr in zip(rec["points"], rec["tracks"]):
+        for i, kp in tr.items():
+            i, kp = int(i), int(kp)
+            if i not in rec["cameras"] or not 0 <= kp < len(kps[i]):
+                errs.append(100.0)
+                continue
+            R, t = rec["cameras"][i]
+            Xc = R @ X + t
+            if Xc[2] <= 0:
+                errs.append(100.0)
+                continue
+            uv = rec["K"][i][:2, :2] @ _radial(Xc[None, :2] / Xc[2], rec["k"][i])[0] + rec["K"][i][:2, 2]
+            errs.append(float(np.linalg.norm(uv - kps[i][kp])))
+    return float(np.mean(errs)) if errs else 100.0
+
+
+def recon_reprojection_px(out: dict, problem: dict) -> float:
+    """`real_reprojection_px` of `incremental_sfm`'s raw output (for demo cells)."""
+    return real_reprojection_px(_convert_recon_intrinsics(out, None), problem)
+
+
+def relative_rotation_errors(cams: dict, ref: dict) -> np.ndarray:
+    """For every pair i < j of images registered in both (dicts image -> (R, t) or {"R"}), the angle (°)
+    between R_j R_iᵀ and the reference's: independent of the gauge. Empty with < 2 common images."""
+    def rot(c):
+        return c["R"] if isinstance(c, dict) else c[0]
+    common = sorted(set(cams) & set(ref))
+    return np.array([rotation_angle_deg(rot(cams[j]) @ rot(cams[i]).T, rot(ref[j]) @ rot(ref[i]).T)
+                     for a, i in enumerate(common) for j in common[a + 1:]])
+
+
+def _real_rotations(rec, stat) -> float:
+    err = relative_rotation_errors(rec["cameras"], colmap_sacre_coeur()["cameras"])
+    return float(stat(err)) if len(err) else 180.0
+
+
+def _focal_at_prior(rec, problem) -> bool:
+    """Every returned focal length still COLMAP's prior 1.2 max(w, h) (to 0.1 %): never refined."""
+    sizes = problem["image_sizes"]
+    return bool(rec["K"]) and all(abs(rec["K"][i][0, 0] / (1.2 * max(sizes[i])) - 1) < 1e-3 for i in rec["K"])
+
+
+def real_sfm_cases() -> list[Case]:
+    """4.14 on the Sacré-Cœur photos against pycolmap (see `sacre_coeur_problem`, `colmap_sacre_coeur`); []
+    without the photos. One run of the learner's pipeline, judged four ways; pycolmap runs on first use
+    (in the metric, outside the learner's time limit, and never for an untouched stub)."""
+    from . import datasets
+
+    if not datasets.available("sacre_coeur"):
+        return []
+    s = sacre_coeur_problem()
+    problem = s["problem"]
+    call = _sfm_call({}, problem)
+    n = len(problem["keypoints"])
+    info = {"problem": problem}
+    # Measured (640 px, 4,000 SIFT, 30 pairs; 2-core machine, idle → loaded): pycolmap registers 8 images (mean
+    # reprojection 0.34 px, 1.3-3 s); the reference solution 10 (0.21 px, 2-4 s), the stand-in 10 (0.31 px,
+    # 2.5-4.6 s). Relative rotations vs pycolmap's over the 28 common pairs: reference median 1.61°, max 7.36°;
+    # stand-in median 1.43°, max 3.8°; with every focal length left at the 1.2 max(w, h) prior (no focal
+    # refinement) median 7.0°, max 19°. The reference's max is image 7 (60584745), weakly attached to the rest
+    # (pycolmap leaves out its two telephoto partners): in every pair with it the two differ by 4-7°. The
+    # telephoto focal lengths are weakly determined by 10 photos (reference/pycolmap f ratio 0.9-1.55; pycolmap
+    # with threads differs from itself by 2°), so the issue's "every relative rotation within 2°" is not met
+    # by every correct pipeline; we ask the median within 3° and the worst pair within 10°.
+    return [
+        # registered: pycolmap's count minus one is the issue's floor (pycolmap 8, reference and stand-in 10)
+        Case(f"Sacré-Cœur, {n} photos, K unknown: images registered, fewer than pycolmap's", (), None,
+             lambda rec, _: float(max(0, len(colmap_sacre_coeur()["cameras"]) - len(rec["cameras"]))), 1.0,
+             "images fewer", convert=_convert_recon_intrinsics, call=call, info=info),
+        # mean reprojection over all observations, returned K and (k1, k2): reference 0.21 px, stand-in 0.31 px
+        Case("Sacré-Cœur: mean reprojection error with your K and (k1, k2)", (), None,
+             lambda rec, _: real_reprojection_px(rec, problem), 1.0, "px (mean)",
+             convert=_convert_recon_intrinsics, call=call, info=info),
+        # relative rotations R_j R_iᵀ vs pycolmap's: median 1.61° (reference), 1.43° (stand-in), 7.0° (f unrefined)
+        Case("Sacré-Cœur: relative rotations R_j R_iᵀ vs pycolmap's, median over pairs", (), None,
+             lambda rec, _: _real_rotations(rec, np.median), 3.0, "° (median)",
+             convert=_convert_recon_intrinsics, call=call, info=info),
+        # worst pair: 7.36° (reference), 3.8° (stand-in), 19° with the focal lengths never refined
+        Case("Sacré-Cœur: relative rotations vs pycolmap's, worst pair", (), None,
+             lambda rec, _: _real_rotations(rec, np.max), 10.0, "° (max)",
+             convert=_convert_recon_intrinsics, call=call, info=info),
+    ]
+
+
+def uncalibrated_sfm_scene(rng, n_cams: int = 7, n_points: int = 400, width: int = 1280, height: int = 960,
+                           noise: float = 0.5, wrong: float = 0.1) -> dict:
+    """`sfm_scene` with unknown, different cameras: per camera a focal length from a 40-75° horizontal field
+    of view (0.54-1.14 x the 1.2 max(w, h) prior), the principal point at the centre, and radial distortion
+    k1 in [-0.12, 0.02] (k2 = 0) in the true points' keypoints. problem["K"] is None; truth adds "dists"."""
+    rig = scene.random_rig(rng, n_cams, radius=6.0, arc_deg=120.0, elevation_deg=(5.0, 25.0))
+    Ks = []
+    for _ in range(n_cams):
+        f = (width / 2) / np.tan(np.radians(rng.uniform(40.0, 75.0)) / 2)
+        Ks.append(np.array([[f, 0.0, (width - 1) / 2], [0.0, f, (height - 1) / 2], [0.0, 0.0, 1.0]]))
+    X = scene.random_point_cloud(rng, n_points, extent=np.array([3.0, 2.0, 3.0]))
+    s = _sfm_problem(rng, Ks, rig, X, width, height, noise, wrong, False)
+    dists = [np.array([rng.uniform(-0.12, 0.02), 0.0]) for _ in range(n_cams)]
+    for i, ((R, t), K, k) in enumerate(zip(rig, Ks, dists)):
+        index = s["truth"]["kp_index"][i]
+        pts = np.flatnonzero(index >= 0)
+        Xc = X[pts] @ R.T + t
+        uv = _radial(Xc[:, :2] / Xc[:, 2:], k) @ K[:2, :2].T + K[:2, 2]
+        s["problem"]["keypoints"][i][index[pts]] = scene.add_noise(rng, uv, noise)
+    s["truth"]["dists"] = dists
+    return s
+
+
+def focal_error(rec: dict, truth: dict) -> float:
+    """Largest relative focal-length error |f / f_true - 1| over the registered cameras (1.0 without any)."""
+    errs = [abs(rec["K"][i][0, 0] / truth["Ks"][i][0, 0] - 1) for i in rec["cameras"]]
+    return float(max(errs)) if errs else 1.0
+
+
+def uncalibrated_sfm_cases(rng) -> list[Case]:
+    """4.14 with K unknown on a synthetic scene (`uncalibrated_sfm_scene`): registered, rotations after the
+    Sim(3) gauge, focal lengths. Measured over 8 draws: the reference and the stand-in register every camera,
+    rotations ≤ 0.037°, focal lengths within 0.4 %; with the focal lengths left at the prior, 0.4-1.0° and
+    64-81 %."""
+    s = uncalibrated_sfm_scene(rng)
+    truth, n = s["truth"], len(s["truth"]["Rs"])
+    call = _sfm_call({}, s["problem"])
+    info = {"problem": s["problem"]}
+    return [
+        Case(f"K unknown: {n} cameras, focal lengths 0.54-1.14 × the prior, radial k1 -0.12 to 0.02: fraction of "
+             "cameras not registered", (), truth, lambda rec, exp: 1.0 - recon_errors(rec, exp)["registered"], 0.0,
+             "", convert=_convert_recon_intrinsics, call=call, info=info),
+        # rotations: 0.1° as with K known (correct pipelines ≤ 0.037°, focal never refined ≥ 0.42°)
+        Case("K unknown: largest rotation error after Sim(3) alignment", (), truth,
+             lambda rec, exp: recon_errors(rec, exp)["rot"], 0.1, "°", convert=_convert_recon_intrinsics,
+             call=call, info=info),
+        # focal lengths: 3 % (correct pipelines ≤ 0.4 %)
+        Case("K unknown: largest focal-length error |f / f_true - 1|", (), truth, focal_error, 0.03, "",
+             convert=_convert_recon_intrinsics, call=call, info=info),
+    ]
+
+
+REAL_SFM_HINTS = [
+    Hint("your focal lengths are still COLMAP's prior 1.2 × max(w, h): with K unknown, refine each camera's focal "
+         "length (and k1, k2) in bundle adjustment — focal refinement; a wrong f bends every ray and the rotations "
+         "with it.",
+         lambda c, out: c.name.startswith(("Sacré-Cœur", "K unknown")) and _focal_at_prior(out, c.info["problem"])),
+    Hint("on the photos: images are missing compared with pycolmap. Unknown focal lengths make PnP fail at the "
+         "prior f: start each camera at 1.2 × max(w, h), estimate f from the fundamental matrices of its pairs or "
+         "try a few f in PnP RANSAC (COLMAP does), and use COLMAP's loose 12 px registration threshold.",
+         lambda c, out: c.name.startswith("Sacré-Cœur") and "registered" in c.name),
+    Hint("on the photos: your mean reprojection error is high. Reproject with each camera's own K and (k1, k2): "
+         "x_d = x_n (1 + k1 r² + k2 r⁴), pixel = K x_d; filter observations over 4 px after bundle adjustment.",
+         lambda c, out: c.name.startswith("Sacré-Cœur") and "reprojection" in c.name),
+    Hint("on the photos: your rotations disagree with pycolmap's. Check the focal lengths you return (they should "
+         "differ per camera: these photos mix phone and telephoto lenses) and that bundle adjustment refines "
+         "them with the poses.", lambda c, out: c.name.startswith("Sacré-Cœur") and "rotations" in c.name),
+]
 
 
 def cv_incremental_sfm(problem: dict, refine: bool = True, verify: bool = True, min_angle: float = 1.5,
-                       max_images: int | None = None, noise_px: float = 0.5) -> dict:
-    """The grader's stand-in for `incremental_sfm`, chaining OpenCV calls (known K only):
-    tracks by union-find, the initial pair with the most E inliers among pairs with a median
-    triangulation angle ≥ 4° and H/E inlier ratio < 0.8, two-view initialisation, then repeatedly the
-    image seeing most reconstructed points → cv2.solvePnPRansac + LM refinement → triangulation of
-    new tracks (angle ≥ 1.5°, reprojection < 4 px), and a final scipy bundle adjustment (poses and
-    points, fixed K, Huber loss) when `refine`. Thresholds assume keypoint noise ~`noise_px` (E: 3σ,
-    at least 1.5 px; PnP and triangulation: 8σ, at least 4 px)."""
+                       max_images: int | None = None, noise_px: float = 0.5, refine_focal: bool = True) -> dict:
+    """The grader's stand-in for `incremental_sfm`, chaining OpenCV calls: tracks by union-find, the
+    initial pair with the most E inliers among pairs with a median triangulation angle ≥ 4° and H/E
+    inlier ratio < 0.8, two-view initialisation, then repeatedly the image seeing most reconstructed
+    points → cv2.solvePnPRansac + LM refinement → triangulation of new tracks (angle ≥ 1.5°, reprojection
+    < 4 px), a scipy bundle adjustment every second image and two at the end (plain least squares) when
+    `refine`. Thresholds assume keypoint noise ~`noise_px` (E: 3σ, at least 1.5 px; PnP and
+    triangulation: 8σ, at least 4 px).
+    K unknown (problem["K"] is None): each camera starts at COLMAP's prior f = 1.2 max(w, h), principal
+    point at the centre ((w - 1) / 2, (h - 1) / 2); pairs are verified by F (USAC_MAGSAC), each f is then
+    self-calibrated (weighted median over its pairs of `_focal_from_F`), PnP uses COLMAP's loose 12 px,
+    points are kept within 4 px, and bundle adjustment refines per-camera f (from 4 images on, f and k1;
+    k2 stays 0: 10 photos do not determine it) when `refine_focal`."""
     K = problem.get("K")
-    if K is None:            # a guessed focal length leaves pixels of error: COLMAP-like loose thresholds
+    unknown = K is None          # COLMAP-like loose thresholds while f is a guess
+    if unknown:
         noise_px = max(noise_px, 1.5)
     th_e, th_px = max(1.5, 3 * noise_px), max(4.0, 8 * noise_px)
-    if K is None:
-        w, h = problem["image_sizes"][0]
-        K = [np.array([[1.2 * max(w, h), 0, w / 2], [0, 1.2 * max(w, h), h / 2], [0, 0, 1.0]])
-             for w, h in problem["image_sizes"]]
-    K = [np.asarray(k, float) for k in K]
+    th_fit = th_px                      # K unknown: loose while f is a guess, 4 px in the final model
     kps = [np.asarray(k, float) for k in problem["keypoints"]]
     n_img = len(kps)
-    # geometric verification per pair (E with USAC_MAGSAC), also used for the initial pair
+    raw = {p: np.asarray(m, int).reshape(-1, 2) for p, m in problem["matches"].items()}
+    if unknown:
+        K = [np.array([[1.2 * max(w, h), 0, (w - 1) / 2], [0, 1.2 * max(w, h), (h - 1) / 2], [0, 0, 1.0]])
+             for w, h in problem["image_sizes"]]
+        est: dict[int, list] = {i: [] for i in range(n_img)}          # (log f, inliers) per pair
+        for (i, j), m in list(raw.items()):
+            if len(m) < 15:
+                continue
+            F, mask = cv2.findFundamentalMat(kps[i][m[:, 0]], kps[j][m[:, 1]], cv2.USAC_MAGSAC, th_e, 0.999, 10_000)
+            if F is None or F.shape != (3, 3):
+                raw.pop((i, j))
+                continue
+            inl = mask.ravel().astype(bool) if verify else np.ones(len(m), bool)
+            raw[(i, j)] = m[inl]
+            if refine_focal and inl.sum() >= 30:
+                f1, f2 = _focal_from_F(F, K[i], K[j])
+                est[i].append((np.log(f1), inl.sum()))
+                est[j].append((np.log(f2), inl.sum()))
+        for i, e in est.items():
+            if e:
+                v, w = np.array(e).T
+                o = np.argsort(v)
+                cum = np.cumsum(w[o])
+                K[i][0, 0] = K[i][1, 1] = np.exp(v[o][np.searchsorted(cum, 0.5 * cum[-1])])
+    K = [np.asarray(k, float).copy() for k in K]
+    dist = [np.zeros(2) for _ in range(n_img)]
+
+    def norm(i, x):
+        return _unradial(to_normalised(x, K[i]), dist[i])
+
+    def proj(i, X, pose):
+        Xc = X @ pose[0].T + pose[1]
+        z = Xc[:, 2]
+        xd = _radial(Xc[:, :2] / z[:, None], dist[i])
+        return xd @ K[i][:2, :2].T + K[i][:2, 2], z
+
+    # geometric verification per pair (E with USAC_MAGSAC; F above when K is unknown), also used for the
+    # initial pair
     verified, stats = {}, {}
-    for (i, j), m in problem["matches"].items():
-        m = np.asarray(m, int)
+    for (i, j), m in raw.items():
         if len(m) < 15:
             continue
         a, b = to_normalised(kps[i][m[:, 0]], K[i]), to_normalised(kps[j][m[:, 1]], K[j])
         E, mask = cv2.findEssentialMat(a, b, np.eye(3), cv2.USAC_MAGSAC, 0.999, th_e / K[i][0, 0])
         if E is None:
             continue
-        inl = mask.ravel().astype(bool) if verify else np.ones(len(m), bool)
+        inl = mask.ravel().astype(bool) if verify or unknown else np.ones(len(m), bool)
         if inl.sum() < 15:
             continue
-        verified[(i, j)] = m[inl]
+        # K unknown: the pair was verified by F above; with f still approximate, E would reject true matches
+        verified[(i, j)] = m if unknown else m[inl]
         _, R, t, _ = cv2.recoverPose(E[:3], a[inl], b[inl], np.eye(3))
         t = t.ravel()
         X = gt_midpoint(np.c_[np.eye(3), np.zeros(3)], np.c_[R, t], a[inl], b[inl])
@@ -1182,7 +1596,7 @@ def cv_incremental_sfm(problem: dict, refine: bool = True, verify: bool = True, 
         nh = 0 if hm is None else int(hm.sum())
         stats[(i, j)] = dict(n_inliers_E=int(inl.sum()), n_inliers_H=nh, median_angle_deg=float(ang), R=R, t=t)
     tracks = [tr for tr in gt_build_tracks(verified)]
-    obs_track = [dict() for _ in range(n_img)]       # image -> keypoint -> track index
+    obs_track = [dict() for _ in range(n_img)]
     for k, tr in enumerate(tracks):
         for i, kp in tr.items():
             obs_track[i][kp] = k
@@ -1193,67 +1607,120 @@ def cv_incremental_sfm(problem: dict, refine: bool = True, verify: bool = True, 
     order = [i0, j0]
     Xs: dict[int, np.ndarray] = {}
 
+    # every observation of every track, flattened: track, image, pixel
+    obs_k = np.repeat(np.arange(len(tracks)), [len(tr) for tr in tracks]).astype(int)
+    obs_i = np.array([i for tr in tracks for i in tr], int)
+    obs_xy = np.array([kps[i][kp] for tr in tracks for i, kp in tr.items()], float).reshape(-1, 2)
+
+    def observe(ks, P, X=None):
+        """Observations of tracks `ks` in the images of P: their indices, world-frame unit rays and,
+        given points X (track -> (3,)), reprojection errors (inf behind the camera)."""
+        sel = np.flatnonzero(np.isin(obs_k, ks) & np.isin(obs_i, list(P)))
+        rays, err = np.zeros((len(sel), 3)), np.full(len(sel), np.inf)
+        for i in np.unique(obs_i[sel]):
+            s = obs_i[sel] == i
+            r = np.c_[norm(i, obs_xy[sel[s]]), np.ones(s.sum())] @ P[i][0]        # Rᵀ [x_n, 1]
+            rays[s] = r / np.linalg.norm(r, axis=1, keepdims=True)
+            if X is not None:
+                uv, z = proj(i, np.array([X[k] for k in obs_k[sel[s]]]), P[i])
+                err[s] = np.where(z > 0, np.linalg.norm(uv - obs_xy[sel[s]], axis=1), np.inf)
+        return sel, rays, err
+
+    def widest(sel, rays):
+        """Per track among obs_k[sel]: the largest angle (°) between two of its rays (the angle between
+        viewing rays does not depend on a noisy depth) and the two observations that make it."""
+        trk = obs_k[sel]
+        order = np.argsort(trk, kind="stable")
+        trk, rays, sel = trk[order], rays[order], sel[order]
+        uniq, first, row = np.unique(trk, return_index=True, return_inverse=True)
+        slot = np.arange(len(trk)) - first[row]
+        L = int(slot.max()) + 1 if len(slot) else 1
+        pad = np.zeros((len(uniq), L, 3))
+        pad[row, slot] = rays
+        cos = np.einsum("tac,tbc->tab", pad, pad)
+        used = np.zeros((len(uniq), L), bool)
+        used[row, slot] = True
+        cos[~(used[:, :, None] & used[:, None, :]) | np.eye(L, dtype=bool)] = 2.0
+        best = cos.reshape(len(uniq), -1).argmin(1)
+        a, b = best // L, best % L
+        idx = np.full((len(uniq), L), -1)
+        idx[row, slot] = sel
+        ang = np.degrees(np.arccos(np.clip(cos.reshape(len(uniq), -1)[np.arange(len(uniq)), best], -1, 1)))
+        return uniq, np.where(cos.reshape(len(uniq), -1).min(1) > 1.5, 0.0, ang), idx[np.arange(len(uniq)), a], \
+            idx[np.arange(len(uniq)), b]
+
     def triangulate_new():
-        for k, tr in enumerate(tracks):
-            if k in Xs:
-                continue
-            reg = [i for i in tr if i in poses]
-            if len(reg) < 2:
-                continue
-            # the angle between the two viewing rays (world frame) does not depend on the noisy depth:
-            # a far point triangulated from nearly parallel rays can land close, at a large angle
-            ang, ia, ib = _max_ray_angle(reg, tr, poses, kps, K, pair=True)
-            if ang < min_angle:
-                continue
-            X = _dlt_normalised(poses[ia], poses[ib], to_normalised(kps[ia][[tr[ia]]], K[ia]),
-                                to_normalised(kps[ib][[tr[ib]]], K[ib]))[0]
-            ok = True
-            for i in reg:
-                uv, z = project(X[None], K[i], *poses[i])
-                if z[0] <= 0 or np.linalg.norm(uv[0] - kps[i][tr[i]]) > th_px:
-                    ok = False
-                    break
-            if ok:
-                Xs[k] = X
+        todo = [k for k in range(len(tracks)) if k not in Xs and sum(i in poses for i in tracks[k]) >= 2]
+        if not todo:
+            return
+        sel, rays, _ = observe(todo, poses)
+        ks, ang, oa, ob = widest(sel, rays)
+        ks, oa, ob = ks[ang >= min_angle], oa[ang >= min_angle], ob[ang >= min_angle]
+        new = {}
+        for ia, ib in {(int(obs_i[a]), int(obs_i[b])) for a, b in zip(oa, ob)}:
+            s = (obs_i[oa] == ia) & (obs_i[ob] == ib)
+            X = _dlt_normalised(poses[ia], poses[ib], norm(ia, obs_xy[oa[s]]), norm(ib, obs_xy[ob[s]]))
+            new.update(zip(ks[s].tolist(), X))
+        for k in fits(poses, new):
+            Xs[k] = new[k]
 
     def fits(P, X):
-        """Points (keys) that reproject within th_px in every registered image, with rays ≥ min_angle apart."""
-        keep = []
-        for k, Xk in X.items():
-            reg = [i for i in tracks[k] if i in P]
-            if len(reg) < 2 or _max_ray_angle(reg, tracks[k], P, kps, K) < min_angle:
-                continue
-            if all(project(Xk[None], K[i], *P[i])[1][0] > 0 and
-                   np.linalg.norm(project(Xk[None], K[i], *P[i])[0][0] - kps[i][tracks[k][i]]) <= th_px for i in reg):
-                keep.append(k)
-        return keep
+        """Points (keys) that reproject within th_fit in every registered image, in front of it, with
+        rays ≥ min_angle apart."""
+        if not X:
+            return []
+        sel, rays, err = observe(list(X), P, X)
+        bad = np.zeros(len(tracks), bool)
+        bad[obs_k[sel][err > th_fit]] = True
+        ks, ang, _, _ = widest(sel, rays)
+        return [int(k) for k in ks[(ang >= min_angle) & ~bad[ks]]]
 
     def refine_and_filter(P, X, nfev):
         """Filter, bundle-adjust (plain least squares), filter again; keep the previous state if the
         adjustment made most points stop fitting (outliers dragged it away)."""
+        nonlocal K, dist
         X = {k: X[k] for k in fits(P, X)}
         if len(X) < 10:
             return P, X
-        P2, X2 = _bundle_adjust(P, X, tracks, kps, K, max_nfev=nfev)
+        K0, d0 = K, dist
+        intr = "f" if len(P) < 4 else "fk1"
+        P2, X2, K, dist = _bundle_adjust(P, X, tracks, kps, K, max_nfev=nfev, dist=dist,
+                                         intrinsics=intr if unknown and refine_focal else "")
         keep = fits(P2, X2)
         if len(keep) < 0.7 * len(X):
+            K, dist = K0, d0
             return P, X
         return P2, {k: X2[k] for k in keep}
 
     triangulate_new()
+    rescued = False
     while len(poses) < (max_images or n_img):
         counts = {i: [(kp, k) for kp, k in obs_track[i].items() if k in Xs] for i in range(n_img) if i not in poses}
+        if not counts:
+            break
         i = max(counts, key=lambda i: len(counts[i]))
-        if len(counts[i]) < 12:
-            break
-        X3 = np.array([Xs[k] for _, k in counts[i]])
-        x2 = np.array([kps[i][kp] for kp, _ in counts[i]])
-        try:
-            R, t, inl = cv_pnp_ransac(X3, x2, K[i], th_px)
-        except ValueError:
-            break
+        inl, Ki = np.zeros(0, bool), K[i]
+        if len(counts[i]) >= 12:
+            X3 = np.array([Xs[k] for _, k in counts[i]])
+            x2 = np.array([kps[i][kp] for kp, _ in counts[i]])
+            try:
+                if unknown and refine_focal:
+                    R, t, inl, Ki = _pnp_unknown_focal(X3, x2, K[i], th_px)
+                else:
+                    R, t, inl = cv_pnp_ransac(X3, x2, K[i], th_px)
+            except ValueError:
+                pass
         if inl.sum() < 12:
+            if unknown and refine and not rescued:
+                # stuck (K unknown): points filtered while the focal lengths were still off may fit now;
+                # refine everything, triangulate again and retry once (COLMAP's retriangulation)
+                poses, Xs = refine_and_filter(poses, Xs, 20)
+                triangulate_new()
+                rescued = True
+                continue
             break
+        rescued = False
+        K[i] = Ki
         poses[i] = (R, t)
         order.append(i)
         triangulate_new()
@@ -1261,21 +1728,14 @@ def cv_incremental_sfm(problem: dict, refine: bool = True, verify: bool = True, 
             poses, Xs = refine_and_filter(poses, Xs, 8)
     if refine:
         poses, Xs = refine_and_filter(poses, Xs, 50)
+        if unknown:
+            th_fit = 4.0                # the final model: COLMAP's 4 px filter
+            triangulate_new()           # tracks that fit once the intrinsics are refined
         poses, Xs = refine_and_filter(poses, Xs, 20)
     keys = sorted(Xs)
-    return {"cameras": {i: {"R": R, "t": t, "K": K[i], "k": np.zeros(2)} for i, (R, t) in poses.items()},
+    return {"cameras": {i: {"R": R, "t": t, "K": K[i].copy(), "k": dist[i].copy()} for i, (R, t) in poses.items()},
             "points": np.array([Xs[k] for k in keys]).reshape(-1, 3),
             "tracks": [{i: kp for i, kp in tracks[k].items() if i in poses} for k in keys], "order": order}
-
-
-def _max_ray_angle(reg, tr, poses, kps, K, pair: bool = False):
-    """Largest angle (°) between the world-frame viewing rays of a track's observations in the images
-    `reg` (and the pair of images that achieves it, if `pair`)."""
-    rays = {i: poses[i][0].T @ np.r_[to_normalised(kps[i][[tr[i]]], K[i])[0], 1.0] for i in reg}
-    rays = {i: r / np.linalg.norm(r) for i, r in rays.items()}
-    best = max(((np.degrees(np.arctan2(np.linalg.norm(np.cross(rays[a], rays[b])), rays[a] @ rays[b])), a, b)
-                for ai, a in enumerate(reg) for b in reg[ai + 1:]), default=(0.0, None, None))
-    return best if pair else best[0]
 
 
 def _dlt_normalised(pose1, pose2, n1, n2) -> np.ndarray:
@@ -1287,11 +1747,50 @@ def _dlt_normalised(pose1, pose2, n1, n2) -> np.ndarray:
     return Xh[:, :3] / Xh[:, 3:]
 
 
-def _bundle_adjust(poses, Xs, tracks, kps, K, f_scale: float = 2.0, max_nfev: int = 30):
-    """Poses and points by scipy.optimize.least_squares, fixed K; the gauge is left free (it does not
-    change the cost). Plain least squares: the points were filtered by reprojection error when they were
-    triangulated, and scipy's robust losses (Huber here) converge far more slowly on this problem
-    (30 evaluations: 2° off instead of 0.04°). `f_scale` is kept for callers and unused."""
+def _pnp_unknown_focal(X, x, K, thresh_px, factors=np.geomspace(0.6, 1.7, 9)):
+    """PnP for an image whose focal length is a guess, COLMAP's way: RANSAC (`cv_pnp_ransac`) with each
+    f = factor × K's f, the one with the lowest truncated cost Σ min(e², thresh²) kept (a wrong f bends the
+    bearings: the inlier count alone hardly moves at a 12 px threshold), then pose and f refined together
+    on its inliers (scipy least squares on rotation vector, t, log f). Returns (R, t, inliers, K)."""
+    from scipy.optimize import least_squares
+
+    best = None
+    for s in factors:
+        Ks = K.copy()
+        Ks[:2, :2] *= s
+        try:
+            R, t, inl = cv_pnp_ransac(X, x, Ks, thresh_px)
+        except ValueError:
+            continue
+        uv, z = project(X, Ks, R, t)
+        cost = np.sum(np.minimum(np.sum((uv - x) ** 2, 1), thresh_px ** 2))
+        if best is None or cost < best[0]:
+            best = (cost, R, t, inl, Ks)
+    if best is None:
+        raise ValueError("no pose for any focal length")
+    _, R, t, inl, Ks = best
+
+    def residual(p):
+        Kp = Ks.copy()
+        Kp[:2, :2] *= np.exp(p[6])
+        return (project(X[inl], Kp, cv2.Rodrigues(p[:3])[0], p[3:6])[0] - x[inl]).ravel()
+
+    sol = least_squares(residual, np.r_[cv2.Rodrigues(R)[0].ravel(), t, 0.0], method="lm", max_nfev=100)
+    Ks[:2, :2] *= np.exp(sol.x[6])
+    R, t = cv2.Rodrigues(sol.x[:3])[0], sol.x[3:6]
+    uv, z = project(X, Ks, R, t)
+    return R, t, (z > 0) & (np.linalg.norm(uv - x, axis=1) < thresh_px), Ks
+
+
+def _bundle_adjust(poses, Xs, tracks, kps, K, max_nfev: int = 30, dist=None,
+                   intrinsics: str = ""):
+    """Poses and points by scipy.optimize.least_squares, and per camera (log f, k1, k2) as far as
+    `intrinsics` says ("": fixed K and dist, "f", "fk1", "fk"); principal points fixed; the gauge is
+    left free (it does not change the cost). Plain least squares: the points were filtered by
+    reprojection error when they were triangulated, and scipy's robust losses (Huber here) converge far
+    more slowly on this problem (30 evaluations: 2° off instead of 0.04°). LSMR steps are capped at 100
+    iterations (the photos: 4 s instead of 8 s, same result).
+    Returns (poses, points, K list, dist list)."""
     from scipy.optimize import least_squares
     from scipy.sparse import lil_matrix
     cam_ids, pt_ids = sorted(poses), sorted(Xs)
@@ -1301,10 +1800,16 @@ def _bundle_adjust(poses, Xs, tracks, kps, K, f_scale: float = 2.0, max_nfev: in
     oc = np.array([o[0] for o in obs])
     op = np.array([o[1] for o in obs])
     ox = np.array([o[2] for o in obs])
+    dist = [np.zeros(2) for _ in K] if dist is None else dist
     Kc = np.stack([K[c] for c in cam_ids])
-    x0 = np.r_[np.concatenate([np.r_[cv2.Rodrigues(poses[c][0])[0].ravel(), poses[c][1]] for c in cam_ids]),
-               np.concatenate([Xs[p] for p in pt_ids])]
     nc = len(cam_ids)
+    ni = {"": 0, "f": 1, "fk": 3, "fk1": 2}[intrinsics]
+    # intrinsics as (log f, k1, k2): log f keeps the focal length positive and its steps relative
+    x0 = np.r_[np.concatenate([np.r_[cv2.Rodrigues(poses[c][0])[0].ravel(), poses[c][1]] for c in cam_ids]),
+               np.concatenate([Xs[p] for p in pt_ids]),
+               np.concatenate([np.r_[np.log(K[c][0, 0]), dist[c]][:ni] for c in cam_ids])]
+    npnt = len(pt_ids)
+    d_fixed = np.stack([dist[c] for c in cam_ids])
 
     def rodrigues(r):
         th = np.linalg.norm(r, axis=1, keepdims=True)
@@ -1315,12 +1820,25 @@ def _bundle_adjust(poses, Xs, tracks, kps, K, f_scale: float = 2.0, max_nfev: in
         kx = kx - kx.transpose(0, 2, 1)
         return np.eye(3) + s * kx + (1 - c) * kx @ kx
 
+    def unpack(p):
+        intr = p[6 * nc + 3 * npnt:].reshape(nc, ni)
+        f = np.exp(intr[:, 0]) if ni else Kc[:, 0, 0]
+        d = np.c_[intr[:, 1:ni], np.zeros((nc, 3 - ni))] if ni >= 2 else d_fixed
+        return f, d
+
     def residual(p):
         cams = p[:6 * nc].reshape(nc, 6)
-        pts = p[6 * nc:].reshape(-1, 3)
+        pts = p[6 * nc:6 * nc + 3 * npnt].reshape(-1, 3)
+        f, d = unpack(p)
         Rm = rodrigues(cams[:, :3])
         Xc = np.einsum("nij,nj->ni", Rm[oc], pts[op]) + cams[oc, 3:]
-        uv = np.einsum("nij,nj->ni", Kc[oc][:, :2, :2], Xc[:, :2] / Xc[:, 2:]) + Kc[oc][:, :2, 2]
+        xn = Xc[:, :2] / Xc[:, 2:]
+        r2 = np.sum(xn * xn, 1, keepdims=True)
+        xd = xn * (1 + d[oc, :1] * r2 + d[oc, 1:] * r2 * r2)
+        if ni:
+            uv = f[oc, None] * xd + Kc[oc][:, :2, 2]
+        else:
+            uv = np.einsum("nij,nj->ni", Kc[oc][:, :2, :2], xd) + Kc[oc][:, :2, 2]
         return (uv - ox).ravel()
 
     A = lil_matrix((2 * len(obs), len(x0)), dtype=int)
@@ -1331,12 +1849,21 @@ def _bundle_adjust(poses, Xs, tracks, kps, K, f_scale: float = 2.0, max_nfev: in
     for d in range(3):
         A[2 * rows, 6 * nc + 3 * op + d] = 1
         A[2 * rows + 1, 6 * nc + 3 * op + d] = 1
+    for d in range(ni):
+        A[2 * rows, 6 * nc + 3 * npnt + ni * oc + d] = 1
+        A[2 * rows + 1, 6 * nc + 3 * npnt + ni * oc + d] = 1
     sol = least_squares(residual, x0, jac_sparsity=A, loss="linear", x_scale="jac", max_nfev=max_nfev,
-                        method="trf")
+                        method="trf", tr_options={"maxiter": 100})
     cams = sol.x[:6 * nc].reshape(nc, 6)
-    pts = sol.x[6 * nc:].reshape(-1, 3)
+    pts = sol.x[6 * nc:6 * nc + 3 * npnt].reshape(-1, 3)
     new_poses = {c: (cv2.Rodrigues(cams[a, :3])[0], cams[a, 3:].copy()) for a, c in enumerate(cam_ids)}
-    return new_poses, {p: pts[a] for a, p in enumerate(pt_ids)}
+    new_K, new_d = [k.copy() for k in K], [d.copy() for d in dist]
+    if ni:
+        f, d = unpack(sol.x)
+        for a, c in enumerate(cam_ids):
+            new_K[c][0, 0] = new_K[c][1, 1] = f[a]
+            new_d[c] = d[a].copy()
+    return new_poses, {p: pts[a] for a, p in enumerate(pt_ids)}, new_K, new_d
 
 
 # ============================================================ COLMAP text models ====
@@ -1350,8 +1877,8 @@ def _quat_wxyz(R: np.ndarray) -> np.ndarray:
 
 def gt_write_colmap_text(recon: dict, folder) -> None:
     """The grader's writer (and the stand-in for `write_colmap_text`): cameras.txt (one camera per
-    image: PINHOLE, or RADIAL when k ≠ 0), images.txt (pose as qw qx qy qz tx ty tz, then every
-    keypoint as x y POINT3D_ID, with COLMAP's pixel corner at (0, 0): +0.5), points3D.txt (tracks as
+    image: PINHOLE; SIMPLE_RADIAL when only k1 ≠ 0; RADIAL when k2 ≠ 0), images.txt (pose as
+    qw qx qy qz tx ty tz, then every keypoint as x y POINT3D_ID, with COLMAP's pixel corner at (0, 0): +0.5), points3D.txt (tracks as
     IMAGE_ID POINT2D_IDX). Ids are our indices + 1. Needs recon["keypoints"]."""
     from pathlib import Path
     folder = Path(folder)
@@ -1367,9 +1894,12 @@ def gt_write_colmap_text(recon: dict, folder) -> None:
     for i, c in sorted(cams.items()):
         K, k = np.asarray(c["K"], float), np.asarray(c.get("k", np.zeros(2)), float)
         w, h = sizes[i] if sizes is not None else (int(2 * K[0, 2] + 1), int(2 * K[1, 2] + 1))
-        if np.any(k != 0):
+        if k[1] != 0:
             par = [K[0, 0], K[0, 2] + 0.5, K[1, 2] + 0.5, k[0], k[1]]
             cam_lines.append(f"{i + 1} RADIAL {w} {h} " + " ".join(repr(float(v)) for v in par))
+        elif k[0] != 0:
+            par = [K[0, 0], K[0, 2] + 0.5, K[1, 2] + 0.5, k[0]]
+            cam_lines.append(f"{i + 1} SIMPLE_RADIAL {w} {h} " + " ".join(repr(float(v)) for v in par))
         else:
             par = [K[0, 0], K[1, 1], K[0, 2] + 0.5, K[1, 2] + 0.5]
             cam_lines.append(f"{i + 1} PINHOLE {w} {h} " + " ".join(repr(float(v)) for v in par))
@@ -1397,6 +1927,9 @@ def _colmap_K(model: str, params) -> tuple[np.ndarray, np.ndarray]:
     elif model in ("PINHOLE", "OPENCV"):
         fx, fy, cx, cy = p[:4]
         k = np.array(p[4:6]) if len(p) >= 6 else np.zeros(2)
+        if model == "OPENCV" and any(p[6:8]):
+            raise ValueError(f"OPENCV camera with tangential distortion p1, p2 = {p[6:8]}: a camera here holds only "
+                             f"the radial k1, k2 (convert the model with COLMAP's image_undistorter first)")
     else:
         raise ValueError(f"camera model {model} not handled")
     return np.array([[fx, 0, cx - 0.5], [0, fy, cy - 0.5], [0, 0, 1.0]]), k
@@ -1425,8 +1958,8 @@ def colmap_read_text(folder) -> dict:
 
 def colmap_recon(rng, n_cams: int = 4, n_points: int = 80) -> dict:
     """A reconstruction dict with everything a COLMAP text model holds: cameras with different K (one
-    with fx ≠ fy, two with radial k1, k2), a missing (unregistered) image, keypoints (with unobserved
-    ones), names and sizes."""
+    with fx ≠ fy, one with radial k1, k2 (RADIAL), one with k1 only (SIMPLE_RADIAL)), a missing
+    (unregistered) image, keypoints (with unobserved ones), names and sizes."""
     s = sfm_scene(rng, n_cams=n_cams + 1, n_points=n_points)
     t, p = s["truth"], s["problem"]
     cams = {}
@@ -1436,8 +1969,8 @@ def colmap_recon(rng, n_cams: int = 4, n_points: int = 80) -> dict:
         K = t["Ks"][i].copy()
         k = np.zeros(2)
         if i >= 3:
-            K[1, 1] = K[0, 0]                                    # RADIAL has one focal length
-            k = rng.uniform(-0.1, 0.1, 2)
+            K[1, 1] = K[0, 0]                                    # RADIAL and SIMPLE_RADIAL have one focal length
+            k = rng.uniform(-0.1, 0.1, 2) if i == 3 else np.array([rng.uniform(-0.1, 0.1), 0.0])
         cams[i] = {"R": t["Rs"][i], "t": t["ts"][i], "K": K, "k": k}
     tracks, X = [], []
     for q in range(n_points):
@@ -1521,7 +2054,8 @@ def _io_cases(rng, call_for) -> list[Case]:
     # O(0.1)) and a shifted id (a count).
     return [Case("poses: largest |ΔR|, |Δt| entry", (), recon, _io_pose_error, 1e-6, "", convert=_convert_recon_io,
                  call=call, info=info),
-            Case("intrinsics: pixels of K, k1, k2 (half-pixel convention)", (), recon, _io_pixel_error, 1e-6, "px",
+            Case("intrinsics: pixels of K, k1, k2 (PINHOLE, RADIAL, SIMPLE_RADIAL; half-pixel convention)", (),
+                 recon, _io_pixel_error, 1e-6, "px",
                  convert=_convert_recon_io, call=call, info=info),
             Case("points and tracks (IMAGE_ID = index + 1, POINT2D_IDX = keypoint)", (), recon, _io_point_error, 0,
                  "points wrong", convert=_convert_recon_io, call=call, info=info),
@@ -1967,15 +2501,45 @@ def _close_points(a, b, rel: float = 1e-6) -> bool:
     return a.shape == b.shape and bool(np.all(np.linalg.norm(a - b, axis=1) <= rel * (1 + np.linalg.norm(b, axis=1))))
 
 
+def _parallel_rows(out, exp) -> bool:
+    """Each returned point lies on the line through the origin and the true point, at another distance: the
+    first three coordinates of a homogeneous solution that was never divided by its 4th."""
+    X = exp["X"]
+    cos = np.sum(out * X, 1) / (np.linalg.norm(out, axis=1) * np.linalg.norm(X, axis=1) + 1e-300)
+    return bool(np.all(np.abs(cos) > 1 - 1e-9) and np.median(np.abs(np.linalg.norm(out, axis=1) /
+                                                                     np.linalg.norm(X, axis=1) - 1)) > 1e-3)
+
+
 TRI_DLT_HINTS = [
+    # the unnormalised DLT's own output, or its symptom on the shared-residual row: one image fitted exactly
+    # (a max/min RMS ratio above 1e4; normalised DLTs stay below ~5) while the points stay near their matches
+    # (< 20 px RMS: the other image carries the 1 px noise of both; a wrong row is off by hundreds of px)
     Hint("no normalisation: with pixel coordinates in the 1000s and P's of very different scale, the rows of A differ "
          "by orders of magnitude and one camera is simply ignored. Normalise each image's points (T x) and its P (T P, "
          "then unit norm) before the SVD.",
-         lambda c, out: _close_points(out, _unnormalised_dlt(c), 1e-6) or "shared" in c.name),
-    Hint("the triangulated points are off on exact data: divide the homogeneous solution by its 4th coordinate "
-         "(X = Xh[:3] / Xh[3]), and use rows x·P3 − P1, y·P3 − P2 for each camera.",
-         lambda c, out: "no noise" in c.name),
+         lambda c, out: _close_points(out, _unnormalised_dlt(c), 1e-6) or
+         ("shared" in c.name and _residual_split(out, c.expected) > 1e4 and _reproj_rms(out, c.expected) < 20)),
+    Hint("each point is in the right direction from the origin but at the wrong distance: divide the homogeneous "
+         "solution by its 4th coordinate (X = Xh[:3] / Xh[3]).",
+         lambda c, out: "no noise" in c.name and _parallel_rows(out, c.expected)),
 ]
+
+
+def _midpoint_camera_frame_rays(c):
+    """The midpoint with each ray's direction K⁻¹x left in its camera's frame (not rotated into the world)."""
+    from scipy.linalg import rq
+    P1, P2, x1, x2 = c.args
+
+    def ray(P, x):
+        Kq, _ = rq(P[:, :3])
+        return -np.linalg.solve(P[:, :3], P[:, 3]), np.linalg.solve(Kq * np.sign(np.diag(Kq)), _h(x).T).T
+    (C1, d1), (C2, d2) = ray(P1, x1), ray(P2, x2)
+    b = C2 - C1
+    a11, a12, a22 = np.sum(d1 * d1, 1), -np.sum(d1 * d2, 1), np.sum(d2 * d2, 1)
+    r1, r2 = d1 @ b, -(d2 @ b)
+    det = a11 * a22 - a12 * a12
+    s1, s2 = (a22 * r1 - a12 * r2) / det, (a11 * r2 - a12 * r1) / det
+    return 0.5 * (C1 + s1[:, None] * d1 + C2 + s2[:, None] * d2)
 
 
 def _on_ray1(c):
@@ -1993,26 +2557,89 @@ MIDPOINT_HINTS = [
          "in the ray parameters) and average them.", lambda c, out: _close_points(out, cv_triangulate(*c.args), 1e-5)),
     Hint("that point lies on ray 1: the midpoint is halfway between the closest points of *both* rays.",
          lambda c, out: _close_points(out, _on_ray1(c), 1e-6)),
+    Hint("the rays are left in the camera frames: K⁻¹x is a direction in camera coordinates; rotate it into the "
+         "world (d = Rᵀ K⁻¹ x, or d = M⁻¹ x for P = [M | p]) before intersecting the rays.",
+         lambda c, out: _close_points(out, _midpoint_camera_frame_rays(c), 1e-6)),
 ]
+
+def _angle_at_camera(c):
+    C1, C2, X = c.args
+    a, b = X - C1, C2 - C1
+    return np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), a @ b))
+
 
 ANGLE_HINTS = [
     like(lambda c: np.radians(gt_triangulation_angles(*c.args)), "radians: this function returns degrees."),
+    like(_angle_at_camera, "that is the angle at camera 1 (between the ray to X and the baseline): the "
+                           "triangulation angle is at X, between the rays from X to C1 and from X to C2."),
     like(lambda c: 180.0 - gt_triangulation_angles(*c.args),
          "the supplementary angle: use the rays from X to C1 and from X to C2 (both pointing away from X)."),
 ]
 
 
+def _truth_pose(c) -> tuple[np.ndarray, np.ndarray]:
+    e = c.expected
+    return (e["R"], e["t"]) if isinstance(e, dict) else e
+
+
+def _fixed_by(fix: Callable) -> Callable:
+    """A hint condition: the output passes this case once `fix(R, t)` undoes a suspected mistake."""
+    def when(c, out):
+        return c.metric(fix(*out[:2]), c.expected) <= c.tol
+    return when
+
+
+def _t_parallel(c, out) -> bool:
+    """R right (1e-3°) and t along ±the true t with another length: the null vector's scale or sign kept."""
+    (R, t), (R0, t0) = out[:2], _truth_pose(c)
+    cos = t @ t0 / (np.linalg.norm(t) * np.linalg.norm(t0) + 1e-300)
+    return (rotation_angle_deg(R, R0) < 1e-3 and abs(cos) > 1 - 1e-9 and
+            (cos < 0 or abs(np.linalg.norm(t) / np.linalg.norm(t0) - 1) > 1e-4))
+
+
+def _R_is_KR(c, out) -> bool:
+    """On exact data a DLT on pixels gives P ∝ K [R | t]: its 'rotation' is the rotation nearest K R."""
+    return rotation_angle_deg(out[0], project_to_SO3(c.args[2] @ _truth_pose(c)[0])) < 1e-2
+
+
+CENTRE_FOR_T = ("t is the camera centre: the pose is x_c = R X + t, so t = −R C (C = −Rᵀ t), not C.",
+                _fixed_by(lambda R, t: (R, -R @ t)))
+
 PNP_DLT_HINTS = [
-    Hint("exact points but a wrong pose: the null vector gives P = λ [R | t] with unknown scale and sign — divide by "
-         "the mean singular value of the 3x3 block, and flip the sign if the points end up behind the camera.",
-         lambda c, o: "no noise" in c.name),
+    Hint(*CENTRE_FOR_T),
+    Hint("the rotation is the nearest rotation to K R: the DLT ran on pixels, so the 3x3 block of P is K R. Work on "
+         "rays K⁻¹x (normalised image coordinates).", lambda c, o: "no noise" in c.name and _R_is_KR(c, o)),
+    Hint("R is right and t points the right way but has the wrong length or sign: the null vector gives "
+         "P = λ [R | t] with unknown scale and sign — divide by the mean singular value of the 3x3 block, and flip "
+         "the sign if the points end up behind the camera.", lambda c, o: _t_parallel(c, o)),
+    # 2 x the textbook DLT's held-out error with R within 5° of the truth: a roughly right pose that a
+    # normalisation would sharpen (pixels instead of rays, or unnormalised 3D points, cost 2-100x)
     Hint("much less accurate than a normalised DLT: work on rays K⁻¹x (not pixels), translate the 3D points to their "
          "centroid and scale them to mean distance √3 before the SVD, then undo both.",
-         lambda c, o: "noise" in c.name and "origin" not in c.name and c.metric(o, c.expected) > 2 * c.info["ref"]),
+         lambda c, o: "noise" in c.name and "origin" not in c.name and c.metric(o, c.expected) > 2 * c.info["ref"]
+         and rotation_angle_deg(o[0], c.expected["R"]) < 5),
+    # 2 km from the origin with R within 0.5° of the truth: the rotation is fine, t carries the error
     Hint("right near the origin, wrong 2 km away: t read off P's 4th column carries the rotation's residual error "
          "times the distance to the origin. Solve t for the final R (least squares on centred points), or take "
          "the centre C from the normalised frame and set t = −R C.",
-         lambda c, o: "origin" in c.name),
+         lambda c, o: "origin" in c.name and rotation_angle_deg(o[0], c.expected["R"]) < 0.5),
+]
+
+
+def _fits_K_identity(c, out) -> bool:
+    """The pose explains the pixels better through K = I than through K: pixels were used as rays."""
+    X, x, K = c.args
+    e = [np.median(np.linalg.norm(project(X, k, *out[:2])[0] - x, axis=1)) for k in (np.eye(3), K)]
+    return bool(e[0] < e[1])
+
+
+EPNP_HINTS = [
+    Hint(*CENTRE_FOR_T),
+    Hint("that is the camera-to-world pose (its inverse passes): return world-to-camera R, t with x_c = R X + t — "
+         "the Kabsch step aligns world points onto camera-frame points, not the other way round.",
+         _fixed_by(lambda R, t: (R.T, -R.T @ t))),
+    Hint("the pose reprojects the pixels better with K = I than with K: the image points were used as rays. "
+         "Use K⁻¹x (normalised coordinates) in the M x = 0 system.", _fits_K_identity),
 ]
 
 
@@ -2022,12 +2649,27 @@ P3P_HINTS = [
          lambda c, out: max(_three_point_px(p, c.expected["X"], c.expected["x"], c.expected["K"]) for p in out) > 1e-2),
 ]
 
+def _squared_mask(c, out) -> bool:
+    """The returned inliers are the points with r² < threshold under the returned pose (r in px), not r < threshold."""
+    X, x, K, th = c.args[:4]
+    R, t, inl = out
+    uv, z = project(X, K, R, t)
+    r = np.linalg.norm(uv - x, axis=1)
+    sq, lin = (z > 0) & (r ** 2 < th), (z > 0) & (r < th)
+    return bool(np.sum(inl != sq) < np.sum(inl != lin) and np.sum(inl != sq) <= 0.01 * len(inl))
+
+
 RANSAC_HINTS = [
     Hint("a fixed number of iterations: with 87 % wrong matches a P3P sample is clean with probability 0.13³ ≈ 0.002, "
          "so k = log(1 − p) / log(1 − w³) ≈ 2,100 samples are needed. Update k from the best inlier ratio so far.",
          lambda c, out: c.name.startswith("600")),
+    Hint("the inliers are the points with r² < threshold: a 4 px threshold then keeps only r < 2 px and drops ~14 % "
+         "of the true matches (1 px noise). Compare the reprojection distance itself with the threshold.",
+         lambda c, out: c.args != () and _squared_mask(c, out)),
+    # the inlier mask is as good as pycolmap's (within the F1 row's 0.03) but the pose is not: no refinement
     Hint("accurate inliers but an inaccurate pose: refine the pose on all inliers (Gauss-Newton/LM on the "
-         "reprojection error) after RANSAC.", lambda c, out: "held-out" in c.name),
+         "reprojection error) after RANSAC.",
+         lambda c, out: "held-out" in c.name and 1 - _f1(out[2], c.expected["is_outlier"]) <= c.info["f1_tol"]),
 ]
 
 
@@ -2087,6 +2729,7 @@ ROTAVG_HINTS = [
 ]
 
 SFM_HINTS = [
+    *REAL_SFM_HINTS,          # the Sacré-Cœur rows (defined with real_sfm_cases)
     Hint("far points made it into the model: triangulate a track only when two of its viewing rays are at least "
          "1.5° apart (measure the angle between the rays, not at a noisy triangulated point), and filter again "
          "after bundle adjustment.", lambda c, out: "rays" in c.name),
@@ -2100,16 +2743,30 @@ IO_HINTS = [
     Hint("half a pixel off: COLMAP puts the corner of the top-left pixel at (0, 0), we put its centre there — add "
          "0.5 to principal points and keypoints when writing, subtract it when reading.",
          lambda c, out: "px" in c.unit and 0.4 < c.metric(out, c.expected) < 0.6),
+    Hint("every pose is inverted: COLMAP stores world-to-camera (R, t), as we do — write and read them as they are, "
+         "not the camera-to-world pose (Rᵀ, −Rᵀt).",
+         lambda c, out: c.name.startswith("poses") and _io_pose_error(
+             dict(out, cameras={i: dict(k, R=k["R"].T, t=-k["R"].T @ k["t"]) for i, k in out["cameras"].items()}),
+             c.expected) <= c.tol),
     Hint("the rotation is off: COLMAP stores the world-to-camera quaternion as QW QX QY QZ (scalar first); scipy's "
-         "as_quat() is (x, y, z, w).", lambda c, out: c.name.startswith("poses") and c.metric(out, c.expected) > 1e-3),
+         "as_quat() is (x, y, z, w).", lambda c, out: c.name.startswith("poses") and c.metric(out, c.expected) > 1e-3
+         and max(rotation_angle_deg(k["R"], c.expected["cameras"][i]["R"]) for i, k in out["cameras"].items()) > 1),
     Hint("ids: IMAGE_ID and CAMERA_ID are our index + 1, POINT2D_IDX is the position in the image's POINTS2D line (the "
          "keypoint index).", lambda c, out: c.name.startswith("points")),
 ]
 
+def _unions_of_components(c, out) -> bool:
+    """Fewer components than the truth, each a union of true components: weak pairs were kept as edges."""
+    want = [set(x) for x in c.expected["components"]]
+    return len(out) < len(want) and all(any(w <= set(o) for o in out) for w in want)
+
+
 COMPONENT_HINTS = [
     Hint("a pair with fewer than `min_inliers` verified matches is not a connection (repetitive windows give a "
          "handful of consistent wrong matches): drop those edges before taking connected components.",
-         lambda c, out: len(out) < len(c.expected["components"])),
+         _unions_of_components),
+    Hint("only the largest component: return every component of two or more images (each is reconstructed "
+         "separately), largest first.", lambda c, out: len(out) == 1 and out == c.expected["components"][:1]),
     Hint("order the components largest first: the largest is reconstructed first.",
          lambda c, out: {tuple(x) for x in out} == {tuple(x) for x in c.expected["components"]}),
 ]
@@ -2122,13 +2779,20 @@ REGISTRATION_HINTS = [
          "poses. Keep min_inliers ≥ 15-30.", lambda c, out: out["min_inliers"] < 12 or out["thresh_px"] > 20),
 ]
 
+def _global_similarity_of_chain(c, out) -> bool:
+    """The output is one similarity s R C + t of the drifting chain (Umeyama fit; residual < 1 mm)."""
+    C = broken_trajectory(c.args[0])
+    s, R, t = gt_umeyama(C, out)
+    return float(np.max(np.linalg.norm(s * C @ R.T + t - out, axis=1))) < 1e-3
+
+
 DRIFT_HINTS = [
     Hint("that is the drifting chain: nothing ties the scale to the GPS.",
          lambda c, out: _close_points(out, broken_trajectory(c.args[0]), 1e-3)),
     Hint("that is the raw GPS (3 m noise): combine it with the chain, whose directions are accurate and whose scale "
          "only drifts slowly.", lambda c, out: _close_points(out, c.args[0]["gps"], 1e-3)),
     Hint("one global similarity cannot undo a scale that changes along the path: let the scale vary (per step, "
-         "smoothly) and solve for it jointly with the GPS.", lambda c, out: True),
+         "smoothly) and solve for it jointly with the GPS.", _global_similarity_of_chain),
 ]
 
 INITIAL_PAIR_HINTS = [
@@ -2143,12 +2807,25 @@ INITIAL_PAIR_HINTS = [
 ]
 
 
+def _umeyama_no_centroid(c):
+    X, Y = c.args
+    U, S, Vt = np.linalg.svd(Y.T @ X)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt)) or 1.0])
+    R = U @ D @ Vt
+    s = np.trace(np.diag(S) @ D) / np.sum(X ** 2)
+    return dict(c.expected, oracle=(s, R, Y.mean(0) - s * R @ X.mean(0)))
+
+
 UMEYAMA_HINTS = [
     Hint("R is transposed: with Σ = Σ (y − ȳ)(x − x̄)ᵀ = U S Vᵀ the rotation is U D Vᵀ (D fixes det = +1).",
          lambda c, o: rotation_angle_deg(o[1].T, c.expected["oracle"][1]) < 0.1),
     Hint("the scale: s = tr(D S) / σx² (Umeyama's eq. 42); the ratio of the spreads σy / σx is only right for "
          "noise-free data.", lambda c, o: rotation_angle_deg(o[1], c.expected["oracle"][1]) < 0.1 and
          abs(o[0] / c.expected["oracle"][0] - 1) > 1e-6),
+    # within 1e-3 of the cloud's size of what the SVD of the uncentred cross-covariance Σ y xᵀ gives
+    Hint("the centroids: subtract x̄ and ȳ before the cross-covariance and the spread (otherwise the translation "
+         "leaks into R and s); t = ȳ − s R x̄ comes last.",
+         lambda c, o: c.metric(o, _umeyama_no_centroid(c)) <= 1e5 * c.tol),
 ]
 
 
@@ -2192,12 +2869,16 @@ HOURS_RETRIEVAL = 10_000 * 50 * 0.03 / 3600
 register(
     # ---------------------------------------------------------------- CONCEPT
     numeric_question("4.1", "Depth uncertainty from the baseline", "sigma_z", "concept",
-       [sigma_z(5, 800, 0.5, 0.5), sigma_z(5, 800, 0.5, 1.0)], 0.01, "rel.", (2,), relative,
+       # relative error 3.5 %: the seed rounds to the millimetre (0.031, 0.016 m), and half a millimetre is 3.2 %
+       # of the smaller answer (0.016 is 2.4 % off 0.015625); the slips below are off by a factor of 2 or more.
+       [sigma_z(5, 800, 0.5, 0.5), sigma_z(5, 800, 0.5, 1.0)], 0.035, "rel.", (2,), relative,
        "σZ = Z² σ / (f B) = 25 · 0.5 / (800 · 0.5) = 0.031 m (3.1 cm); with B = 1 m, 1.6 cm. Depth error grows with "
        "Z² and falls with 1/B: halve the distance and it drops 4x; double the baseline and it halves.",
        [value_hint([5 * 0.5 / (800 * 0.5), 5 * 0.5 / 800], "Z is squared: σZ = Z² σ / (f B)."),
         value_hint([sigma_z(5, 800, 0.5, 0.5), sigma_z(5, 800, 0.5, 0.25)],
-                    "doubling B halves σZ (B is in the denominator).")]),
+                    "doubling B halves σZ (B is in the denominator)."),
+        value_hint([100 * sigma_z(5, 800, 0.5, 0.5), 100 * sigma_z(5, 800, 0.5, 1.0)],
+                   "that is in centimetres; the question asks for metres.")]),
     numeric_question("4.2", "COLMAP's registration thresholds", "colmap_thresholds", "concept", [8.0, 30.0, 1.5, 4.0], 1e-6, "",
        (4,), max_abs,
        "P3P inside RANSAC with an 8 px inlier threshold; register if > 30 inliers; triangulate only with a "
@@ -2221,7 +2902,7 @@ register(
              arg_names=("X", "x", "K")),
     Exercise("4.8", "P3P: every valid solution", "p3p", "code", 4, cases_p3p, P3P_HINTS, fallback=cv_p3p,
              arg_names=("X", "x", "K")),
-    Exercise("4.9", "EPnP", "epnp", "code", 3, cases_epnp, fallback=cv_epnp, arg_names=("X", "x", "K")),
+    Exercise("4.9", "EPnP", "epnp", "code", 3, cases_epnp, EPNP_HINTS, fallback=cv_epnp, arg_names=("X", "x", "K")),
     Exercise("4.10", "PnP inside RANSAC", "pnp_ransac", "code", 4, cases_pnp_ransac, RANSAC_HINTS,
              fallback=cv_pnp_ransac, timeout=60.0, arg_names=("X", "x", "K", "thresh_px", "seed")),
     Exercise("4.11", "Tracks by union-find", "build_tracks", "code", 3, cases_build_tracks, TRACK_HINTS,

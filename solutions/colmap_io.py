@@ -8,10 +8,10 @@ COLMAP's:
   (0.5, 0.5); we put the centre at (0, 0). Principal points and keypoints get +0.5 on the way out
   and -0.5 on the way in;
 - cameras: one per registered image, RADIAL (f, cx, cy, k1, k2) — x_d = x_n (1 + k1 r^2 + k2 r^4),
-  our radial model exactly — or SIMPLE_PINHOLE (f, cx, cy) when k1 = k2 = 0 and fx = fy, or
-  PINHOLE (fx, fy, cx, cy) for a known K with fx != fy (skew is not representable and dropped).
+  our radial model exactly — SIMPLE_RADIAL (f, cx, cy, k1) when k2 = 0 — or SIMPLE_PINHOLE
+  (f, cx, cy) when k1 = k2 = 0 and fx = fy, or PINHOLE (fx, fy, cx, cy) for a known K with fx != fy (skew is not representable and dropped).
 
-The reconstruction dict is the one `incremental_sfm` returns (docs/ch04_contract.md), plus
+The reconstruction dict is the one `incremental_sfm` returns (the stub of Exercise 4.14), plus
 optional "keypoints" (list of (N_i, 2) pixels, all 2D points of each image, written to images.txt so
 that track indices stay valid), "names" (image file names), "image_sizes" ((w, h) per image) and
 "colors" ((P, 3) uint8). Image and camera ids in the files are our image index + 1; point ids are
@@ -38,6 +38,8 @@ def _camera_line(cam_id: int, K: np.ndarray, k: np.ndarray, size) -> str:
     cx, cy = float(K[0, 2]) + 0.5, float(K[1, 2]) + 0.5   # our pixel centres -> COLMAP's pixel corners
     if np.any(k != 0):
         f = float(0.5 * (K[0, 0] + K[1, 1]))
+        if k[1] == 0:
+            return f"{cam_id} SIMPLE_RADIAL {w} {h} {f!r} {cx!r} {cy!r} {float(k[0])!r}"
         return f"{cam_id} RADIAL {w} {h} {f!r} {cx!r} {cy!r} {float(k[0])!r} {float(k[1])!r}"
     if np.isclose(K[0, 0], K[1, 1], rtol=1e-12):
         return f"{cam_id} SIMPLE_PINHOLE {w} {h} {float(K[0, 0])!r} {cx!r} {cy!r}"
@@ -125,7 +127,10 @@ def _K_and_k(model: str, params: list[float]) -> tuple[np.ndarray, np.ndarray]:
     elif model in ("PINHOLE", "OPENCV"):
         fx, fy, cx, cy = params[:4]
         if model == "OPENCV":
-            k[:] = params[4:6]                    # p1, p2 dropped: not in our radial model
+            k[:] = params[4:6]
+            if any(params[6:8]):                  # p1, p2: not representable in our radial model
+                raise ValueError(f"OPENCV camera with tangential distortion p1, p2 = {params[6:8]}: only k1, k2 "
+                                 f"are supported")
     else:
         raise ValueError(f"camera model {model} not supported")
     K = np.array([[fx, 0.0, cx - 0.5], [0.0, fy, cy - 0.5], [0.0, 0.0, 1.0]])

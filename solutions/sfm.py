@@ -3,7 +3,7 @@
 Conventions (docs/CONVENTIONS.md): world-to-camera poses `X_c = R X + t`, camera centre
 `C = -R^T t`; pixels (x, y) with the centre of the top-left pixel at (0, 0); point arrays are rows
 (`X: (N, 3)`, `x: (N, 2)`), homogeneous versions carry an `h`. Projection matrices `P = K [R | t]`
-are (3, 4). The interface is docs/ch04_contract.md.
+are (3, 4). The interface is the stubs of notebooks/04_structure_from_motion.ipynb.
 
 Contents, in the order of the notebook:
   triangulate_dlt / triangulate_midpoint / triangulation_angles        (HZ 12.2, 12.5)

@@ -1,7 +1,7 @@
 """Chapter 4 — an incremental Structure-from-Motion pipeline in the manner of COLMAP, from scratch.
 
-`incremental_sfm(problem)` takes keypoints and pairwise matches (docs/ch04_contract.md) and returns
-registered cameras, 3D points and their tracks. `reconstruct_folder(folder)` runs the whole thing on
+`incremental_sfm(problem)` takes keypoints and pairwise matches (the format of exercise 4.14 in
+notebooks/04_structure_from_motion.ipynb) and returns registered cameras, 3D points and their tracks. `reconstruct_folder(folder)` runs the whole thing on
 photos: Chapter 3's SIFT-lite features, mutual-nearest-neighbour matching with the ratio test,
 Chapter 2's RANSAC for geometric verification, then `incremental_sfm` with unknown focal lengths.
 
@@ -491,7 +491,7 @@ def _refine_all(m: _Model, max_iter: int, refine: str) -> None:
 
 def incremental_sfm(problem: dict, seed: int = 0, local_window: int = 6, global_every: int = 3,
                     verbose: bool = False) -> dict:
-    """Incremental SfM (see the module docstring). problem (docs/ch04_contract.md):
+    """Incremental SfM (see the module docstring). problem (the 4.14 stub in notebooks/04_structure_from_motion.ipynb):
     keypoints: list of (N_i, 2) pixels; matches: {(i, j): (M, 2) int keypoint pairs}, i < j, raw or
     verified (they are verified again unless problem["verified"] is True); image_sizes: list of
     (width, height); K: list of (3, 3), or None for unknown intrinsics (f = 1.2 max(w, h), f, k1,

@@ -131,6 +131,8 @@ def test_seed_worked_numbers():
     # The seed's worked example: Z = 5 m, f = 800 px, σ = 0.5 px, B = 0.5 m → 3.1 cm; B = 1 m → 1.6 cm.
     assert abs(ch4.sigma_z(5, 800, 0.5, 0.5) - 0.03125) < 1e-12
     assert round(ch4.sigma_z(5, 800, 0.5, 1.0) * 100, 1) == 1.6
+    assert grade(EXERCISES["4.1"], [0.031, 0.016], seed=0).passed          # the seed's rounded answer
+    assert not grade(EXERCISES["4.1"], [0.03, 0.02], seed=0).passed         # rounded to the centimetre
     assert grade(EXERCISES["4.3"], [4950, 49_995_000], seed=0).passed
     assert grade(EXERCISES["4.23"], ["Incremental", "GLOBAL", "global", "incremental"], seed=0).passed
 
@@ -185,6 +187,17 @@ def test_build_tracks_oracle_drops_merged_points():
     assert ch4.gt_build_tracks(m) == [{0: 0, 1: 3, 2: 7, 3: 1}]
 
 
+def test_colmap_camera_models():
+    # the read/write cases hold PINHOLE, RADIAL and SIMPLE_RADIAL cameras; OPENCV's p1, p2 are refused, not dropped
+    recon = ch4.colmap_recon(np.random.default_rng(0))
+    ks = [c["k"] for c in recon["cameras"].values()]
+    assert any(k[0] != 0 and k[1] == 0 for k in ks) and any(k[1] != 0 for k in ks) and any(not k.any() for k in ks)
+    K, k = ch4._colmap_K("OPENCV", [700.0, 710.0, 320.5, 240.5, -0.1, 0.02, 0.0, 0.0])
+    assert np.allclose(k, [-0.1, 0.02]) and K[0, 2] == 320.0
+    with pytest.raises(ValueError, match="p1, p2"):
+        ch4._colmap_K("OPENCV", [700.0, 710.0, 320.5, 240.5, -0.1, 0.02, 1e-3, 0.0])
+
+
 def test_debug_symptoms_are_real():
     # Each DEBUG case shows its symptom with the colleague's code/settings, on the case learners get.
     case, truth = ch4.debug_components(np.random.default_rng(0))
@@ -220,3 +233,53 @@ def test_frontier_reference_recovers_the_pose_from_pointmaps():
     s, R, t, inliers = sfm_frontier.pose_from_pointmaps(p["X1"], p["X2"])
     assert rotation_angle_deg(R, p["R"]) < 1.0 and abs(s / p["s"] - 1) < 0.02
     assert np.mean(inliers[~p["bad"]]) > 0.9 and np.mean(inliers[p["bad"]]) < 0.2
+
+
+# ----------------------------------------------------------------- 4.14 with K unknown and on real photos
+
+def _need_sacre_coeur():
+    from graders import datasets
+    try:
+        datasets.path("sacre_coeur")
+    except datasets.DatasetMissing as exc:
+        pytest.skip(str(exc))
+
+
+def test_real_photo_rows_only_with_the_dataset(monkeypatch, tmp_path):
+    monkeypatch.setenv("COURSE_DATA", str(tmp_path / "no_data"))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "no_cache"))
+    names = [c.name for c in EXERCISES["4.14"].cases(np.random.default_rng(0))]
+    assert not any(n.startswith("Sacré-Cœur") for n in names)
+    assert sum(n.startswith("K unknown") for n in names) == 3
+
+
+def test_real_photo_oracle_is_pycolmap_on_the_same_matches():
+    _need_sacre_coeur()
+    s = ch4.sacre_coeur_problem()["problem"]
+    assert len(s["keypoints"]) == 10 and s["K"] is None and len(s["image_sizes"]) == 10
+    assert max(max(wh) for wh in s["image_sizes"]) == ch4.SACRE_COEUR_MAX_SIDE
+    assert len(s["matches"]) >= 20 and all(len(m) >= 30 for m in s["matches"].values())
+    col = ch4.colmap_sacre_coeur()
+    assert len(col["cameras"]) >= 7 and col["reproj"] < 1.0
+    # the metric is gauge-free: pycolmap against itself in another world frame is exact
+    Q = ch4.scene.random_rotation(np.random.default_rng(0))
+    moved = {i: {"R": c["R"] @ Q.T} for i, c in col["cameras"].items()}
+    assert ch4.relative_rotation_errors(moved, col["cameras"]).max() < 1e-4
+
+
+def test_real_photo_rows_pass_for_reference_and_stand_in():
+    _need_sacre_coeur()
+    ex = EXERCISES["4.14"]
+    for fn in (reference(ex), ch4.cv_incremental_sfm):
+        result = grade(ex, fn, seed=0)
+        rows = [r for r in result.cases if r.name.startswith("Sacré-Cœur")]
+        assert len(rows) == 4 and all(r.passed for r in rows), checks.show(result)
+
+
+def test_focal_never_refined_fails_the_real_photos():
+    _need_sacre_coeur()
+    from mutants.ch04 import sfm_focal_never_refined
+    result = grade(EXERCISES["4.14"], sfm_focal_never_refined, seed=0)
+    rows = [r for r in result.cases if r.name.startswith("Sacré-Cœur: relative rotations")]
+    assert rows and not any(r.passed for r in rows), checks.show(result)
+    assert all("focal refinement" in r.hint for r in rows), checks.show(result)

@@ -273,8 +273,8 @@ def test_rotation_averaging():
     chain = np.eye(3)                                            # chaining the noisy path 0-1-..-n
     chain_err = []
     for i in range(n - 1):
-        chain = noisy[(i, i + 1)] @ chain
-        chain_err.append(_rot_err_deg(chain @ R[0].T @ R[0], R[i + 1] @ R[0].T))
+        chain = noisy[(i, i + 1)] @ chain                        # estimates R_{i+1} R_0ᵀ (R_0 = I gauge)
+        chain_err.append(_rot_err_deg(chain, R[i + 1] @ R[0].T))
     assert err < 2.0 and err < max(chain_err)
 
 
@@ -397,9 +397,9 @@ def _small_recon():
     recon["tracks"] = tracks
     recon["points"] = np.array([X[kp_to_point[next(iter(tr))][tr[next(iter(tr))]]] for tr in tracks])
     for i in range(3):
-        k = np.array([-0.05, 0.01]) if i == 1 else np.zeros(2)
+        k = {1: np.array([-0.05, 0.01]), 2: np.array([0.03, 0.0])}.get(i, np.zeros(2))   # RADIAL, SIMPLE_RADIAL
         recon["cameras"][i] = {"R": cams[i][0], "t": cams[i][1], "K": Ks[i], "k": k}
-    # make the observations exact for the distorted camera, so reprojection errors are known
+    # make the observations exact for the distorted cameras, so reprojection errors are known
     for tr, Xp in zip(tracks, recon["points"]):
         for i, kp in tr.items():
             c = recon["cameras"][i]
@@ -424,7 +424,7 @@ def test_colmap_text_roundtrip_and_pycolmap_reads_it(tmp_path):
     rec = pycolmap.Reconstruction(str(tmp_path))
     assert rec.num_reg_images() == 3 and rec.num_points3D() == len(recon["points"])
     models = {cid: cam.model.name for cid, cam in rec.cameras.items()}
-    assert models[2] == "RADIAL" and models[1] == "SIMPLE_PINHOLE"
+    assert models[2] == "RADIAL" and models[1] == "SIMPLE_PINHOLE" and models[3] == "SIMPLE_RADIAL"
     rec.update_point_3d_errors()
     assert rec.compute_mean_reprojection_error() < 1e-6
     R1 = rec.images[1].cam_from_world().rotation.matrix()
@@ -436,3 +436,11 @@ def test_colmap_text_roundtrip_and_pycolmap_reads_it(tmp_path):
     again = read_colmap_text(out)
     order = np.argsort(again["point_ids"])
     assert np.allclose(again["points"][order], recon["points"])
+
+
+def test_colmap_opencv_camera_with_tangential_distortion_is_refused():
+    from solutions.colmap_io import _K_and_k
+    K, k = _K_and_k("OPENCV", [700.0, 710.0, 320.5, 240.5, -0.1, 0.02, 0.0, 0.0])
+    assert np.allclose(k, [-0.1, 0.02]) and K[0, 2] == 320.0
+    with pytest.raises(ValueError, match="p1, p2"):
+        _K_and_k("OPENCV", [700.0, 710.0, 320.5, 240.5, -0.1, 0.02, 1e-3, 0.0])

@@ -137,7 +137,7 @@ def _pnp_P(X, x, K, normalise_rays=True, normalise_3d=True):
     Xn = _h(X) @ U.T
     z = np.zeros_like(Xn)
     A = np.r_[np.c_[Xn, z, -n[:, :1] * Xn], np.c_[z, Xn, -n[:, 1:] * Xn]]
-    P = np.linalg.svd(A)[2][-1].reshape(3, 4)
+    P = np.linalg.svd(A, full_matrices=False)[2][-1].reshape(3, 4)
     return np.linalg.solve(T, P) @ U
 
 
@@ -164,7 +164,7 @@ def pnp_unnormalised(X, x, K):
     Xh = _h(X)
     z = np.zeros_like(Xh)
     A = np.r_[np.c_[Xh, z, -n[:, :1] * Xh], np.c_[z, Xh, -n[:, 1:] * Xh]]
-    P = np.linalg.svd(A)[2][-1].reshape(3, 4)
+    P = np.linalg.svd(A, full_matrices=False)[2][-1].reshape(3, 4)
     if np.median(Xh @ P[2]) < 0:
         P = -P
     U, S, Vt = np.linalg.svd(P[:, :3])
@@ -339,9 +339,9 @@ def tracks_pairwise(matches):
 
 # ----------------------------------------------------------------- 4.12 two-view initialisation
 
-def _two_view(x1, x2, K1, K2, choose):
+def _two_view(x1, x2, K1, K2, choose, thresh_px=2.0):
     n1, n2 = _normalised_K(x1, K1), _normalised_K(x2, K2)
-    E, mask = cv2.findEssentialMat(n1, n2, np.eye(3), cv2.USAC_MAGSAC, 0.999, 1.0 / K1[0, 0])
+    E, mask = cv2.findEssentialMat(n1, n2, np.eye(3), cv2.USAC_MAGSAC, 0.999, thresh_px / K1[0, 0])
     inl = mask.ravel().astype(bool)
     E = ch4.refine_essential(E[:3], x1[inl], x2[inl], K1, K2)
     R1, R2, t = cv2.decomposeEssentialMat(E)
@@ -424,6 +424,11 @@ def sfm_points_out_of_order(problem):
     rec = ch4.cv_incremental_sfm(problem)
     rec["tracks"] = rec["tracks"][1:] + rec["tracks"][:1]
     return rec
+
+
+def sfm_focal_never_refined(problem):
+    # K unknown: every focal length kept at the 1.2 max(w, h) prior (no self-calibration, none refined)
+    return ch4.cv_incremental_sfm(problem, refine_focal=False)
 
 
 # ----------------------------------------------------------------- 4.15 rotation averaging
@@ -602,51 +607,54 @@ MUTANTS = [
     ("4.4", "rows mixed up", tri_rows_mixed, None),
     ("4.5", "DLT instead of midpoint", mid_is_dlt, "DLT point"),
     ("4.5", "closest point on ray 1", mid_on_ray1, "lies on ray 1"),
-    ("4.5", "rays left in the camera frame", mid_camera_frame_rays, None),
+    ("4.5", "rays left in the camera frame", mid_camera_frame_rays, "camera frames"),
     ("4.6", "radians", angles_radians, "radians"),
     ("4.6", "supplementary angle", angles_supplementary, "supplementary"),
-    ("4.6", "angle at the camera", angles_at_camera, None),
+    ("4.6", "angle at the camera", angles_at_camera, "angle at camera 1"),
     ("4.7", "t not divided by the scale", pnp_no_scale, "mean singular value"),
-    ("4.7", "camera centre instead of t", epnp_returns_centre_dlt, None),
+    ("4.7", "camera centre instead of t", epnp_returns_centre_dlt, "t is the camera centre"),
     ("4.7", "t read off P's 4th column (far from the origin)", pnp_t_from_column, "4th column"),
-    ("4.7", "pixels instead of K⁻¹x", pnp_pixels, None),
+    ("4.7", "pixels instead of K⁻¹x", pnp_pixels, "K R"),
     ("4.7", "R not orthonormalised", pnp_not_orthonormal, "not a rotation"),
+    ("4.7", "neither rays nor 3D points normalised", pnp_unnormalised, "4th column"),
     ("4.8", "only the first root", p3p_first_only, "every real root"),
     ("4.8", "root mix-up", p3p_root_mixup, "pairing"),
     ("4.8", "a solution returned twice", p3p_with_duplicates, "solution(s)"),
-    ("4.9", "forgot K", epnp_forgot_K, None),
-    ("4.9", "camera-to-world pose", epnp_camera_to_world, None),
-    ("4.9", "camera centre instead of t", epnp_returns_centre, None),
+    ("4.9", "forgot K", epnp_forgot_K, "K = I"),
+    ("4.9", "camera-to-world pose", epnp_camera_to_world, "camera-to-world"),
+    ("4.9", "camera centre instead of t", epnp_returns_centre, "t is the camera centre"),
     ("4.10", "fixed 100 iterations", ransac_fixed_100, "fixed number of iterations"),
-    ("4.10", "no final refinement", ransac_no_refinement, None),
-    ("4.10", "threshold on squared pixels", ransac_squared_threshold, None),
+    ("4.10", "no final refinement", ransac_no_refinement, "refine the pose"),
+    ("4.10", "threshold on squared pixels", ransac_squared_threshold, "r² < threshold"),
     ("4.11", "tracks that merge two 3D points", tracks_keep_inconsistent, "join two 3D points"),
-    ("4.11", "only the conflicting observations dropped", tracks_drop_duplicate_image_only, None),
+    ("4.11", "only the conflicting observations dropped", tracks_drop_duplicate_image_only, "drop the whole component"),
     ("4.11", "existing tracks never merged", tracks_no_merge, "union-find"),
     ("4.11", "one track per match", tracks_pairwise, "union-find"),
     ("4.12", "X in camera 2's frame", two_view_points_in_camera2, "reproject"),
-    ("4.12", "first decomposition", two_view_first_candidate, None),
+    ("4.12", "cheirality tested in camera 1 only", two_view_camera1_only, "in front of BOTH cameras"),
+    ("4.12", "first decomposition", two_view_first_candidate, "cheirality"),
     ("4.12", "K1 used for both images", two_view_K1_for_both, None),
-    ("4.13", "most matches", rank_by_matches, None),
+    ("4.13", "most matches", rank_by_matches, "H/E"),
     ("4.13", "most E inliers", rank_by_E_inliers, "H/E"),
-    ("4.13", "widest angle", rank_by_angle, None),
-    ("4.13", "no H/E check", rank_no_H_check, None),
+    ("4.13", "widest angle", rank_by_angle, "100 E inliers"),
+    ("4.13", "no H/E check", rank_no_H_check, "H/E"),
     ("4.14", "no bundle adjustment", sfm_no_bundle_adjustment, None),
     ("4.14", "stops after the initial pair", sfm_initial_pair_only, None),
     ("4.14", "no triangulation-angle filter", sfm_no_angle_filter, "1.5°"),
     ("4.14", "points and tracks out of order", sfm_points_out_of_order, None),
+    ("4.14", "focal length never refined (kept at 1.2 × max side)", sfm_focal_never_refined, "focal refinement"),
     ("4.15", "chained along a spanning tree", rotavg_spanning_tree, "along a tree"),
     ("4.15", "R_ij transposed", rotavg_transposed, "R_ij = R_j R_iᵀ"),
     ("4.15", "no projection onto SO(3)", rotavg_no_projection, "not a rotation"),
     ("4.16", "no half-pixel shift", write_no_half_pixel, "half a pixel"),
     ("4.16", "quaternion written x y z w", write_quaternion_xyzw, "QW QX QY QZ"),
-    ("4.16", "camera-to-world pose", write_camera_to_world, None),
+    ("4.16", "camera-to-world pose", write_camera_to_world, "inverted"),
     ("4.17", "no half-pixel shift", read_no_half_pixel, "half a pixel"),
     ("4.17", "quaternion read as x y z w", read_quaternion_xyzw, "QW QX QY QZ"),
     ("4.17", "ids not shifted", read_ids_not_shifted, "IMAGE_ID − 1"),
     ("4.18", "BFS over every pair (the colleague's)", components_all_edges, "min_inliers"),
-    ("4.18", "not ordered by size", components_unordered, None),
-    ("4.18", "largest component only", components_largest_only, None),
+    ("4.18", "not ordered by size", components_unordered, "largest first"),
+    ("4.18", "largest component only", components_largest_only, "only the largest component"),
     ("4.19", "settings unchanged", registration_unchanged, "images still fail"),
     ("4.19", "threshold fixed, 100 inliers still required", registration_threshold_only, "images still fail"),
     ("4.19", "loose threshold, 5 inliers", registration_anything_goes, "another place"),
@@ -654,9 +662,9 @@ MUTANTS = [
     ("4.20", "raw GPS", drift_gps_only, "raw GPS"),
     ("4.20", "one global Sim(3)", drift_global_sim3, "global similarity"),
     ("4.21", "most matches (the colleague's)", initial_most_matches, "turning on the spot"),
-    ("4.21", "widest angle", initial_widest_angle, None),
-    ("4.21", "most E inliers", initial_most_E_inliers, None),
+    ("4.21", "widest angle", initial_widest_angle, "too few matches"),
+    ("4.21", "most E inliers", initial_most_E_inliers, "turning on the spot"),
     ("4.25", "R transposed", umeyama_transposed, "transposed"),
     ("4.25", "scale from the spreads", umeyama_std_ratio, "scale"),
-    ("4.25", "centroids not subtracted", umeyama_no_centroid, None),
+    ("4.25", "centroids not subtracted", umeyama_no_centroid, "the centroids"),
 ]
