@@ -336,6 +336,45 @@ def _detector_pair_case(name, img1, img2, H, n, oracle, call, rep_tol=0.25):
                 "below OpenCV", convert=_pair_of(2), call=call, info={"H": H})
 
 
+def corners_and_edges(rng, size=SIZE) -> tuple[np.ndarray, np.ndarray]:
+    """Six low-contrast turned squares (their 24 vertices are the only corners) between two long
+    high-contrast bars (four straight edges that run off both sides of the image): uint8 image and
+    the (24, 2) true corners (x, y). Drawn 8x larger with cv2.fillPoly, area-averaged down, blurred
+    by 0.7 px.
+
+    The bars' contrast (0.45) is ~4x the squares' (0.12): on a straight edge one eigenvalue of M is
+    large, so every response that grows with tr(M) or with the larger eigenvalue (gradient energy,
+    det M + k tr(M)^2, lambda_max) ranks the bars' edges first, while det M - k tr(M)^2 (negative on
+    an edge) and lambda_min (~0 on an edge) rank the squares' vertices first."""
+    W, H = size
+    up = 8
+    img = np.full((H * up, W * up), 0.5, np.float32)
+    for yc in (rng.uniform(22, 34), rng.uniform(H - 34, H - 22)):
+        slope, half = np.tan(np.radians(rng.uniform(-6, 6))), rng.uniform(4, 6)
+        ends = np.array([-20.0, W + 20.0])
+        mid = yc + slope * (ends - W / 2)
+        pts = np.c_[np.r_[ends, ends[::-1]], np.r_[mid - half, mid[::-1] + half]]
+        cv2.fillPoly(img, [np.rint((pts + 0.5) * up).astype(np.int32)], float(rng.choice([0.05, 0.95])))
+    corners = []
+    for cx in (W / 6, W / 2, 5 * W / 6):
+        for cy in (H / 2 - 40, H / 2 + 40):
+            c, a, half = np.array([cx, cy]) + rng.uniform(-6, 6, 2), rng.uniform(0, np.pi / 2), rng.uniform(14, 20)
+            Rm = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+            v = c + (np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * half) @ Rm.T
+            cv2.fillPoly(img, [np.rint((v + 0.5) * up).astype(np.int32)], float(0.5 + rng.choice([-1, 1]) * 0.12))
+            corners.append(v)
+    small = cv2.GaussianBlur(cv2.resize(img, size, interpolation=cv2.INTER_AREA), (0, 0), 0.7)
+    return to_u8(small), np.concatenate(corners)
+
+
+def _at_corners(out, corners):
+    """1 - fraction of the detections within 3.5 px of a true corner."""
+    k = np.asarray(out, float)
+    if len(k) < 0.75 * len(corners):
+        raise OutputError(f"returned {len(k)} keypoints for an image with {len(corners)} corners (n = {len(corners)})")
+    return 1.0 - float(np.mean(np.linalg.norm(k[:, None] - corners[None], axis=2).min(1) <= 3.5))
+
+
 def cases_corners(rng) -> list[Case]:
     n = 300
     out = []
@@ -354,11 +393,21 @@ def cases_corners(rng) -> list[Case]:
     # 0: non-maximum suppression with radius 3 leaves no two corners within 2 px.
     out.append(Case("non-maximum suppression: no two corners within 2 px", (img, n), None, _close_pairs, 0.0,
                     "fraction", convert=lambda o, c: _points(o, c)))
+    for method in ("harris", "shi-tomasi"):
+        img, corners = corners_and_edges(rng)
+        # 3.5 px, 0.1: a blurred corner's response peaks inside the corner, 1.5-3.1 px from the vertex
+        # (our Gaussian window, cv2's 5x5 box; 12 seeds); 0.1 allows 2 of the 24 to land further.
+        # Responses that favour edges put 0 of 24 near a corner (they sit on the bars, >= 10 px away).
+        out.append(Case(f"24 corners among long straight edges, {method}: detections at corners",
+                        (img, len(corners), method), corners, _at_corners, 0.1, "fraction off",
+                        convert=lambda o, c: _points(o, c), info={"method": method}))
     return out
 
 
 def _swap_hint(text):
     def when(case, out):
+        if "method" in case.info:  # corners-and-edges image: swapped points land far from the corners
+            return case.metric(out[:, ::-1], case.expected) + 0.3 < case.metric(out, case.expected)
         if case.call is None:
             return False
         k1, k2 = out
@@ -368,10 +417,25 @@ def _swap_hint(text):
     return Hint(text, when)
 
 
+def _on_edges(method):
+    # the symptom: over half the detections away from every corner of the corners-and-edges image
+    # (and not because x and y are swapped: _swap_hint comes first)
+    def when(case, out):
+        return case.info.get("method") == method and case.metric(out, case.expected) > 0.5
+    return when
+
+
 CORNER_HINTS = [
     _swap_hint("your points look like (row, col): np.argwhere/np.nonzero give (y, x); return (x, y)."),
     Hint("corners come in clumps: keep only local maxima of the response (non-maximum suppression) "
-         "before taking the strongest n.", lambda c, out: c.call is None and c.metric(out, None) > 0.2),
+         "before taking the strongest n.",
+         lambda c, out: c.name.startswith("non-maximum") and c.metric(out, None) > 0.2),
+    Hint("Harris: your strongest responses lie on the long straight edges, not at the corners. On an edge one "
+         "eigenvalue is large and det M ≈ 0, so R = det M − k·tr(M)² must come out negative: subtract k·tr(M)² "
+         "(k > 0), don't add it; tr(M) alone (gradient energy) is an edge detector.", _on_edges("harris")),
+    Hint("Shi-Tomasi: your strongest responses lie on the long straight edges, not at the corners: the response "
+         "is the smaller eigenvalue, tr/2 − sqrt((Sxx − Syy)²/4 + Sxy²); the larger one is large on every edge.",
+         _on_edges("shi-tomasi")),
 ]
 
 
@@ -407,13 +471,30 @@ def _fast_no_nms(case):
     return cv_fast(img, t, False)
 
 
+def _missed_wrap_fraction(case, out):
+    """Of cv2's corners that `out` misses, the fraction whose circle pixels 15 and 0 (at (-1, -3) and
+    (0, -3)) are both brighter or both darker than the centre by the threshold: 1.0 when the arcs
+    were not allowed to wrap around (measured: 1.00 for that bug, 0.58-0.78 for FAST-12)."""
+    img, t, _ = case.args
+    I = np.asarray(img, int)
+    mine = {tuple(p) for p in np.rint(out).astype(int)}
+    missed = [p for p in np.rint(case.expected).astype(int) if tuple(p) not in mine]
+    if len(missed) < 10:
+        return 0.0
+    wraps = [(I[y - 3, x] - I[y, x] > t and I[y - 3, x - 1] - I[y, x] > t) or
+             (I[y, x] - I[y - 3, x] > t and I[y, x] - I[y - 3, x - 1] > t) for x, y in missed]
+    return float(np.mean(wraps))
+
+
 FAST_HINTS = [
     like(_fast_no_nms, "these are all corners before non-maximum suppression: keep a corner only if its score "
                        "beats its 8 neighbours'."),
     like(lambda c: c.expected[:, ::-1], "your points look like (row, col); return (x, y)."),
-    Hint("far fewer corners than cv2: is the arc 12 pixels instead of 9, or does it fail to wrap around "
-         "the circle (pixels 15, 0, 1 are contiguous)?",
-         lambda c, out: len(out) < 0.8 * len(c.expected)),
+    Hint("every corner you miss has its arc running through the top of the circle (pixels 15 and 0 both pass "
+         "the test): the circle wraps around — pixels 15, 0, 1 are contiguous; append the first 8 again and "
+         "test every start.", lambda c, out: _missed_wrap_fraction(c, out) >= 0.95),
+    Hint("far fewer corners than cv2, and not only those whose arc wraps: is the arc 12 contiguous pixels "
+         "instead of 9 (FAST-9 needs 9 of the 16)?", lambda c, out: len(out) < 0.8 * len(c.expected)),
 ]
 
 
@@ -468,10 +549,12 @@ def cases_orb(rng) -> list[Case]:
         k1, k2 = _orb_keypoints(img1, img2, H)
         acc = _nn_accuracy(gt_orb_descriptors(img1, k1, BRIEF_PATTERN), gt_orb_descriptors(img2, k2, BRIEF_PATTERN),
                            cv_hamming)
-        # 0.1: the specified descriptor's own nearest-neighbour accuracy on these keypoints minus
-        # a margin for a few flipped bits; unsteered BRIEF at 60-180° is near 0.
+        # 0.15: the specified descriptor's own nearest-neighbour accuracy on these keypoints minus a margin
+        # for another steered BRIEF: cv2.ORB's learned pattern with Gaussian smoothing, steered by the same
+        # angle, trails it by up to 0.115 (10 seeds); unsteered BRIEF loses 0.35-1.0, a wrongly turned
+        # pattern 0.58-1.0 near 90° (it only recovers near 180°).
         out.append(Case(f"{tex} turned {rot:.0f}°: NN accuracy vs the spec's {acc:.2f}", (img1, img2), {"acc": acc},
-                        _orb_acc_metric, 0.1, "below", convert=lambda o, c: (_packed(o[0], c), _packed(o[1], c)),
+                        _orb_acc_metric, 0.15, "below", convert=lambda o, c: (_packed(o[0], c), _packed(o[1], c)),
                         call=lambda fn, a=(img1, k1, img2, k2): (fn(a[0], a[1], BRIEF_PATTERN), fn(a[2], a[3], BRIEF_PATTERN))))
     return out
 
@@ -500,6 +583,8 @@ def cases_hamming(rng) -> list[Case]:
 
 
 HAMMING_HINTS = [
+    like(lambda c: cv_hamming(c.args[0][:, :8], c.args[1][:, :8]),
+         "only the first 8 bytes (one 64-bit word) are counted: sum the popcounts over all the words."),
     like(lambda c: (c.args[0][:, None, :] != c.args[1][None]).sum(2),
          "that counts differing bytes: each byte holds 8 bits — count the set bits of the XOR (np.bitwise_count)."),
     like(lambda c: (c.args[0][:, None, :] ^ c.args[1][None]).sum(2, dtype=np.int64),
@@ -509,17 +594,32 @@ HAMMING_HINTS = [
 
 # ============================================================ 3.9 DoG detector ====
 
-def _blobs(rng, n=24, size=(320, 240)):
-    """Gaussian blobs (bright and dark) at random sub-pixel centres on a grey background."""
+def _blobs(rng, n=24, size=(320, 240), sigma_range=(2.0, 4.0), with_sigma=False):
+    """Gaussian blobs (bright and dark) at random sub-pixel centres on a grey background:
+    uint8 image, (n, 2) centres (x, y) [and (n,) standard deviations if with_sigma]."""
     W, H = size
     ys, xs = np.mgrid[0:H, 0:W]
     img = np.full((H, W), 0.5)
     gx, gy = np.meshgrid(np.linspace(30, W - 30, 6), np.linspace(30, H - 30, 4))
     centres = np.c_[gx.ravel(), gy.ravel()][:n] + rng.uniform(-5, 5, (n, 2))
-    sig = rng.uniform(2.0, 4.0, n)
+    sig = rng.uniform(*sigma_range, n)
     for (cx, cy), s, sign in zip(centres, sig, rng.choice([-1, 1], n)):
         img += sign * 0.35 * np.exp(-((xs - cx) ** 2 + (ys - cy) ** 2) / (2 * s ** 2))
-    return to_u8(img), centres
+    return (to_u8(img), centres, sig) if with_sigma else (to_u8(img), centres)
+
+
+def _scale_metric(out, exp):
+    """Median |log(sigma / sigma_expected)| over the blobs found within 2 px."""
+    k = np.asarray(out, float)
+    if len(k) == 0:
+        raise OutputError("no keypoints")
+    d = np.linalg.norm(k[:, None, :2] - exp["centres"][None], axis=2)
+    found = d.min(0) < 2.0
+    if np.mean(found) < 0.6:
+        return 9.9  # most blobs missed: scale cannot be judged
+    if np.any(k[:, 2] <= 0):
+        raise OutputError("sigma (column 3) must be positive")
+    return float(np.median(np.abs(np.log(k[d.argmin(0), 2] / exp["sigma"])[found])))
 
 
 def _subpixel_metric(out, centres):
@@ -552,10 +652,51 @@ def cases_dog(rng) -> list[Case]:
     # are off by ~0.4 px (the median distance of a uniform offset in a pixel).
     out.append(Case("Gaussian blobs at sub-pixel centres: median error", (img, n), centres, _subpixel_metric, 0.15,
                     "px", convert=lambda o, c: _points(o, c, 3)))
+    img, centres, sig = _blobs(rng, sigma_range=(1.8, 6.0), with_sigma=True)
+    # A blob of standard deviation s peaks in the scale-normalised Laplacian at sigma = s; D_i = G_{i+1} - G_i
+    # straddles sigma_i and k sigma_i and is labelled sigma_i (the spec), so it peaks at s / sqrt(k), k = 2^(1/3).
+    # 0.15 in log scale (16 %): we and cv2.SIFT land within 0.03 of s / sqrt(k) (8 seeds); labelling a level
+    # by sqrt(k) sigma_i is off by 0.12 and still passes; a constant sigma = 1.6 is off by 0.5-0.75, a sigma
+    # not scaled by 2^octave by ~0.7 for the blobs of the coarser octaves.
+    out.append(Case("Gaussian blobs of widths 1.8-6 px: median |log(sigma / expected)|", (img, n),
+                    {"centres": centres, "sigma": sig / 2 ** (1 / 6)}, _scale_metric, 0.15, "log",
+                    convert=lambda o, c: _points(o, c, 3)))
     return out
 
 
+def _octave_sigma(case, out):
+    if not case.name.startswith("Gaussian blobs of widths"):
+        return False
+    exp = case.expected
+    d = np.linalg.norm(out[:, None, :2] - exp["centres"][None], axis=2)
+    found = d.min(0) < 2.0
+    err = np.log(out[d.argmin(0), 2] / exp["sigma"])
+    small, large = found & (exp["sigma"] < 2.4), found & (exp["sigma"] > 3.6)  # octave 0 / octave >= 1 blobs
+    return bool(small.any() and large.any() and np.median(np.abs(err[small])) < 0.15 and np.median(err[large]) < -0.4)
+
+
+def _octave_positions(case, out):
+    """On the blob-scale case: scaling each keypoint's (x, y) by 2^octave (from its sigma) finds many more
+    blobs, i.e. positions were left in the coarser octave's pixels."""
+    if not case.name.startswith("Gaussian blobs of widths"):
+        return False
+    octave = np.floor(np.log2(np.maximum(out[:, 2] / 1.6, 1.0)))
+    fixed = out[:, :2] * 2.0 ** octave[:, None]
+    found = lambda k: np.mean(np.linalg.norm(k[:, None] - case.expected["centres"][None], axis=2).min(0) < 2.0)
+    return bool(octave.max() > 0 and found(fixed) > found(out[:, :2]) + 0.2)
+
+
+def _constant_sigma(case, out):
+    return case.name.startswith("Gaussian blobs of widths") and np.ptp(out[:, 2]) < 1e-6 * max(1.0, out[:, 2].max())
+
+
 DOG_HINTS = [
+    Hint("keypoints from coarser octaves are misplaced: x and y of octave o are in its own (2^o times coarser) "
+         "pixels — multiply them by 2^o, like sigma.", _octave_positions),
+    Hint("every keypoint has the same sigma: report the scale of the level where the extremum was found, "
+         "σ = σ0·2^((i + δs)/s)·2^o (sub-level offset δs from the refinement, times 2^octave).", _constant_sigma),
+    Hint("sigma is right for small blobs and too small for large ones: multiply the level's σ by 2^octave "
+         "(σ is in image pixels, like x and y).", lambda c, out: _octave_sigma(c, out)),
     Hint("keypoints sit on whole pixels: refine each extremum with one or more Newton steps on the quadratic "
          "model of D (offset = −H⁻¹ g) and add the offset.",
          lambda c, out: c.name.startswith("Gaussian") and np.all(np.abs(out[:, :2] - np.rint(out[:, :2])) < 1e-9)),
@@ -576,11 +717,19 @@ def _mma_metric(out, exp):
 
 def _desc_pair(width):
     def convert(out, case):
+        probe = None
+        if "probe" in case.info:  # a third call: view 1 turned 180° or enlarged 2x (for the hints)
+            out, probe = out[:2], out[2]
         try:
             a, b = out
         except Exception:
             raise OutputError("expected descriptors for both views") from None
         a, b = _points(a, case, width), _points(b, case, width)
+        if probe is not None:
+            try:
+                case.info["probe_out"] = _points(probe, case, width)
+            except OutputError:
+                case.info["probe_out"] = None
         if len(a) != len(case.expected["k1"]) or len(b) != len(case.expected["k2"]):
             raise OutputError("expected one descriptor per keypoint, in order")
         norms = np.linalg.norm(np.r_[a, b], axis=1)
@@ -597,32 +746,71 @@ def cases_sift(rng) -> list[Case]:
              (str(rng.choice(["astronaut", "grass", "chelsea"])), float(rng.uniform(45, 135)))]
     for tex, rot in pairs:
         img1, img2, H = homography_pair(rng, tex, rotate_deg=rot)
-        out.append(_sift_case(tex + (f" turned {rot:.0f}°" if rot else ""), img1, img2, H))
+        out.append(_sift_case(tex + (f" turned {rot:.0f}°" if rot else ""), img1, img2, H,
+                              probe="rot180" if rot else None))
     tex = str(rng.choice(["astronaut", "coffee", "chelsea"]))
     img1, img2, H = homography_pair(rng, tex, scale_range=(0.45, 0.55), max_angle_deg=20)  # view 2 twice as close
     # 0.3 here: across a 2x zoom SIFT-lite (no image doubling) trails cv2.SIFT by up to 0.21 (60 seeds);
     # a window that ignores sigma trails by 0.6-0.9.
-    out.append(_sift_case(f"{tex} zoomed 2×", img1, img2, H, tol=0.3))
+    out.append(_sift_case(f"{tex} zoomed 2×", img1, img2, H, tol=0.3, probe="zoom2"))
     if datasets.available("homography"):
         out.append(_sift_case("graf1 → graf3 (real)", *graf_half()))
     return out
 
 
-def _sift_case(name, img1, img2, H, n=400, tol=0.15):
+def _probe_view(img, k, probe):
+    """View 1 turned by exactly 180° ('rot180') or enlarged 2x ('zoom2'), and its keypoints."""
+    h, w = img.shape
+    if probe == "rot180":
+        return np.ascontiguousarray(img[::-1, ::-1]), np.c_[w - 1 - k[:, 0], h - 1 - k[:, 1], k[:, 2]]
+    big = cv2.resize(img, (2 * w, 2 * h), interpolation=cv2.INTER_LINEAR)  # pixel centre x -> 2x + 0.5
+    return big, np.c_[2 * k[:, :2] + 0.5, 2 * k[:, 2]]
+
+
+def _sift_case(name, img1, img2, H, n=400, tol=0.15, probe=None):
     k1, k2 = cv_dog(img1, n), cv_dog(img2, n)
     m = cv_ratio_matches(cv_sift_descriptors(img1, k1), cv_sift_descriptors(img2, k2), 0.8)
     exp = {"k1": k1, "k2": k2, "H": H, "mma_cv": mma(k1[m[:, 0]], k2[m[:, 1]], H), "n_cv": len(m)}
+    if probe:
+        # The hints of the turned and zoomed cases tell *why* matching failed from one more call:
+        # the same view turned by exactly 180° (a mirrored angle convention, gx and gy swapped, still
+        # matches there; no orientation does not) or enlarged 2x (a window that ignores sigma fails).
+        img3, k3 = _probe_view(img1, k1, probe)
+        return Case(f"{name}: MMA@3px vs OpenCV {exp['mma_cv']:.2f}", (img1, img2), exp, _mma_metric, tol, "below",
+                    convert=_desc_pair(128), info={"probe": probe},
+                    call=lambda fn: (fn(img1, k1), fn(img2, k2), fn(img3, k3)))
     # 0.15: on OpenCV's own keypoints SIFT-lite's MMA@3px is within ±0.1 of cv2.SIFT's (which also
     # uses cv2's orientations); an unrotated or unnormalised descriptor loses 0.2-0.9 when turned.
     return Case(f"{name}: MMA@3px vs OpenCV {exp['mma_cv']:.2f}", (img1, img2), exp, _mma_metric, tol, "below",
                 convert=_desc_pair(128), call=lambda fn: (fn(img1, k1), fn(img2, k2)))
 
 
+def _probe_accuracy(case, out):
+    """Nearest-neighbour accuracy between view 1's descriptors and the probe view's (same keypoints)."""
+    probe = case.info.get("probe_out")
+    if probe is None or len(probe) != len(out[0]):
+        return None
+    return _nn_accuracy(out[0], probe, lambda a, b: np.linalg.norm(a[:, None] - b[None], axis=2))
+
+
+def _probe_hint(probe, good, text):
+    # 0.5: under an exact 180° turn or 2x enlargement of the same view our SIFT-lite keeps 0.89-1.0 of nearest
+    # neighbours, cv2.SIFT 0.6-0.8 (its orientation comes from a re-detection), gx/gy swapped 0.91-1.0; no
+    # orientation keeps <= 0.04 at 180°, a window that ignores sigma <= 0.13 at 2x (3 seeds).
+    def when(case, out):
+        acc = _probe_accuracy(case, out) if case.info.get("probe") == probe else None
+        return acc is not None and (acc >= 0.5) == good
+    return Hint(text, when)
+
+
 SIFT_HINTS = [
-    Hint("good at one scale, poor when zoomed: the window must grow with the keypoint's sigma (bins 3 sigma wide).",
-         lambda c, out: "zoomed" in c.name),
-    Hint("good on upright pairs, poor on turned ones: measure gradient angles relative to the keypoint's "
-         "dominant orientation (and sample the patch turned by it).", lambda c, out: "turned" in c.name),
+    _probe_hint("zoom2", False, "the same view enlarged 2x gives different descriptors: the window must grow with "
+                "the keypoint's sigma (16 samples 0.75 sigma apart, bins 3 sigma wide)."),
+    _probe_hint("rot180", True, "your descriptors survive a 180° turn but not a 45-135° one: angles turn the wrong "
+                "way. np.gradient returns (d/dy, d/dx) — axis 0 first; with gx and gy swapped every angle is "
+                "mirrored (atan2(gx, gy) = 90° − θ), so the orientation and the patch turn against the image."),
+    _probe_hint("rot180", False, "good on upright pairs, poor on turned ones (even by exactly 180°): measure gradient "
+                "angles relative to the keypoint's dominant orientation (and sample the patch turned by it)."),
 ]
 
 
@@ -755,9 +943,11 @@ def _distribution_metric(out, exp):
     ref = gt_distribute(kps, scores, size, n, cells)
     cov_gap = _coverage(kps, ref, size, cells) - _coverage(kps, sel, size, cells)
     score_gap = 1 - scores[sel].mean() / scores[ref].mean()
-    # allowances: 5 % of the cells (ANMS or a quadtree may leave one or two cells empty) and 30 % of
-    # the mean score (spreading out costs strength; picking at random costs much more).
-    return max(cov_gap / 0.05, score_gap / 0.3, 0.0)
+    # allowances: 15 % of the cells — plain ANMS (c = 1) and ORB-SLAM's breadth-first quadtree do not follow
+    # the grid and leave up to 8 % and 10 % of its cells empty (20 seeds, worst on n = 100 over 8 x 6), while
+    # picking at random leaves 22-77 % and the strongest n 81-92 %; and 30 % of the mean score (spreading
+    # out costs strength: ANMS loses up to 20 %, the quadtree 3 %).
+    return max(cov_gap / 0.15, score_gap / 0.3, 0.0)
 
 
 def cases_distribute(rng) -> list[Case]:
@@ -775,6 +965,10 @@ def cases_distribute(rng) -> list[Case]:
 DISTRIBUTE_HINTS = [
     Hint("that is the strongest n overall — all on the poster: take the best of every cell first.",
          lambda c, out: set(np.asarray(out, int).tolist()) == set(np.argsort(-c.args[1])[:c.args[3]].tolist())),
+    Hint("your picks leave many occupied cells empty, and they are not the strongest either: go round the cells, "
+         "taking the best remaining keypoint of each, before a cell gets its second.",
+         lambda c, out: _coverage(c.args[0], out.astype(int), c.args[2], c.args[4])
+         < _coverage(c.args[0], gt_distribute(*c.args), c.args[2], c.args[4]) - 0.15),
 ]
 
 
@@ -902,8 +1096,18 @@ def debug_too_slow(rng):
 
 
 def debug_clustered(rng):
-    """3.16 — features clustered: one busy poster takes every keypoint of a 300-keypoint budget."""
-    img1, img2, H = homography_pair_from(rng, _poster_scene(rng), max_angle_deg=25)
+    """3.16 — features clustered: one busy poster takes every keypoint of a 200-keypoint budget.
+
+    Drawn freely, the strongest 200 keypoints of view 1 sometimes reach 60 % of its 4 x 4 cells (the
+    poster fills much of the view, or a smooth poster lets the wall in): unchanged settings passed 1
+    draw in 12. Draws whose strongest 200 occupy more than 8 of the 16 cells are redrawn, so the
+    correct matches of the unchanged settings (a subset of them) cover at most 50 % < 60 %."""
+    for _ in range(100):
+        img1, img2, H = homography_pair_from(rng, _poster_scene(rng), max_angle_deg=25)
+        kps = cv2.SIFT_create(nfeatures=200).detect(img1, None)
+        pts = np.array([k.pt for k in sorted(kps, key=lambda k: -k.response)[:200]]).reshape(-1, 2)
+        if len(np.unique(_cell_of(pts, img1.shape[::-1], (4, 4)))) <= 8:
+            break
     case = {"img1": img1, "img2": img2, "settings": DEFAULT_SETTINGS | {"n_features": 200, "ratio": 0.8},
             "max_features": 200}
     return case, {"H": H, "need": 30, "precision": 0.6, "max_features": 200, "coverage": 0.6}
@@ -920,21 +1124,79 @@ def _settings(out, case):
 
 def _debug_metric(settings, truth):
     """0 when the pipeline with these settings meets every requirement; else the largest shortfall
-    as a fraction of its requirement (1 = completely missed)."""
+    as a fraction of its requirement (1 = completely missed). Which requirements failed is left in
+    truth["failed"] for the hints (a subset of "features", "count", "precision", "budget", "coverage")."""
+    failed = truth["failed"] = set()
     if "max_features" in truth and settings["n_features"] > truth["max_features"]:
+        failed.add("features")
         return 1.0
     res = pipeline(truth["img1"], truth["img2"], **settings)
     ok = _correct(res, truth["H"])
-    gaps = [(truth["need"] - ok.sum()) / truth["need"],
-            (truth["precision"] - (ok.mean() if len(ok) else 0.0)) / truth["precision"]]
+    gaps = {"count": (truth["need"] - ok.sum()) / truth["need"],
+            "precision": (truth["precision"] - (ok.mean() if len(ok) else 0.0)) / truth["precision"]}
     if "budget" in truth:
-        gaps.append((res["flops"] - truth["budget"]) / truth["budget"])
+        gaps["budget"] = (res["flops"] - truth["budget"]) / truth["budget"]
     if "coverage" in truth:
         cells = _cell_of(res["x1"][ok], truth["img1"].shape[::-1], (4, 4)) if ok.any() else []
         seen = _cell_of(np.argwhere(truth["img1"] > 0)[::97, ::-1].astype(float), truth["img1"].shape[::-1], (4, 4))
         cov = len(np.unique(cells)) / len(np.unique(seen))
-        gaps.append((truth["coverage"] - cov) / truth["coverage"])
-    return float(max(0.0, *gaps))
+        gaps["coverage"] = (truth["coverage"] - cov) / truth["coverage"]
+    failed.update(k for k, g in gaps.items() if g > 0)
+    return float(max(0.0, *gaps.values()))
+
+
+def _failed(*requirements, settings=lambda s: True):
+    """Hint condition: exactly these requirements failed (in the order checked) and `settings` holds."""
+    def when(case, out):
+        return case.expected.get("failed") == set(requirements) and settings(out)
+    return when
+
+
+def _strict(ratio):
+    return lambda s: s["ratio"] is not None and s["ratio"] < ratio
+
+
+DEBUG_HINTS = {
+    "3.13": [
+        Hint("still too few correct matches, and your ratio is strict (< 0.7): across a 2× zoom descriptors "
+             "change more, so the true neighbour's d1/d2 is often 0.6-0.8 — relax the ratio to about 0.8.",
+             lambda c, s: "count" in c.expected.get("failed", ()) and _strict(0.7)(s)),
+        Hint("still too few correct matches: with few keypoints per image (n_features), few are detected at the "
+             "same scale in both views of a 2× zoom — detect more (about 2,000).",
+             lambda c, s: "count" in c.expected.get("failed", ()) and s["n_features"] < 1000),
+        Hint("enough matches but too many wrong ones (under 60 % correct): the ratio is too loose; about 0.8 "
+             "keeps the distinctive ones.", _failed("precision")),
+    ],
+    "3.14": [
+        Hint("too many wrong matches (under 90 % correct): on identical bays the second-nearest neighbour is as "
+             "close as the first, so no ratio separates right from wrong — verify the geometry: a RANSAC "
+             "homography (ransac_px) keeps only matches consistent with one plane.",
+             lambda c, s: "precision" in c.expected.get("failed", ()) and not s["ransac_px"]),
+        Hint("too few correct matches survive (need 20): the ratio is so strict, or the RANSAC threshold so tight, "
+             "that the true matches go too — about 0.7 and 3 px.", _failed("count")),
+        Hint("still wrong matches after RANSAC: a threshold of many pixels accepts repeated bays that almost fit; "
+             "use about 3 px.", lambda c, s: "precision" in c.expected.get("failed", ()) and bool(s["ransac_px"])),
+    ],
+    "3.15": [
+        Hint("over the budget: brute force costs n1 × n2 × 128 multiply-adds, so with 20,000 keypoints requested "
+             "it is the keypoint count, not the ratio test or mutual check, that must come down (2,000 × 2,000 × 128 "
+             "fits) — or use an approximate matcher (matcher='flann').", _failed("budget")),
+        Hint("within the budget, but too few correct matches (need 100): you cut more keypoints than the budget "
+             "requires — 2,000 per image fit.", lambda c, s: "count" in c.expected.get("failed", ())
+             and "budget" not in c.expected["failed"]),
+    ],
+    "3.16": [
+        Hint("more keypoints than the budget of 200 per image (n_features): the fix must spread the same budget.",
+             _failed("features")),
+        Hint("the correct matches cover too few of the image's regions (need 60 % of the 4 × 4 cells the views "
+             "share): the strongest keypoints all sit on the poster — distribute the budget over a grid "
+             "(grid=(8, 8)) instead of taking the strongest.",
+             lambda c, s: "coverage" in c.expected.get("failed", ()) and not s["grid"]),
+        Hint("the correct matches cover too few regions even with a grid: a coarse grid still lets the poster "
+             "take most of the budget; use about 8 × 8 cells.",
+             lambda c, s: "coverage" in c.expected.get("failed", ()) and bool(s["grid"])),
+    ],
+}
 
 
 def _debug_cases(generator, n=2):
@@ -985,6 +1247,7 @@ def true_homography(exercise_id: str, seed: int = 0) -> np.ndarray:
 TRAIN_TEXTURES = ("astronaut", "brick", "coffee", "grass", "gravel", "rocket", "page", "camera")
 TEST_TEXTURES = ("chelsea", "coins", "text", "immunohistochemistry")
 PATCH = 32
+TRAIN_STEPS = 40  # optimiser steps the check asks for: 4-5 s for the reference on 2 cores at load average 5-6
 
 
 def patch_pairs(rng: np.random.Generator, n: int, textures=TRAIN_TEXTURES) -> tuple[np.ndarray, np.ndarray]:
@@ -1060,7 +1323,7 @@ def cv_sift_patch_descriptor(P: np.ndarray) -> np.ndarray:
     return D / np.maximum(np.linalg.norm(D, axis=1, keepdims=True), 1e-12)
 
 
-def cv_train_descriptor(P1, P2, seconds=20):
+def cv_train_descriptor(P1, P2, steps=TRAIN_STEPS):
     """Stand-in for 3.19: no training; OpenCV's SIFT descriptor at the patch centre."""
     return cv_sift_patch_descriptor
 
@@ -1084,15 +1347,29 @@ def _frontier_metric(out, exp):
     return max(0.0, exp["raw"] + 0.1 - nn_accuracy(*out))
 
 
+FRONTIER_HINTS = [
+    # 0.05 above raw: an untrained network scores 0.34-0.36 and shuffled positives 0.32-0.41 (raw 0.39-0.46);
+    # any network that learns from true pairs is past 0.7 within 40 steps.
+    Hint("no better than raw pixels: either the network is not trained (does the loop take `steps` optimiser "
+         "steps, with loss.backward() and opt.step() each time?) or the positives are not pairs (draw one index "
+         "array per batch and use it for both, so P1[i] stays paired with P2[i]).",
+         lambda c, out: nn_accuracy(*out) <= c.expected["raw"] + 0.05),
+]
+
+
 def cases_frontier(rng) -> list[Case]:
     P1, P2 = patch_pairs(rng, 3000, TRAIN_TEXTURES)
     Q1, Q2 = patch_pairs(rng, 500, TEST_TEXTURES)
     raw = nn_accuracy(raw_patch_descriptor(Q1), raw_patch_descriptor(Q2))
-    # raw + 0.1: normalised pixels (~0.4) fail under ±30° rotation and 0.8-1.25 scale; a 3-layer CNN
-    # trained for 6 s with InfoNCE reaches ~0.65 on unseen textures, cv2's SIFT at the patch centre
-    # ~0.85. An untrained network or a wrong loss stays near or below raw.
-    return [Case(f"500 unseen patch pairs: NN accuracy vs raw pixels {raw:.2f} + 0.1", (P1, P2, 6.0), {"raw": raw},
-                 _frontier_metric, 0.0, "below target", convert=_convert_describe, info={"test": (Q1, Q2)})]
+    # raw + 0.1: normalised pixels (0.39-0.46) fail under ±30° rotation and 0.8-1.25 scale; a 3-layer
+    # CNN trained for TRAIN_STEPS = 40 Adam steps (batches of 256) with InfoNCE reaches 0.72-0.77 on
+    # unseen textures (9 seeds, incl. 4247240796 where a 6 s budget under load gave 0.53), 0.19-0.25
+    # above the target (100 steps: 0.78-0.83); cv2's SIFT at the patch centre ~0.85. Shuffled positives
+    # (0.32-0.41), an untrained network or raw unnormalised pixels stay below it. A fixed number of
+    # steps, not seconds, so the grade does not depend on how busy the machine is.
+    return [Case(f"500 unseen patch pairs: NN accuracy vs raw pixels {raw:.2f} + 0.1", (P1, P2, TRAIN_STEPS),
+                 {"raw": raw}, _frontier_metric, 0.0, "below target", convert=_convert_describe,
+                 info={"test": (Q1, Q2)})]
 
 
 # ============================================================ value questions ====
@@ -1149,13 +1426,13 @@ register(
              DISTRIBUTE_HINTS, fallback=gt_distribute, arg_names=("kps", "scores", "image_size", "n", "cells")),
     # ---------------------------------------------------------------- DEBUG
     Exercise("3.13", "Too few matches", "fix_too_few", "debug", 2, _debug_cases(debug_too_few),
-             fallback=fix_too_few_standin, timeout=30.0),
+             DEBUG_HINTS["3.13"], fallback=fix_too_few_standin, timeout=30.0),
     Exercise("3.14", "Wrong matches on repetitive texture", "fix_repetitive", "debug", 2,
-             _debug_cases(debug_repetitive), fallback=fix_repetitive_standin, timeout=30.0),
+             _debug_cases(debug_repetitive), DEBUG_HINTS["3.14"], fallback=fix_repetitive_standin, timeout=30.0),
     Exercise("3.15", "Matching too slow", "fix_too_slow", "debug", 2, _debug_cases(debug_too_slow),
-             fallback=fix_too_slow_standin, timeout=30.0),
+             DEBUG_HINTS["3.15"], fallback=fix_too_slow_standin, timeout=30.0),
     Exercise("3.16", "Features clustered on one region", "fix_clustered", "debug", 2, _debug_cases(debug_clustered),
-             fallback=fix_clustered_standin, timeout=30.0),
+             DEBUG_HINTS["3.16"], fallback=fix_clustered_standin, timeout=30.0),
     # ---------------------------------------------------------------- DESIGN
     numeric_question(
         "3.17", "Exhaustive matching of 100 images", "exhaustive_100", "design", [4950, 4950 * 512e6], 0.02, "rel.",
@@ -1171,5 +1448,5 @@ register(
         [value_hint([1e8, 10000 * 50, 1e6 * 20], "exhaustive: N(N − 1)/2 unordered pairs, not N².")]),
     # ---------------------------------------------------------------- FRONTIER
     Exercise("3.19", "A tiny learned descriptor, trained on CPU", "train_descriptor", "frontier", 3, cases_frontier,
-             fallback=cv_train_descriptor, timeout=60.0, arg_names=("P1", "P2", "seconds")),
+             FRONTIER_HINTS, fallback=cv_train_descriptor, timeout=60.0, arg_names=("P1", "P2", "steps")),
 )

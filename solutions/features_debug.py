@@ -27,6 +27,6 @@ def fix_too_slow(case: dict) -> dict:
 
 
 def fix_clustered(case: dict) -> dict:
-    """Features clustered on one poster → the strongest 300 keypoints are all on it → distribute
+    """Features clustered on one poster → the strongest 200 keypoints are all on it → distribute
     the same budget over an 8 x 8 grid."""
     return dict(case["settings"], grid=(8, 8))

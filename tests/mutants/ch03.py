@@ -36,6 +36,32 @@ def corners_threshold_only(img, n=500, method="harris", k=0.04, sigma=1.5, radiu
     return np.argwhere(R > 0.01 * R.max())[:, ::-1][:n].astype(float)
 
 
+def _corners_with(response):
+    def detect(img, n=500, method="harris", k=0.04, sigma=1.5, radius=3):
+        Sxx, Sxy, Syy = F.structure_tensor(img, sigma)
+        R = response(Sxx, Sxy, Syy, k, method)
+        return F.nms_peaks(R, n, radius, border=8)
+    return detect
+
+
+def _harris(Sxx, Sxy, Syy, k):
+    return Sxx * Syy - Sxy ** 2 - k * (Sxx + Syy) ** 2
+
+
+def _lambda_min(Sxx, Sxy, Syy):
+    return 0.5 * (Sxx + Syy) - np.sqrt(0.25 * (Sxx - Syy) ** 2 + Sxy ** 2)
+
+
+# gradient energy tr(M) = Ix² + Iy² as the response, for either method: an edge detector
+corners_trace = _corners_with(lambda Sxx, Sxy, Syy, k, m: Sxx + Syy)
+# R = det M + k tr(M)²: the sign of k flipped (Shi-Tomasi right)
+corners_k_flipped = _corners_with(lambda Sxx, Sxy, Syy, k, m: Sxx * Syy - Sxy ** 2 + k * (Sxx + Syy) ** 2
+                                  if m == "harris" else _lambda_min(Sxx, Sxy, Syy))
+# Shi-Tomasi with the larger eigenvalue, "+ sqrt" (Harris right)
+shi_tomasi_larger = _corners_with(lambda Sxx, Sxy, Syy, k, m: _harris(Sxx, Sxy, Syy, k) if m == "harris"
+                                  else 0.5 * (Sxx + Syy) + np.sqrt(0.25 * (Sxx - Syy) ** 2 + Sxy ** 2))
+
+
 # ----------------------------------------------------------------- 3.6 fast_detect
 
 def fast_no_nms(img, threshold=20, nms=True):
@@ -149,7 +175,24 @@ def dog_octave_coordinates(img, n_features=1000):
     return k
 
 
+def dog_constant_sigma(img, n_features=1000):
+    k = F.dog_detect(img, n_features)
+    k[:, 2] = 1.6  # the detector's base sigma reported for every keypoint
+    return k
+
+
 # ----------------------------------------------------------------- 3.10 sift_descriptors
+
+def sift_swapped_gradient(img, kps):
+    # gx, gy = np.gradient(P, axis=(1, 2)) — but np.gradient returns d/dy (axis 0 of the patch) first.
+    # Every angle becomes atan2(gx, gy) = 90° - theta: the dominant orientation and the patch's angles.
+    I = F._gray(img)
+    kps = np.asarray(kps, float)
+    pyr = F._pyramid(I, 5)
+    theta = (np.pi / 2 - F.dominant_orientation(pyr, kps)) % (2 * np.pi)
+    P = F._sample_patches(pyr, kps, theta, 18, 0.75)
+    return _histograms(P, swap=True)
+
 
 def sift_no_orientation(img, kps):
     I = F._gray(img)
@@ -249,12 +292,20 @@ def too_few_unchanged(case):
     return dict(case["settings"])
 
 
+def too_few_ransac_only(case):
+    return dict(case["settings"], ransac_px=3.0)  # verification removes wrong matches; it adds no right ones
+
+
 def repetitive_looser(case):
     return dict(case["settings"], ratio=0.99)
 
 
 def repetitive_unchanged(case):
     return dict(case["settings"])
+
+
+def repetitive_mutual_only(case):
+    return dict(case["settings"], mutual=True)  # the repeated bays are mutual nearest neighbours too
 
 
 def too_slow_unchanged(case):
@@ -265,6 +316,10 @@ def too_slow_few(case):
     return dict(case["settings"], n_features=100)
 
 
+def too_slow_ratio_only(case):
+    return dict(case["settings"], ratio=0.6)  # the ratio test runs after the N x N distances: no saving
+
+
 def clustered_more_features(case):
     return dict(case["settings"], n_features=2000)  # over the 200-keypoint budget
 
@@ -273,62 +328,75 @@ def clustered_unchanged(case):
     return dict(case["settings"])
 
 
+def clustered_mutual(case):
+    return dict(case["settings"], mutual=True, ratio=0.7)  # cleaner matches, still all on the poster
+
+
 # ----------------------------------------------------------------- 3.19 train_descriptor
 
-def descriptor_untrained(P1, P2, seconds=20):
-    return F.train_descriptor(P1, P2, seconds=0.0)  # the loop never runs: random convolutions
+def descriptor_untrained(P1, P2, steps=40):
+    return F.train_descriptor(P1, P2, steps=0)  # the loop never runs: random convolutions
 
 
-def descriptor_raw_pixels(P1, P2, seconds=20):
+def descriptor_raw_pixels(P1, P2, steps=40):
     def describe(P):
         X = np.asarray(P, float).reshape(len(P), -1)
         return X / np.linalg.norm(X, axis=1, keepdims=True)  # no mean removed, no learning
     return describe
 
 
-def descriptor_wrong_pairs(P1, P2, seconds=20):
+def descriptor_wrong_pairs(P1, P2, steps=40):
     # positives shuffled: P1[i] paired with a random P2[j] (an indexing slip when batching)
     perm = np.random.default_rng(0).permutation(len(P2))
-    return F.train_descriptor(P1, P2[perm], seconds=seconds)
+    return F.train_descriptor(P1, P2[perm], steps=steps)
 
 
 MUTANTS = [
     ("3.5", "no NMS: strongest pixels", corners_no_nms, "non-maximum suppression"),
     ("3.5", "(row, col) returned", corners_row_col, "(row, col)"),
-    ("3.5", "seed sketch: threshold, raster order", corners_threshold_only, None),
+    ("3.5", "seed sketch: threshold, raster order", corners_threshold_only, "non-maximum suppression"),
+    ("3.5", "gradient energy tr(M): an edge detector", corners_trace, "tr(M) alone"),
+    ("3.5", "Harris with +k tr(M)²", corners_k_flipped, "subtract k·tr(M)²"),
+    ("3.5", "Shi-Tomasi with the larger eigenvalue", shi_tomasi_larger, "the larger one is large on every edge"),
     ("3.6", "no NMS", fast_no_nms, "before non-maximum suppression"),
-    ("3.6", "FAST-12", fast_12, None),
-    ("3.6", "arc does not wrap", fast_no_wrap, None),
+    ("3.6", "FAST-12", fast_12, "12 contiguous pixels"),
+    ("3.6", "arc does not wrap", fast_no_wrap, "wraps around"),
     ("3.6", "(row, col) returned", fast_row_col, "(row, col)"),
     ("3.7", "no orientation", orb_no_orientation, "not turned"),
     ("3.7", "atan2(m10, m01)", orb_atan2_swapped, "atan2(m01, m10)"),
-    ("3.7", "bits not packed", orb_unpacked, None),
+    ("3.7", "bits not packed", orb_unpacked, "np.packbits"),
     ("3.7", "rotated backwards", orb_rotated_backwards, "wrong way"),
     ("3.8", "differing bytes", hamming_bytes, "differing bytes"),
     ("3.8", "XOR summed as numbers", hamming_xor_sum, "set bits"),
-    ("3.8", "first 64-bit word only", hamming_first_word, None),
+    ("3.8", "first 64-bit word only", hamming_first_word, "first 8 bytes"),
     ("3.9", "no sub-pixel refinement", dog_integer, "whole pixels"),
     ("3.9", "(row, col) returned", dog_row_col, "(row, col)"),
-    ("3.9", "octave coordinates not scaled", dog_octave_coordinates, None),
-    ("3.10", "no orientation", sift_no_orientation, None),
-    ("3.10", "scale ignored", sift_fixed_size, "zoomed"),
-    ("3.10", "not normalised", sift_unnormalised, None),
+    ("3.9", "octave coordinates not scaled", dog_octave_coordinates, "multiply them by 2^o"),
+    ("3.9", "constant sigma 1.6", dog_constant_sigma, "same sigma"),
+    ("3.10", "no orientation", sift_no_orientation, "even by exactly 180°"),
+    ("3.10", "gx, gy swapped (np.gradient order)", sift_swapped_gradient, "np.gradient returns (d/dy, d/dx)"),
+    ("3.10", "scale ignored", sift_fixed_size, "must grow with the keypoint's sigma"),
+    ("3.10", "not normalised", sift_unnormalised, "unit vectors"),
     ("3.11", "ratio on squared distances", match_squared_ratio, "squared distances"),
     ("3.11", "ratio inverted", match_ratio_inverted, "inverted"),
     ("3.11", "mutual ignored", match_no_mutual, "mutual=True"),
     ("3.11", "(j, i) returned", match_columns_swapped, "(i, j)"),
     ("3.12", "strongest n", distribute_top_n, "strongest n"),
-    ("3.12", "one per cell", distribute_one_per_cell, None),
-    ("3.12", "random", distribute_random, None),
-    ("3.13", "ratio loosened only", too_few_ratio_only, None),
-    ("3.13", "unchanged", too_few_unchanged, None),
-    ("3.14", "ratio loosened", repetitive_looser, None),
-    ("3.14", "unchanged", repetitive_unchanged, None),
-    ("3.15", "unchanged", too_slow_unchanged, None),
-    ("3.15", "too few features", too_slow_few, None),
-    ("3.16", "more features, over budget", clustered_more_features, None),
-    ("3.16", "unchanged", clustered_unchanged, None),
-    ("3.19", "untrained", descriptor_untrained, None),
-    ("3.19", "raw pixels", descriptor_raw_pixels, None),
-    ("3.19", "positives shuffled", descriptor_wrong_pairs, None),
+    ("3.12", "one per cell", distribute_one_per_cell, "distinct indices"),
+    ("3.12", "random", distribute_random, "leave many occupied cells empty"),
+    ("3.13", "ratio loosened only", too_few_ratio_only, "detect more"),
+    ("3.13", "unchanged", too_few_unchanged, "relax the ratio"),
+    ("3.13", "RANSAC added only", too_few_ransac_only, "relax the ratio"),
+    ("3.14", "ratio loosened", repetitive_looser, "verify the geometry"),
+    ("3.14", "unchanged", repetitive_unchanged, "verify the geometry"),
+    ("3.14", "mutual nearest neighbours only", repetitive_mutual_only, "verify the geometry"),
+    ("3.15", "unchanged", too_slow_unchanged, "keypoint count"),
+    ("3.15", "too few features", too_slow_few, "cut more keypoints"),
+    ("3.15", "ratio tightened only", too_slow_ratio_only, "keypoint count"),
+    ("3.16", "more features, over budget", clustered_more_features, "budget of 200"),
+    ("3.16", "unchanged", clustered_unchanged, "distribute the budget"),
+    ("3.16", "mutual + stricter ratio", clustered_mutual, "distribute the budget"),
+    ("3.19", "untrained", descriptor_untrained, "P1[i] stays paired"),
+    ("3.19", "raw pixels", descriptor_raw_pixels, "D <= 256"),
+    ("3.19", "positives shuffled", descriptor_wrong_pairs, "P1[i] stays paired"),
 ]
