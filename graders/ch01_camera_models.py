@@ -14,7 +14,8 @@ from scipy.optimize import least_squares
 
 from . import datasets, scene
 from .compare import max_abs, max_angle_deg, max_distance, relative
-from .engine import Case, Exercise, Hint, OutputError, as_array, as_pose, like, numeric_question, register, value_hint
+from .engine import (Case, Exercise, Hint, OutputError, as_array, as_pose, like, numeric_question, raised, register,
+                     value_hint)
 
 # ============================================================ oracles and ground truth ====
 
@@ -544,12 +545,19 @@ def _bug_no_tangential(case):
     return cv_project(X, K, R, t, d)
 
 
+def _bug_radial_k1_k2_only(case):
+    X, K, R, t, dist = case.args
+    return cv_project(X, K, R, t, np.array([dist[0], dist[1], 0, 0, 0], float))
+
+
 PROJECT_HINTS = [
     like(_bug_distort_after_K, "distortion applied after K? Distort the normalised coordinates x/z, y/z, then apply K."),
     like(_bug_R_transposed, "R looks transposed: the course's R maps world to camera (X_c = R X + t)."),
     like(_bug_p1_p2_swapped, "p1 and p2 are swapped in the tangential terms (OpenCV: x += 2 p1 x y + p2 (r² + 2x²))."),
     like(_bug_k3_order, "dist is (k1, k2, p1, p2, k3) — OpenCV's order, k3 last."),
     like(_bug_no_tangential, "tangential distortion (p1, p2) is missing."),
+    like(_bug_radial_k1_k2_only, "only k1 and k2 are applied: p1, p2 and k3 r⁶ are dropped — dist has five "
+         "coefficients (k1, k2, p1, p2, k3), and strong lenses need all of them."),
 ]
 
 
@@ -570,12 +578,21 @@ def _bug_undistort_radial_only(case):
     return cv_undistort(uv, K, d)
 
 
+def _undistort_without_centre(case, out):
+    """True if `out` undistorts uv / (fx, fy): the distorted point maps back to uv + (cx, cy)."""
+    uv, K, dist = case.args
+    back = cv_project(np.c_[out, np.ones(len(out))], K, np.eye(3), np.zeros(3), dist)
+    return float(np.median(np.linalg.norm(back - (uv + K[:2, 2]), axis=1))) < 0.5
+
+
 UNDISTORT_HINTS = [
     like(_bug_undistort_returns_pixels, "you returned pixels: return normalised coordinates (apply K⁻¹, no K at the end)."),
     like(_bug_undistort_radial_only, "the tangential terms are ignored: the inverse must undo p1, p2 too."),
     Hint("not converged: a few fixed-point steps are not enough for strong distortion near the corners — "
          "iterate to convergence or use Newton's method with the 2×2 Jacobian.",
          lambda case, out: case.name.startswith("strong") and case.metric(out, case.expected) < 50),
+    Hint("(cx, cy) was not subtracted: normalise with K⁻¹, x = (u − cx) / fx, y = (v − cy) / fy, before undoing "
+         "the distortion.", _undistort_without_centre),
 ]
 
 
@@ -594,6 +611,9 @@ FISHEYE_PROJECT_HINTS = [
          "the distortion polynomial D is not applied."),
     like(lambda c: cv_project(c.args[0], c.args[1], np.eye(3), np.zeros(3)),
          "that is the pinhole projection: a fisheye maps the angle θ, not tan θ, to the image radius."),
+    like(lambda c: _kb_model(*c.args, lambda r, z: r / z),
+         "the polynomial is evaluated at tan θ = r / z, the pinhole radius: Kannala-Brandt distorts the angle "
+         "itself, θ = atan2(r, z)."),
 ]
 
 
@@ -608,10 +628,21 @@ FISHEYE_UNPROJECT_HINTS = [
     like(_bug_unproject_tan, "rays past 90° point forward: build the ray from θ (sin θ, cos θ), not from tan θ."),
     like(lambda c: gt_fisheye_unproject(c.args[0], c.args[1], np.zeros(4)),
          "the distortion is not inverted: solve θ_d(θ) = |a| for θ (Newton), then build the ray."),
+    raised("unit length", "scale each ray to unit length: divide it by its norm, or build it as "
+           "(sin θ cos φ, sin θ sin φ, cos θ), which is unit by construction."),
 ]
+
+
+def _axes(name: str) -> np.ndarray:
+    """B for a convention: columns are its forward, right and up directions."""
+    return np.array([CONVENTIONS[name][k] for k in ("forward", "right", "up")], float).T
+
 
 FRAME_HINTS = [
     like(lambda c: gt_frame_change(*c.args).T, "transposed: that matrix maps dst → src."),
+    like(lambda c: _axes(c.args[1]).T @ _axes(c.args[0]),
+         "B_dstᵀ B_src combines the bases the wrong way round: v_c = B_c w turns body components w into "
+         "convention c, so eliminate w with v_dst = B_dst B_srcᵀ v_src."),
     Hint("right-handed ≠ left-handed: Unreal's (forward, right, up) = (+X, +Y, +Z) is left-handed, so a change "
          "between it and the others has det −1 — no rotation can do it.",
          lambda c, out: "unreal" in c.args and np.linalg.det(out) > 0),
@@ -624,12 +655,103 @@ def _rs_bug(case, **change):
     return gt_rolling_shutter(**args)
 
 
+def _rs_column_time(case):
+    """Rolling shutter with the readout time taken from the column u instead of the row."""
+    X, K, R, t, omega, v, lt = case.args
+    u = np.zeros(len(X))
+    for _ in range(50):  # |du/dτ|·line_time << 1: the fixed point converges in a few steps
+        tau = u * lt
+        Xc = np.einsum("nij,nj->ni", _so3_exp(tau[:, None] * omega[None]), X @ R.T + t) + tau[:, None] * v
+        uv = (Xc[:, :2] / Xc[:, 2:]) @ K[:2, :2].T + K[:2, 2]
+        u = uv[:, 0]
+    return uv
+
+
 ROLLING_HINTS = [
     like(lambda c: _rs_bug(c, omega=-c.args[4], v=-c.args[5]), "the motion has the wrong sign: "
          "R(τ) = Exp(τ ω) R, t(τ) = Exp(τ ω) t + τ v."),
     like(lambda c: _rs_bug(c, v=np.zeros(3)), "the translation velocity v is ignored."),
+    like(_rs_column_time, "the readout time comes from the column: the sensor reads row after row, so "
+         "τ = y · line_time with y the row, not the column x."),
     Hint("one step is not enough: the row depends on the time, which depends on the row — iterate until it settles.",
          lambda c, out: c.metric(out, c.expected) < 3.0),
+]
+
+
+def _file_kept(*keys):
+    """What leaving the calibration file's `keys` unchanged returns, as a hidden truth to compare with."""
+    return lambda c: dict(c.expected, **{k: c.args[0][k] for k in keys})
+
+
+def _only_k1(case, out):
+    return np.abs(np.asarray(out, float)[1:]).max() < 1e-12
+
+
+DISTORTION_FIX_HINTS = [
+    like(_file_kept("dist"), "the distortion is still the file's — another lens's numbers: re-fit k1, k2 "
+                "(and k3) to the chessboard views by least squares on the reprojection error."),
+    Hint("only k1 was fitted: a wide-angle lens bends the corners by k2 r⁴ (and k3 r⁶) too — fit k1 and k2 "
+         "together.", _only_k1),
+]
+
+
+def _stale_t(case, out):
+    return np.allclose(out[1], case.args[0]["t"], rtol=0, atol=1e-9)
+
+
+EXTRINSICS_FIX_HINTS = [
+    like(_file_kept("R", "t"), "the pose is still the file's: the mount moved — re-estimate R and t from X "
+                "and uv2 (solvePnP from the file's pose, or least squares on the reprojection error)."),
+    Hint("t is still the file's: the knock moved the mount as well as turning it (near points are off by more "
+         "than far ones) — estimate R and t together.", _stale_t),
+]
+
+
+def _centre_moved_backwards(case, out):
+    c_file, c_true = case.args[0]["K"][:2, 2], case.expected["K"][:2, 2]
+    return float(np.dot(out[:2, 2] - c_file, c_true - c_file)) < 0
+
+
+PRINCIPAL_POINT_FIX_HINTS = [
+    like(_file_kept("K"), "K is still the file's: (cx, cy) is not the image centre — the residuals "
+                "uv − projection are the same vector everywhere; move the principal point by it."),
+    Hint("the principal point moved the wrong way: the detections sit at projection + Δ, so add the mean residual "
+         "Δ = uv − projection to (cx, cy), not subtract it.", _centre_moved_backwards),
+]
+
+
+def _bug_gl_inverted_only(case):
+    poses = [(R_wc.T, -R_wc.T @ C) for R_wc, C in case.args[0]["poses_gl"]]
+    return dict(case.expected, poses=poses)
+
+
+FRAME_FIX_HINTS = [
+    like(_bug_gl_inverted_only, "the poses are inverted, but their camera axes are still OpenGL's (y up, "
+                "looking down −z): flip y and z too, R = (R_wc diag(1, −1, −1))ᵀ, t = −R C."),
+    raised("det [−-]1", "flipping one axis is a mirror (det −1), not a change of camera frame: OpenGL → OpenCV "
+           "flips both y and z, diag(1, −1, −1)."),
+]
+
+
+def _fit_is_initial_guess(case, out):
+    return abs(out[0] - case.args[4]) <= 1e-9 * case.args[4] and out[1] == 0
+
+
+def _bug_fit_linear_k1(case):
+    X_c, uv, cx, cy, f0 = case.args
+    x = X_c[:, :2] / X_c[:, 2:3]
+    r = np.linalg.norm(x, axis=1, keepdims=True)
+    f, fk1 = np.linalg.lstsq(np.c_[x.ravel(), (x * r).ravel()], (uv - [cx, cy]).ravel(), rcond=None)[0]
+    return {"f": f, "k1": fk1 / f}
+
+
+FIT_HINTS = [
+    Hint("(f, k1) is still the initial guess (f0, 0): the optimiser made no progress — check that each step "
+         "calls loss.backward() (inside the closure for LBFGS) and that you return the tensors it optimises.",
+         _fit_is_initial_guess),
+    Hint("k1 is still 0: only f was fitted — put k1 in the model f (1 + k1 r²) x_n and in the optimiser's "
+         "parameters.", lambda c, out: out[1] == 0),
+    like(_bug_fit_linear_k1, "the radial factor is 1 + k1 r: the model uses r² = x² + y², not r."),
 ]
 
 
@@ -673,16 +795,17 @@ register(
     # 0.3 px RMS: the fits see 0.1-0.2 px noise on dozens of points and land within ~0.05 px of
     # the truth; leaving the bug in costs 2-100 px.
     Exercise("1.11", "Edges warped", "fix_distortion", "debug", 2,
-             _debug_cases(debug_distortion, _metric_dist, 0.3, shape=(5,)), fallback=cv_fix_distortion),
+             _debug_cases(debug_distortion, _metric_dist, 0.3, shape=(5,)), DISTORTION_FIX_HINTS,
+             fallback=cv_fix_distortion),
     Exercise("1.12", "Cameras disagree", "fix_extrinsics", "debug", 2,
              _debug_cases(debug_extrinsics, _metric_extrinsics, 0.3, convert=lambda o, c: as_pose(o)),
-             fallback=cv_fix_extrinsics),
+             EXTRINSICS_FIX_HINTS, fallback=cv_fix_extrinsics),
     Exercise("1.13", "Constant offset", "fix_principal_point", "debug", 2,
              _debug_cases(debug_principal_point, _metric_K, 0.3, convert=_convert_K, shape=(3, 3)),
-             fallback=cv_fix_principal_point),
+             PRINCIPAL_POINT_FIX_HINTS, fallback=cv_fix_principal_point),
     Exercise("1.14", "Mirrored projections", "fix_frame_convention", "debug", 2,
              _debug_cases(debug_frame_convention, _metric_poses, 0.01, convert=_convert_poses),
-             fallback=gt_fix_frame_convention),
+             FRAME_FIX_HINTS, fallback=gt_fix_frame_convention),
     # ---------------------------------------------------------------- DESIGN
     numeric_question(
         "1.15", "Rolling-shutter skew", "rs_skew_px", "design", 800 * np.tan(np.radians(90 * 0.033)), 0.02 * 41.5,
@@ -703,7 +826,7 @@ register(
         "190° across 1280 px: f = 640/1.658 rad = 386 px, 6.7 px/° everywhere: 1.7× coarser, 2× the field."),
     # ---------------------------------------------------------------- FRONTIER
     Exercise("1.18", "A differentiable camera learns f and k1", "fit_focal_k1", "frontier", 3,
-             cases_fit_focal_k1, fallback=scipy_fit_focal_k1, timeout=30.0,
+             cases_fit_focal_k1, FIT_HINTS, fallback=scipy_fit_focal_k1, timeout=30.0,
              arg_names=("X_c", "uv", "cx", "cy", "f0")),
 )
 

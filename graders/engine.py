@@ -64,6 +64,14 @@ class Hint:
     raised: str | None = None
 
 
+def _magnitude(x: Any) -> float:
+    """Largest absolute entry of an array-like; 0 for what has none (a hidden-truth dict, a pose pair)."""
+    try:
+        return float(np.max(np.abs(np.asarray(x, float))))
+    except (TypeError, ValueError):
+        return 0.0
+
+
 def like(bug: Callable[[Case], Any], text: str, factor: float = 1.0, rel: float = 1e-9) -> Hint:
     """A hint that fires when the output matches what the mistake `bug(case)` would return:
     within the case's tolerance (times `factor`), plus `rel` of the bug's own magnitude, since
@@ -72,7 +80,7 @@ def like(bug: Callable[[Case], Any], text: str, factor: float = 1.0, rel: float 
     def when(case: Case, out: Any) -> bool:
         try:
             wrong = bug(case)
-            return case.metric(out, wrong) <= factor * case.tol + rel * float(np.max(np.abs(wrong)))
+            return case.metric(out, wrong) <= factor * case.tol + rel * _magnitude(wrong)
         except Exception:  # a hint model that does not apply to this output is simply silent
             return False
 
