@@ -59,9 +59,18 @@ class Hint:
     """A known mistake: `when(case, output)` is True if the output looks like that mistake; or, with
     `raised` (a regex), the mistake is recognised by the error it causes — an exception from the
     learner's code or an output the checks reject (see `raised()`)."""
-    text: str
+    text: str | Callable[[Case, Any], str]     # or text(case, output): a hint that quotes what it measured
     when: Callable[[Case, Any], bool] | None = None
     raised: str | None = None
+
+    def say(self, case: Case, out: Any) -> str:
+        """The hint's text for this case and output (out is None for a `raised` hint)."""
+        if not callable(self.text):
+            return self.text
+        try:
+            return str(self.text(case, out))
+        except Exception:  # a text that cannot be composed for this output must not cost the learner a hint
+            return ""
 
 
 def _magnitude(x: Any) -> float:
@@ -321,9 +330,9 @@ def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None) -> ExerciseRe
     return result
 
 
-def _error_hint(ex: Exercise, error_text: str) -> str:
+def _error_hint(ex: Exercise, case: Case, error_text: str) -> str:
     """The first `raised` hint whose pattern matches the error, or ''."""
-    return next((h.text for h in ex.hints if h.raised and re.search(h.raised, error_text)), "")
+    return next((h.say(case, None) for h in ex.hints if h.raised and re.search(h.raised, error_text)), "")
 
 
 def _raise(exc: Exception):
@@ -342,14 +351,14 @@ def _judge_case(ex: Exercise, fn: Callable, case: Case) -> CaseResult | None:
     if outcome.kind != "ok":
         row.message = outcome.error
         row.traceback = outcome.traceback
-        row.hint = _error_hint(ex, row.message + "\n" + row.traceback)
+        row.hint = _error_hint(ex, case, row.message + "\n" + row.traceback)
         return row
     try:
         out = (case.convert or as_array)(outcome.value, case)
         row.error = float(case.metric(out, case.expected))
     except OutputError as exc:
         row.message = str(exc)
-        row.hint = _error_hint(ex, row.message)
+        row.hint = _error_hint(ex, case, row.message)
         return row
     except Exception as exc:  # an output the metric cannot digest is a wrong output
         row.message = f"output could not be compared ({type(exc).__name__}: {exc})"
@@ -370,6 +379,6 @@ def _judge_case(ex: Exercise, fn: Callable, case: Case) -> CaseResult | None:
             except Exception:
                 fired = False
             if fired:
-                row.hint = hint.text
+                row.hint = hint.say(case, out)
                 break
     return row

@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from graders import Case, Exercise, check, grade, like, use
+from graders import Case, Exercise, Hint, check, grade, like, use
 from graders.engine import choice_question
 from graders.compare import max_abs, max_distance, up_to_scale, rotation_angle_deg, max_angle_deg
 from graders.sandbox import safe_call
@@ -192,3 +192,12 @@ def test_a_mistake_can_be_recognised_by_the_error_it_causes():
     assert "singular system" in grade(ex, singular).cases[0].hint
     assert "one row per point" in grade(ex, lambda x: 2 * x[:3]).cases[0].hint
     assert grade(ex, lambda x: 1 / 0).cases[0].hint == ""
+
+
+def test_a_hint_can_quote_what_it_measured():
+    def text(case, out):
+        return f"off by {np.max(np.abs(out - case.expected)):.1f} px everywhere: a constant offset?"
+
+    ex = Exercise("0.7", "double", "double", "code", 1, _double_cases, timeout=1.0,
+                  hints=[Hint(text, lambda case, out: True)])
+    assert "off by 5.0 px" in grade(ex, lambda x: 2 * x + 5).cases[0].hint
