@@ -19,3 +19,24 @@ exhaustive_100 = [100 * 99 / 2, 100 * 99 / 2 * 2000 * 2000 * 128]
 
 # 3.18  10k exhaustive, 10k with top-50 retrieval, 1M with top-20 learned retrieval
 pairs_at_scale = [10_000 * 9_999 / 2, 10_000 * 50, 1_000_000 * 20]
+
+# 3.20  s = 3 intervals per octave: s DoG levels searched, each with a DoG level above and below (s + 2 DoG
+# images, from s + 3 Gaussian images); k^s = 2; image i has sigma0 k^i, so image s has 2 sigma0
+_s = 3
+dog_octave = [_s + 3, _s + 2, 2 ** (1 / _s), _s]
+
+
+# 3.21  FAST-9: 9 contiguous circle pixels all brighter ("b") or all darker ("d"); the circle wraps around
+def _fast9(pattern: str, n: int = 9) -> bool:
+    ring = pattern + pattern[:n - 1]
+    return any(all(ring[i + j] == c for j in range(n)) for c in "bd" for i in range(len(pattern)))
+
+
+fast9_corners = ["corner" if _fast9(p) else "not"
+                 for p in ("sssddddddddddsss", "bbbbbsssssssbbbb", "bbbbbdbbbbbsssss", "ssddddddddssssbs",
+                           "bbbbbddddsssssss")]
+
+# 3.22  keep the nearest neighbour if d1 < rho d2
+ratio_decisions = ["keep" if d1 < rho * d2 else "reject"
+                   for d1, d2, rho in ((0.20, 0.50, 0.8), (0.10, 0.12, 0.8), (0.45, 0.70, 0.8), (0.30, 0.33, 0.8),
+                                       (0.50, 0.55, 1.0))]

@@ -14,7 +14,7 @@ import pytest
 import grader_checks as checks
 from graders import chapter, grade
 from graders import ch03_features as ch3
-from mutants.ch03 import MUTANTS
+from mutants.ch03 import MUTANTS, SLIPS
 from solutions import features, features_debug, features_questions
 
 SEEDS = [0, 1]
@@ -123,3 +123,28 @@ def test_every_code_and_debug_exercise_has_mutants():
 @pytest.mark.parametrize("exercise_id", [i for i, ex in EXERCISES.items() if ex.value])
 def test_value_hints_are_quiet_on_the_answer(exercise_id):
     checks.assert_value_hints_quiet(EXERCISES[exercise_id], reference(EXERCISES[exercise_id]))
+
+
+@pytest.mark.parametrize("exercise_id, name, answer, hint", SLIPS, ids=[f"{s[0]}-{s[1]}" for s in SLIPS])
+def test_value_slip_is_caught(exercise_id, name, answer, hint):
+    # A classic slip loses the point and the hint naming it fires (value questions have one case).
+    checks.assert_mutant_caught(EXERCISES[exercise_id], name, answer, hint, SEEDS[:1])
+
+
+def test_every_new_concept_question_has_slips():
+    for exercise_id in ("3.20", "3.21", "3.22"):
+        assert sum(s[0] == exercise_id for s in SLIPS) >= 3, exercise_id
+
+
+def test_notebook_states_the_numbers_the_grader_uses():
+    # The questions' numbers live in the grader (answers computed from them) and in the notebook's text.
+    import json
+    from pathlib import Path
+    nb = json.loads((Path(__file__).resolve().parents[1] / "notebooks" / "03_features_matching.ipynb").read_text())
+    text = {i: "".join(c["source"]) for i, c in enumerate(nb["cells"]) if c["cell_type"] == "markdown"}
+    q = {qid: next(t for t in text.values() if f"Question {qid} " in t) for qid in ("3.20", "3.21", "3.22")}
+    assert f"$s = {ch3._S_320}$" in q["3.20"] and f"$\\sigma_0 = {ch3._SIGMA0_320:g}$" in q["3.20"]
+    for pattern in ch3.FAST_PATTERNS_321:
+        assert f"`{pattern}`" in q["3.21"], pattern
+    for d1, d2, rho in ch3.RATIO_CASES_322:
+        assert f"| {d1:.2f} | {d2:.2f} | {rho:g} |" in q["3.22"], (d1, d2, rho)

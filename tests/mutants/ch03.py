@@ -400,3 +400,22 @@ MUTANTS = [
     ("3.19", "raw pixels", descriptor_raw_pixels, "D <= 256"),
     ("3.19", "positives shuffled", descriptor_wrong_pairs, "P1[i] stays paired"),
 ]
+
+
+# ----------------------------------------------------------------- value questions: classic slips
+# (exercise id, short name, wrong answer, hint fragment): each answer makes one slip, and the hint
+# naming it must fire (tests/test_ch03_graders.py::test_value_slip_is_caught).
+SLIPS = [
+    ("3.20", "s + 2 Gaussian images", [5, 4, 2 ** (1 / 3), 3], "count backwards"),
+    ("3.20", "as many DoG as Gaussian images", [6, 6, 2 ** (1 / 3), 3], "one fewer than the Gaussian"),
+    ("3.20", "k = 1 + 1/s", [6, 5, 1 + 1 / 3, 3], "k^s = 2"),
+    ("3.20", "k = sqrt(2)", [6, 5, 1.414, 3], "k^s = 2"),
+    ("3.20", "the last image seeds the next octave", [6, 5, 1.26, 5], "is i = s"),
+    ("3.21", "the arc does not wrap", ["corner", "not", "not", "not", "not"], "wraps around"),
+    ("3.21", "counted, not contiguous", ["corner", "corner", "corner", "not", "not"], "contiguous arc"),
+    ("3.21", "FAST-8", ["corner", "corner", "not", "corner", "not"], "FAST-8"),
+    ("3.21", "brighter and darker mixed", ["corner", "corner", "not", "not", "corner"], "all be brighter or all darker"),
+    ("3.22", "absolute threshold on d1", ["keep", "keep", "reject", "reject", "keep"], "not d1 itself"),
+    ("3.22", "ratio inverted: d2/d1 < rho", ["reject"] * 5, "inverted"),
+    ("3.22", "rho = 1 still filters", ["keep", "reject", "keep", "reject", "reject"], "switches the test off"),
+]
