@@ -526,6 +526,7 @@ def incremental_sfm(problem: dict, seed: int = 0, local_window: int = 6, global_
             # now allow (COLMAP's retriangulation); the images that failed may see more points.
             _refine_all(m, max_iter=20, refine="fk1")
             rescues += 1
+            failed_at.clear()                           # refined intrinsics and points: try them all again
             log(f"rescue round {rescues}: {m.has_X.sum()} points")
             continue
         if not cands:
