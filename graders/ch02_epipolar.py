@@ -649,11 +649,15 @@ def cases_five_point(rng) -> list[Case]:
     # Inside RANSAC, against pycolmap: 200 matches, 25 % outliers, 0.5 px. The grader's own LO-RANSAC
     # draws ~50-100 five-point samples and solves them with *your* function; a solver that is exact on
     # the cases above but fragile on some configurations shows up here. The rotation it finds is
-    # compared with the truth: pycolmap's LO-RANSAC lands within ~0.05°; tolerance 0.3°.
+    # compared with the truth: pycolmap's LO-RANSAC lands within ~0.05°. Tolerance 0.3°, or twice what the
+    # same RANSAC reaches with OpenCV's 5-point solver on this scene: on about 1 scene in 75 the grader's
+    # RANSAC itself settles 0.3-0.8° off whatever exact solver it is given (seeds 87, 129 of 150).
     s = two_view(rng, 200, noise=0.5, outliers=0.25, same_K=True, held_out=1)
     col = _colmap_essential(s)
+    R_cv = _essential_ransac(s, cv_five_point)[1]
+    tol = max(0.3, 2 * rotation_angle_deg(R_cv, s["R"])) if R_cv is not None else 0.3
     out.append(Case(f"inside the grader's RANSAC, 200 matches (pycolmap: {col['err_colmap']:.3f}°)", (),
-                    {"R": s["R"]}, lambda R, exp: rotation_angle_deg(R, exp["R"]), 0.3, "° rotation error",
+                    {"R": s["R"]}, lambda R, exp: rotation_angle_deg(R, exp["R"]), tol, "° rotation error",
                     call=lambda solver, s=s: _essential_ransac(s, solver)[1], convert=_convert_rotation,
                     info={"scene": s}))
     return out
