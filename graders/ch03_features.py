@@ -640,8 +640,10 @@ def cases_dog(rng) -> list[Case]:
                      (str(rng.choice(["astronaut", "grass", "chelsea"])), float(rng.uniform(40, 140)))]:
         img1, img2, H = homography_pair(rng, tex, rotate_deg=rot)
         name = tex + (f" turned {rot:.0f}°" if rot else "")
+        # 0.32 for the DoG: ours (no initial doubling) trails cv2.SIFT's by up to 0.29 on synthetic views
+        # (1 draw in 30, coffee); the coordinate mistakes still lose 0.4-0.8.
         out.append(_detector_pair_case(name, img1, img2, H, n, lambda im: cv_dog(im, n),
-                                       _both(n)(img1, img2)))
+                                       _both(n)(img1, img2), rep_tol=0.32))
         out[-1].convert = _pair_of(3)
     if datasets.available("homography"):
         g1, g3, H = graf_half()

@@ -1216,13 +1216,13 @@ def cases_bundle_adjust(rng) -> list[Case]:
                     Lazy(lambda a=args: colmap_bundle_adjust(*a, loss="cauchy", scale=2.0, tight=True)[2][-1]),
                     _metric_cost, 1e-4, "rel. excess", convert=_convert_ba, kwargs={"loss": "cauchy", "scale": 2.0},
                     info={"args": args, "loss": "cauchy", "scale": 2.0}))
-    # 4) 10 % outliers with loss='huber', scale=1 px: judged against the truth (held_out_rms). 2 px:
+    # 4) 10 % outliers with loss='huber', scale=1 px: judged against the truth (held_out_rms). 6 px:
     #    Huber still gives each outlier a bounded but linear pull, so the robust optimum sits 0.24-0.78 px
-    #    (held-out RMS) from the truth over 6 seeds, for the reference and for Ceres alike; plain L2
-    #    (the loss ignored) lands 38-145 px away.
+    #    (held-out RMS) from the truth on most draws, for the reference and for Ceres alike, and up to
+    #    3.5 px on an unlucky one (1 in 30); plain L2 (the loss ignored) lands 38-145 px away.
     prob = make_problem(rng, n_cams=8, n_points=120, noise=0.5, outliers=0.10)
     out.append(Case("10 % outliers, loss='huber', scale=1: the truth recovered", problem_args(prob), prob["truth"],
-                    lambda o, truth: held_out_rms(o[0], truth), 2.0, "px RMS", convert=_convert_ba,
+                    lambda o, truth: held_out_rms(o[0], truth), 6.0, "px RMS", convert=_convert_ba,
                     kwargs={"loss": "huber", "scale": 1.0}))
     # 5) fix_gauge=True: camera 0's pose and camera 1's chosen translation component must not move
     #    (exactly: to 1e-9), and the cost must still reach scipy's (gauge fixing costs nothing).
