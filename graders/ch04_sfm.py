@@ -440,9 +440,10 @@ def cases_p3p(rng) -> list[Case]:
                 break
         exp = dict(solutions=sols, X=s["X"], x=s["x"], K=s["K"], depth=s["depth"], R=s["R"], t=s["t"])
         # Each of OpenCV's solutions (P3P and AP3P agree to 1e-5) must be present (matched regardless of
-        # order), and each returned pose must reproject the three points: 1e-4 (° or px). Exact float64
-        # solvers agree to ~1e-9; a root mix-up or a spurious root is off by degrees or pixels.
-        out.append(Case(f"{name} ({len(sols)} valid)", (s["X"], s["x"], s["K"]), exp, _metric_p3p, 1e-4,
+        # order), and each returned pose must reproject the three points: 1e-3 (° or px). Exact float64
+        # solvers agree to ~1e-9, but two nearly equal roots of the quartic leave ~4e-4 (1 draw in 30);
+        # a root mix-up or a spurious root is off by degrees or pixels.
+        out.append(Case(f"{name} ({len(sols)} valid)", (s["X"], s["x"], s["K"]), exp, _metric_p3p, 1e-3,
                         "(° / px)", convert=_convert_p3p))
     return out
 
@@ -1469,9 +1470,9 @@ def uncalibrated_sfm_scene(rng, n_cams: int = 7, n_points: int = 400, width: int
 
 
 def focal_error(rec: dict, truth: dict) -> float:
-    """Largest relative focal-length error |f / f_true - 1| over the registered cameras (1.0 without any)."""
+    """Median relative focal-length error |f / f_true - 1| over the registered cameras (1.0 without any)."""
     errs = [abs(rec["K"][i][0, 0] / truth["Ks"][i][0, 0] - 1) for i in rec["cameras"]]
-    return float(max(errs)) if errs else 1.0
+    return float(np.median(errs)) if errs else 1.0
 
 
 def uncalibrated_sfm_cases(rng) -> list[Case]:
@@ -1487,12 +1488,14 @@ def uncalibrated_sfm_cases(rng) -> list[Case]:
         Case(f"K unknown: {n} cameras, focal lengths 0.54-1.14 × the prior, radial k1 -0.12 to 0.02: fraction of "
              "cameras not registered", (), truth, lambda rec, exp: 1.0 - recon_errors(rec, exp)["registered"], 0.0,
              "", convert=_convert_recon_intrinsics, call=call, info=info),
-        # rotations: 0.1° as with K known (correct pipelines ≤ 0.037°, focal never refined ≥ 0.42°)
+        # rotations: 0.3° (correct pipelines ≤ 0.037° on most draws, up to 0.18° on 2 draws in 30 where one
+        # camera's focal length is poorly constrained; focal never refined ≥ 0.42°)
         Case("K unknown: largest rotation error after Sim(3) alignment", (), truth,
-             lambda rec, exp: recon_errors(rec, exp)["rot"], 0.1, "°", convert=_convert_recon_intrinsics,
+             lambda rec, exp: recon_errors(rec, exp)["rot"], 0.3, "°", convert=_convert_recon_intrinsics,
              call=call, info=info),
-        # focal lengths: 3 % (correct pipelines ≤ 0.4 %)
-        Case("K unknown: largest focal-length error |f / f_true - 1|", (), truth, focal_error, 0.03, "",
+        # focal lengths, median over the cameras: 3 % (correct pipelines ≤ 0.4 %, though one camera in 7 can
+        # be far off on an unlucky draw; focal never refined: 64-81 %)
+        Case("K unknown: median focal-length error |f / f_true - 1|", (), truth, focal_error, 0.03, "",
              convert=_convert_recon_intrinsics, call=call, info=info),
     ]
 
