@@ -1986,25 +1986,22 @@ def colmap_recon(rng, n_cams: int = 4, n_points: int = 80) -> dict:
 
 
 def _convert_recon_io(out, case):
-    if not isinstance(out, dict) or not {"cameras", "points", "tracks"} <= set(out):
-        raise OutputError('expected a dict with "cameras", "points" and "tracks" (and "keypoints")')
+    """`_convert_recon` plus each camera's K (3, 3) and radial k (k1, k2; missing entries are 0)."""
+    rec = _convert_recon(out, case)
     cams = {}
     for i, c in out["cameras"].items():
         try:
-            R, t = as_pose((c["R"], c["t"]))
             K = np.asarray(c["K"], float).reshape(3, 3)
             k = np.asarray(c.get("k", np.zeros(2)), float).reshape(-1)[:2]
-        except (OutputError, KeyError, ValueError) as e:
+        except (KeyError, TypeError, ValueError) as e:
             raise OutputError(f"camera {i}: {e}") from None
+        R, t = rec["cameras"][int(i)]
         cams[int(i)] = {"R": R, "t": t, "K": K, "k": np.r_[k, np.zeros(2 - len(k))]}
     want = set(case.info["recon"]["cameras"])
     if set(cams) != want:
         raise OutputError(f"cameras {sorted(cams)} read; the model has images {sorted(want)} (index = IMAGE_ID − 1)")
-    P = _points(out["points"], None, "points")
-    if len(out["tracks"]) != len(P):
-        raise OutputError(f"{len(P)} points but {len(out['tracks'])} tracks")
-    return {"cameras": cams, "points": P, "tracks": [{int(i): int(k) for i, k in tr.items()} for tr in out["tracks"]],
-            "keypoints": out.get("keypoints")}
+    return {"cameras": cams, "points": rec["points"],
+            "tracks": [{int(i): int(k) for i, k in tr.items()} for tr in rec["tracks"]], "keypoints": out.get("keypoints")}
 
 
 def _io_pose_error(rec, exp) -> float:
