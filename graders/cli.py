@@ -18,7 +18,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from .engine import CHAPTER_MODULES, chapter
+from .chapters import READY
+from .engine import chapter
 from .extract import extract
 from .report import ExerciseResult, CaseResult, write_gradescope
 
@@ -28,11 +29,11 @@ HARD_LIMIT = 120.0  # seconds per exercise before its worker is killed; generous
 def chapters_of(path: Path, source: str) -> list[str]:
     """Chapters a file belongs to: from a `NN_` file-name prefix, else from the names it defines."""
     m = re.match(r"(\d+)_", path.name)
-    if m and str(int(m.group(1))) in CHAPTER_MODULES:
+    keys = [c.key for c in READY]
+    if m and str(int(m.group(1))) in keys:
         return [str(int(m.group(1)))]
-    found = [n for n in CHAPTER_MODULES
-             if any(re.search(rf"\b{re.escape(ex.name)}\b", source) for ex in chapter(n))]
-    return found or list(CHAPTER_MODULES)
+    found = [n for n in keys if any(re.search(rf"\b{re.escape(ex.name)}\b", source) for ex in chapter(n))]
+    return found or keys
 
 
 def _from_dict(d: dict) -> ExerciseResult:
@@ -106,7 +107,7 @@ def check_file(path: str | Path, seed: int | None = None, only: list[str] | None
             exercises += chapter(n)
         extracted = extract(path, {ex.name for ex in exercises if ex.value})
     else:
-        for n in CHAPTER_MODULES:
+        for n in (c.key for c in READY):
             exercises += chapter(n)
     if only:
         exercises = [ex for ex in exercises if ex.id in only]

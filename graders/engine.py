@@ -18,14 +18,12 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
+from .chapters import by_number
+from .convert import OutputError, as_array, as_mask, as_points, as_pose, as_poses, as_rotation, as_sim3  # noqa: F401 (re-exported)
 from .report import CaseResult, ExerciseResult
 from .sandbox import safe_call
 
 KINDS = ("concept", "code", "debug", "design", "frontier")
-
-
-class OutputError(ValueError):
-    """What the learner returned cannot be judged (wrong type, shape, NaN, ...)."""
 
 
 @dataclass
@@ -39,6 +37,8 @@ class Case:
     `call(fn)` runs it inside grader machinery (e.g. the learner's solver inside the grader's
     RANSAC, or the learner's RANSAC with a callback that counts samples) and returns the output.
     It runs under the same sandbox (time limit, captured output, exceptions reported).
+    key: a stable identifier (hints and tests select cases by `key` or `tags`, never by the display
+    `name`, so renaming a row cannot switch a hint off).
     """
     name: str
     args: tuple
@@ -52,6 +52,13 @@ class Case:
     convert: Callable[[Any, "Case"], Any] | None = None
     info: dict = field(default_factory=dict)  # anything hints need (e.g. the scene)
     call: Callable[[Callable], Any] | None = None
+    key: str = ""                  # stable identifier for hints and tests; defaults to a slug of `name`
+    tags: tuple[str, ...] = ()     # properties hints select on ("noise", "planar", ...), never display text
+
+    def __post_init__(self):
+        if not self.key:
+            self.key = re.sub(r"[^a-z0-9]+", "-", self.name.lower()).strip("-")
+        self.tags = tuple(self.tags)
 
 
 @dataclass
@@ -186,16 +193,55 @@ def choice_question(id: str, title: str, name: str, kind: str, answers: Sequence
                     hints=[hint(i, text) for i, text in (hints or {}).items()], explanation=explanation)
 
 
+# ---------------------------------------------------------------- shared case builders
+
+def debug_cases(generator: Callable[[np.random.Generator], tuple[dict, Any]], metric: Callable[[Any, Any], float],
+                tol: float, *, unit: str = "px RMS", convert: Callable | None = None,
+                shape: tuple[int, ...] | None = None, n: int = 3, label: str = "hidden problem",
+                info: Callable[[dict, Any], dict] | None = None) -> Callable[[np.random.Generator], Iterable[Case]]:
+    """Cases of a DEBUG exercise: `n` broken artefacts drawn by `generator(rng) -> (case, truth)`; the
+    learner's fix of `case` is judged by `metric(fixed, truth)` in `unit` against `tol`.
+    info(case, truth) -> what the hints need. Built lazily: an untouched stub builds only the first."""
+    def cases(rng: np.random.Generator) -> Iterable[Case]:
+        for i in range(n):
+            case, truth = generator(rng)
+            yield Case(f"{label} {i + 1}", (case,), truth, metric, tol, unit, shape=shape, convert=convert,
+                       info=info(case, truth) if info else {}, key=f"{label.replace(' ', '-')}-{i + 1}")
+    return cases
+
+
+def debug_practice(generators: dict[str, Callable[..., tuple[dict, Any]]]) -> Callable[..., dict]:
+    """`debug_case(exercise_id, seed=0, **kw)` for a notebook: a broken artefact to practise on (its
+    hidden truth stays in the grader; the check draws fresh ones)."""
+    def debug_case(exercise_id: str, seed: int = 0, **kw) -> dict:
+        if exercise_id not in generators:
+            raise KeyError(f"no DEBUG exercise {exercise_id!r}; this chapter has {', '.join(generators)}")
+        case, _ = generators[exercise_id](np.random.default_rng(seed), **kw)
+        return case
+    debug_case.__doc__ = f"A broken artefact of DEBUG exercise {', '.join(generators)} to practise on."
+    return debug_case
+
+
+def shared_run(run: Callable[[Callable], Any]) -> Callable[[Callable], Any]:
+    """Run the learner's code once and judge the output several ways: `run(fn)` is called on the first
+    case that uses it and its output (or its exception) is memoised for the others of the same draw.
+    Pass the result as `Case(call=...)` to every case that judges that one run."""
+    memo: dict[int, tuple[bool, Any]] = {}
+
+    def call(fn: Callable) -> Any:
+        if id(fn) not in memo:
+            try:
+                memo[id(fn)] = (True, run(fn))
+            except Exception as exc:   # the same error is reported on every case that judges this run
+                memo[id(fn)] = (False, exc)
+        ok, value = memo[id(fn)]
+        if not ok:
+            raise value
+        return value
+    return call
+
+
 _REGISTRY: dict[str, Exercise] = {}
-CHAPTER_MODULES = {  # chapter number -> module that defines its exercises
-    "1": "graders.ch01_camera_models",
-    "2": "graders.ch02_epipolar",
-    "3": "graders.ch03_features",
-    "4": "graders.ch04_sfm",
-    "5": "graders.ch05_bundle_adjustment",
-}
-
-
 def register(*exercises: Exercise) -> None:
     for ex in exercises:
         _REGISTRY[ex.id] = ex
@@ -203,17 +249,15 @@ def register(*exercises: Exercise) -> None:
 
 def chapter(number: str | int) -> list[Exercise]:
     """All exercises of a chapter, in order."""
-    number = str(int(number))
-    importlib.import_module(CHAPTER_MODULES[number])
+    number = by_number(number).key
+    importlib.import_module(by_number(number).grader)
     ids = [i for i in _REGISTRY if i.split(".")[0] == number]
     return [_REGISTRY[i] for i in sorted(ids, key=lambda i: [int(p) for p in i.split(".")])]
 
 
 def get(exercise_id: str) -> Exercise:
-    number = exercise_id.split(".")[0]
-    if number not in CHAPTER_MODULES:
-        raise KeyError(f"no chapter {number!r}; chapters: {', '.join(CHAPTER_MODULES)}")
-    importlib.import_module(CHAPTER_MODULES[number])
+    number = by_number(exercise_id.split(".")[0]).key   # KeyError naming the chapters
+    importlib.import_module(by_number(number).grader)
     if exercise_id not in _REGISTRY:
         known = ", ".join(e.id for e in chapter(number))
         raise KeyError(f"no exercise {exercise_id!r}; chapter {number} has {known}")
@@ -221,59 +265,6 @@ def get(exercise_id: str) -> Exercise:
 
 
 # ---------------------------------------------------------------- judging -----------
-
-def as_array(out: Any, case: Case) -> np.ndarray:
-    """Default conversion: a finite float array of exactly `case.shape`."""
-    if out is None:
-        raise OutputError("returned None: is a `return` missing?")
-    try:
-        raw = np.asarray(out)
-        if np.iscomplexobj(raw):
-            raise OutputError("returned complex numbers: a square root or eigenvalue of a negative value?")
-        arr = raw.astype(float)
-    except OutputError:
-        raise
-    except Exception:
-        raise OutputError(f"returned a {type(out).__name__}, expected a numeric array") from None
-    if case.shape is not None and arr.shape != tuple(case.shape):
-        want = tuple(case.shape)
-        why = " (transposed?)" if arr.shape == want[::-1] and len(want) == 2 else ""
-        raise OutputError(f"returned shape {arr.shape}, expected {want}{why}")
-    bad = ~np.isfinite(arr)
-    if bad.any():
-        raise OutputError(f"returned {int(bad.sum())} non-finite value(s) (NaN or inf) out of {arr.size}")
-    return arr
-
-
-def as_rotation(R: Any, what: str = "R") -> np.ndarray:
-    """A learner's rotation as a finite (3, 3) array in SO(3), or an OutputError that says what is wrong."""
-    try:
-        R = np.asarray(R, float)
-    except (TypeError, ValueError):
-        raise OutputError(f"{what} must be a (3, 3) numeric array") from None
-    if R.shape != (3, 3) or not np.isfinite(R).all():
-        raise OutputError(f"{what} must be a finite (3, 3) array, got shape {R.shape}")
-    if abs(np.linalg.det(R) + 1) < 1e-3:
-        raise OutputError(f"{what} has det −1: a reflection, not a rotation — fix the sign (det(U Vᵀ) = +1)")
-    if np.abs(R.T @ R - np.eye(3)).max() > 1e-6 or abs(np.linalg.det(R) - 1) > 1e-6:
-        raise OutputError(f"{what} is not a rotation (Rᵀ R = I, det R = +1): project it onto SO(3) with an SVD")
-    return R
-
-
-def as_pose(out: Any) -> tuple[np.ndarray, np.ndarray]:
-    """A learner's pose (R, t): R in SO(3), t a finite (3,) array (world-to-camera, x_c = R X + t)."""
-    if out is None:
-        raise OutputError("returned None: is a `return` missing?")
-    try:
-        R, t = out
-        t = np.asarray(t, float).reshape(-1)
-    except Exception:
-        raise OutputError("expected a pair (R, t) with R: (3, 3) and t: (3,)") from None
-    R = as_rotation(R)
-    if t.shape != (3,) or not np.isfinite(t).all():
-        raise OutputError(f"t must be a finite (3,) array, got shape {t.shape}")
-    return R, t
-
 
 def _not_attempted(value: Any) -> bool:
     return value is None or value is Ellipsis
@@ -300,9 +291,10 @@ def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None) -> ExerciseRe
     # (real photos, a library run) only once the learner's code has got that far.
     weights = []
     try:
-        cases = iter(ex.cases(np.random.default_rng(seed)))
+        drawn = ex.cases(np.random.default_rng(seed))
     except Exception as exc:  # a broken case generator is our bug, not the learner's; say so
-        cases = iter(_raise(exc))
+        drawn = _raise(exc)
+    cases = iter(drawn)
     while True:
         try:
             case = next(cases, None)
@@ -312,13 +304,18 @@ def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None) -> ExerciseRe
             return result
         if case is None:
             break
-        row = _judge_case(ex, fn, case)
-        if row is None:  # NotImplementedError on a case: the whole exercise is not attempted
+        judged = _judge_case(ex, fn, case)
+        if judged is None:  # NotImplementedError on a case: the whole exercise is not attempted
             result.status, result.cases = "not_attempted", []
             result.message = "raises NotImplementedError: not attempted"
             return result
+        row, kind = judged
         result.cases.append(row)
         weights.append(case.weight)
+        if kind == "timeout":
+            # One endless loop costs one time limit, not one per case: the rest are reported, not run.
+            _stop_after_timeout(result, weights, drawn, cases, len(result.cases), ex.timeout)
+            break
     for row, weight in zip(result.cases, weights):
         row.max_points = ex.points * weight / sum(weights)
         row.points = row.max_points if row.passed else 0.0
@@ -328,6 +325,22 @@ def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None) -> ExerciseRe
     if ex.explanation:
         result.explanation = ex.explanation
     return result
+
+
+def _stop_after_timeout(result: ExerciseResult, weights: list[float], drawn: Any, rest: Iterable[Case],
+                        k: int, timeout: float) -> None:
+    """Rows for the cases after a time-out in case k: listed by name when the cases were a list (cheap),
+    one row for the rest when they are built lazily (building them may cost a reconstruction)."""
+    why = f"not run: stopped after a time-out in case {k}"
+    if isinstance(drawn, (list, tuple)):
+        for case in rest:
+            result.cases.append(CaseResult(name=case.name, tol=case.tol, unit=case.unit, message=why))
+            weights.append(case.weight)
+    else:
+        result.cases.append(CaseResult(name="remaining cases", message=why))
+        weights.append(float(np.mean(weights)))
+    result.message = (f"case {k} exceeded the time limit of {timeout:g} s "
+                      "(an endless loop, or far too slow?); the remaining cases were not run")
 
 
 def _error_hint(ex: Exercise, case: Case, error_text: str) -> str:
@@ -340,7 +353,9 @@ def _raise(exc: Exception):
     yield  # a generator that raises on the first next()
 
 
-def _judge_case(ex: Exercise, fn: Callable, case: Case) -> CaseResult | None:
+def _judge_case(ex: Exercise, fn: Callable, case: Case) -> tuple[CaseResult, str] | None:
+    """The row for one case and the kind of outcome (ok | exception | timeout | exit); None if the
+    learner's code raised NotImplementedError."""
     row = CaseResult(name=case.name, tol=case.tol, unit=case.unit)
     target = fn if case.call is None else (lambda *args, **kwargs: case.call(fn))
     outcome = safe_call(target, case.args, case.kwargs, timeout=ex.timeout, names=ex.arg_names)
@@ -352,20 +367,20 @@ def _judge_case(ex: Exercise, fn: Callable, case: Case) -> CaseResult | None:
         row.message = outcome.error
         row.traceback = outcome.traceback
         row.hint = _error_hint(ex, case, row.message + "\n" + row.traceback)
-        return row
+        return row, outcome.kind
     try:
         out = (case.convert or as_array)(outcome.value, case)
         row.error = float(case.metric(out, case.expected))
     except OutputError as exc:
         row.message = str(exc)
         row.hint = _error_hint(ex, case, row.message)
-        return row
+        return row, outcome.kind
     except Exception as exc:  # an output the metric cannot digest is a wrong output
         row.message = f"output could not be compared ({type(exc).__name__}: {exc})"
-        return row
+        return row, outcome.kind
     if not np.isfinite(row.error):
         row.error, row.message = None, "error is not finite"
-        return row
+        return row, outcome.kind
     row.passed = row.error <= case.tol
     if outcome.mutated:
         row.passed = False
@@ -381,4 +396,4 @@ def _judge_case(ex: Exercise, fn: Callable, case: Case) -> CaseResult | None:
             if fired:
                 row.hint = hint.say(case, out)
                 break
-    return row
+    return row, outcome.kind
