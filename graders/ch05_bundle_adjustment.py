@@ -29,32 +29,14 @@ from scipy.spatial.transform import Rotation
 
 from . import datasets, scene
 from .compare import max_abs, relative
+from .oracles.bundle_adjust import bal_cost, gauge_mask, scipy_bundle_adjust
+from .oracles.bundle_adjust import bal_project as gt_project
 from .engine import Case, Exercise, Hint, OutputError, as_array, like, numeric_question, raised, register, value_hint
 
 F = np.diag([1.0, -1.0, -1.0])  # OpenCV camera axes <-> BAL camera axes (both ways: F = F^-1)
 
 
 # ============================================================ the BAL camera (oracle) ====
-
-def gt_project(cameras: np.ndarray, points: np.ndarray, cam_idx: np.ndarray, pt_idx: np.ndarray) -> np.ndarray:
-    """BAL projection with scipy's rotations: (M, 2) pixels (depth sign ignored, as BAL does)."""
-    cameras, points = np.asarray(cameras, float), np.asarray(points, float)
-    c = cameras[cam_idx]
-    P = Rotation.from_rotvec(c[:, :3]).apply(points[pt_idx]) + c[:, 3:6]
-    with np.errstate(divide="ignore", invalid="ignore"):  # a point at depth 0 projects to inf/NaN
-        p = -P[:, :2] / P[:, 2:3]
-    r2 = np.sum(p**2, axis=1)
-    return (c[:, 6] * (1 + c[:, 7] * r2 + c[:, 8] * r2**2))[:, None] * p
-
-
-def bal_cost(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", scale: float = 1.0) -> float:
-    """0.5 sum_k rho(|r_k|^2) over all observations, with the BAL formula (Ceres' robust convention)."""
-    s = np.sum((gt_project(cameras, points, cam_idx, pt_idx) - obs) ** 2, axis=1)
-    c2 = float(scale) ** 2
-    rho = {"linear": lambda: s, "huber": lambda: np.where(s <= c2, s, 2 * np.sqrt(c2 * s) - c2),
-           "cauchy": lambda: c2 * np.log1p(s / c2)}[loss]()
-    return 0.5 * float(np.sum(rho))
-
 
 def gt_read_bal(path) -> tuple[np.ndarray, ...]:
     """Parse a BAL file with numpy's reader: (cameras, points, cam_idx, pt_idx, obs)."""
@@ -345,82 +327,12 @@ def held_out_rms(cameras: np.ndarray, truth: dict, n: int = 300, seed: int = 7) 
 
 # ============================================================ scipy / pycolmap bundle adjusters ====
 
-def gauge_mask(cameras: np.ndarray) -> np.ndarray:
-    """(nc, 9) True where `fix_gauge` holds a camera parameter: camera 0's w and t, and the
-    translation component k of camera 1 with the largest |t1 - R1 R0^T t0|_k (the direction in
-    which a scale change that keeps camera 0 moves camera 1)."""
-    cameras = np.asarray(cameras, float)
-    fixed = np.zeros(cameras.shape, bool)
-    fixed[0, :6] = True
-    if len(cameras) > 1:
-        R0, R1 = Rotation.from_rotvec(cameras[:2, :3])
-        rel = cameras[1, 3:6] - (R1 * R0.inv()).apply(cameras[0, 3:6])
-        fixed[1, 3 + int(np.argmax(np.abs(rel)))] = True
-    return fixed
-
-
-_SCIPY_CACHE: dict[str, tuple] = {}
-
-
 def _key(*arrays, **kw) -> str:
     h = hashlib.sha1()
     for a in arrays:
         h.update(np.ascontiguousarray(a).tobytes())
     h.update(repr(sorted(kw.items())).encode())
     return h.hexdigest()
-
-
-def scipy_bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", scale: float = 1.0,
-                        fix_gauge: bool = False, max_iter: int = 50, tol: float = 1e-8):
-    """scipy-backed `bundle_adjust`: least_squares (trf, x_scale='jac', sparse 2-point Jacobian).
-
-    Robust losses act on each observation's squared norm, so with a loss the residual vector holds
-    the norms |r_k| (scipy applies its loss to each residual squared). That is the right cost but a
-    poor Gauss-Newton model (one row per observation instead of two): from a far start use
-    `colmap_bundle_adjust` for robust problems. Rotation vectors are
-    optimised additively. max_iter bounds the function evaluations (max_nfev = 4 max_iter). Returns
-    (cameras, points, costs) with costs = [initial cost, cost after each iteration, ..., final].
-    """
-    cameras, points = np.array(cameras, float), np.array(points, float)
-    cam_idx, pt_idx, obs = np.asarray(cam_idx), np.asarray(pt_idx), np.asarray(obs, float)
-    key = _key(cameras, points, cam_idx, pt_idx, obs, loss=loss, scale=float(scale), fix=fix_gauge,
-               it=max_iter, tol=tol)
-    if key in _SCIPY_CACHE:
-        c, p, costs = _SCIPY_CACHE[key]
-        return c.copy(), p.copy(), list(costs)
-    nc, n_pts, m = len(cameras), len(points), len(obs)
-    free = ~np.r_[(gauge_mask(cameras) if fix_gauge else np.zeros(cameras.shape, bool)).ravel(),
-                  np.zeros(3 * n_pts, bool)]
-    x_all = np.r_[cameras.ravel(), points.ravel()]
-    robust = loss != "linear"
-
-    def unpack(x):
-        full = x_all.copy()
-        full[free] = x
-        return full[:9 * nc].reshape(nc, 9), full[9 * nc:].reshape(n_pts, 3)
-
-    costs = [bal_cost(cameras, points, cam_idx, pt_idx, obs, loss, scale)]
-
-    def fun(x):
-        r = gt_project(*unpack(x), cam_idx, pt_idx) - obs
-        return np.linalg.norm(r, axis=1) if robust else r.ravel()
-
-    def record(intermediate_result):  # scipy's cost is 0.5 sum rho: the same as bal_cost's
-        costs.append(float(intermediate_result.cost))
-
-    rows = np.arange(m) if robust else np.arange(2 * m)
-    obs_of_row = rows if robust else rows // 2
-    cols = np.c_[9 * cam_idx[obs_of_row, None] + np.arange(9), 9 * nc + 3 * pt_idx[obs_of_row, None] + np.arange(3)]
-    pattern = sp.csr_matrix((np.ones(cols.size), (np.repeat(rows, 12), cols.ravel())),
-                            shape=(len(rows), len(x_all)))[:, free]
-    res = least_squares(fun, x_all[free], jac_sparsity=pattern, method="trf", x_scale="jac", loss=loss,
-                        f_scale=float(scale), ftol=tol, xtol=tol, gtol=tol, max_nfev=max_iter * 4, callback=record)
-    c, p = unpack(res.x)
-    costs.append(bal_cost(c, p, cam_idx, pt_idx, obs, loss, scale))  # the final value, exactly
-    if len(_SCIPY_CACHE) > 64:
-        _SCIPY_CACHE.clear()
-    _SCIPY_CACHE[key] = (c.copy(), p.copy(), list(costs))
-    return c, p, costs
 
 
 def library_bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", scale: float = 1.0,
