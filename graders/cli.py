@@ -1,9 +1,22 @@
 """`python -m graders check FILE [--json results.json]`: grade every exercise of a notebook.
 
 The learner's definitions are extracted (see `extract`) and run in a worker process, so nothing the
-learner's code does — an endless loop, `os._exit`, a crash of the interpreter — can take the
-grader down: an exercise that overruns its hard time limit is reported and the worker restarted
-for the remaining exercises. The learner's file is only read, never written.
+learner's code does — an endless loop, `os._exit`, a crash of the interpreter, a child process that
+never ends, a 30 GB allocation, files left in the temp directory — can take the grader down or
+outlive the grade:
+
+- each worker runs in its own process group, which is ended as a whole when the worker finishes or
+  is killed (children and grandchildren included);
+- each worker has an address-space limit (`--memory-gb`, 8 GB by default), so a huge allocation
+  fails inside the learner's code as a MemoryError;
+- each grade has a scratch folder as the workers' TMPDIR, removed at the end whatever happened;
+- an exercise that overruns its hard time limit is reported and a new worker grades the rest;
+- a grade has a time budget (`--time-budget`) and a time-out budget (`--max-timeouts` exercises
+  that hit their time limit): past either, the remaining exercises are reported as not run, so a
+  notebook with an endless loop in every stub grades in a couple of minutes with a valid JSON;
+- `--json` is rewritten atomically after every exercise: an outer kill leaves a valid file.
+
+The learner's file is only read, never written.
 """
 from __future__ import annotations
 
@@ -11,19 +24,25 @@ import argparse
 import json
 import os
 import re
+import resource
 import secrets
+import signal
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Callable
 
 from .chapters import READY
 from .engine import chapter
 from .extract import extract
-from .report import ExerciseResult, CaseResult, write_gradescope
+from .report import CaseResult, ExerciseResult, write_gradescope
 
-HARD_LIMIT = 120.0  # seconds per exercise before its worker is killed; generous on a slow 2-core machine
+HARD_LIMIT = 120.0    # seconds per exercise before its worker is killed; generous on a slow 2-core machine
+TIME_BUDGET = 540.0   # seconds for a whole grade: inside Gradescope's default 10-minute limit
+MAX_TIMEOUTS = 3      # exercises that may hit their time limit before the rest are not run
+MEMORY_GB = 8.0       # address-space limit of a worker
 
 
 def chapters_of(path: Path, source: str) -> list[str]:
@@ -41,61 +60,133 @@ def _from_dict(d: dict) -> ExerciseResult:
     return ExerciseResult(**d, cases=cases)
 
 
-def _failed(ex, message: str, seed: int) -> ExerciseResult:
+def _failed(ex, message: str, seed: int, status: str = "error") -> ExerciseResult:
     return ExerciseResult(id=ex.id, title=ex.title, name=ex.name, kind=ex.kind,
-                          max_score=ex.points, seed=seed, message=message)
+                          max_score=ex.points, seed=seed, message=message, status=status, replayable=False)
 
 
-def run_workers(source: str, exercises: list, seed: int, hard_limit: float) -> list[ExerciseResult]:
-    results: dict[str, ExerciseResult] = {}
-    todo = [ex.id for ex in exercises]
-    by_id = {ex.id: ex for ex in exercises}
-    with tempfile.TemporaryDirectory() as tmp:
+def _limit_memory(gb: float) -> Callable[[], None]:
+    def apply() -> None:   # runs in the child between fork and exec
+        limit = int(gb * 2**30)
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+    return apply
+
+
+def _end_group(proc: subprocess.Popen) -> None:
+    """Kill the worker's whole process group (the learner's children too) and reap the worker."""
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass
+    proc.wait()
+
+
+class _Grade:
+    """One grade's bookkeeping: results so far, time and time-out budgets, the JSON after each result."""
+
+    def __init__(self, exercises: list, seed: int, time_budget: float, max_timeouts: int,
+                 on_result: Callable[[list[ExerciseResult]], None] | None):
+        self.exercises, self.seed = exercises, seed
+        self.by_id = {ex.id: ex for ex in exercises}
+        self.results: dict[str, ExerciseResult] = {}
+        self.deadline = time.monotonic() + time_budget
+        self.time_budget, self.max_timeouts = time_budget, max_timeouts
+        self.timeouts: list[str] = []
+        self.on_result = on_result
+
+    def add(self, r: ExerciseResult) -> None:
+        self.results[r.id] = r
+        if r.timed_out:
+            self.timeouts.append(r.id)
+        if self.on_result:
+            self.on_result(self.ordered())
+
+    def todo(self) -> list[str]:
+        return [ex.id for ex in self.exercises if ex.id not in self.results]
+
+    def stop_reason(self) -> str:
+        if len(self.timeouts) >= self.max_timeouts:
+            return (f"not run: your code hit the time limit in {len(self.timeouts)} exercises "
+                    f"({', '.join(self.timeouts)}); fix those (an endless loop?) and grade again")
+        if time.monotonic() > self.deadline:
+            return f"not run: the grade's time budget of {self.time_budget:g} s was used up"
+        return ""
+
+    def stop_rest(self, why: str) -> None:
+        for i in self.todo():
+            self.add(_failed(self.by_id[i], why, self.seed, status="failed"))
+
+    def ordered(self) -> list[ExerciseResult]:
+        return [self.results[ex.id] for ex in self.exercises if ex.id in self.results]
+
+
+def _worker(src: Path, log: Path, ids: list[str], seed: int, scratch: Path, memory_gb: float) -> subprocess.Popen:
+    cmd = [sys.executable, "-m", "graders.worker", str(src), str(log), "--ids", ",".join(ids), "--seed", str(seed)]
+    env = dict(os.environ, MPLBACKEND="Agg", TMPDIR=str(scratch), TEMP=str(scratch), TMP=str(scratch))
+    return subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
+                            cwd=scratch, env=env, start_new_session=True, preexec_fn=_limit_memory(memory_gb))
+
+
+def _watch(proc: subprocess.Popen, log: Path, grade: _Grade, hard_limit: float) -> tuple[str | None, str]:
+    """Follow a worker's log until it ends. Returns (exercise it was on, why it was stopped or '')."""
+    current, started, seen = None, time.monotonic(), 0
+    while True:
+        done = proc.poll() is not None
+        lines = log.read_text(encoding="utf-8").splitlines() if log.exists() else []
+        for line in lines[seen:]:
+            event = json.loads(line)
+            if "start" in event:
+                current, started = event["start"], time.monotonic()
+            else:
+                grade.add(_from_dict(event["result"]))
+                current = None
+        seen = len(lines)
+        if done:
+            return current, ""
+        if grade.stop_reason():
+            return current, grade.stop_reason()
+        # Loading the learner's code counts against the first exercise's limit.
+        if time.monotonic() - started > hard_limit:
+            return current, f"took longer than {hard_limit:g} s and was stopped"
+        time.sleep(0.05)
+
+
+def run_workers(source: str, exercises: list, seed: int, hard_limit: float = HARD_LIMIT,
+                time_budget: float = TIME_BUDGET, max_timeouts: int = MAX_TIMEOUTS, memory_gb: float = MEMORY_GB,
+                on_result: Callable[[list[ExerciseResult]], None] | None = None) -> list[ExerciseResult]:
+    grade = _Grade(exercises, seed, time_budget, max_timeouts, on_result)
+    with tempfile.TemporaryDirectory(prefix="cv3d-grade-") as tmp:
         src = Path(tmp, "learner.py")
         src.write_text(source, encoding="utf-8")
-        while todo:
-            log = Path(tmp, f"results-{len(results)}.jsonl")
-            cmd = [sys.executable, "-m", "graders.worker", str(src), str(log), "--ids", ",".join(todo),
-                   "--seed", str(seed)]
-            env = dict(os.environ, MPLBACKEND="Agg")
-            proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                    cwd=tmp, env=env)
-            current, started, killed = None, time.monotonic(), False
-            seen = 0
-            while True:
-                done = proc.poll() is not None
-                lines = log.read_text(encoding="utf-8").splitlines() if log.exists() else []
-                for line in lines[seen:]:
-                    event = json.loads(line)
-                    if "start" in event:
-                        current, started = event["start"], time.monotonic()
-                    else:
-                        r = _from_dict(event["result"])
-                        results[r.id] = r
-                        current = None
-                seen = len(lines)
-                if done:
-                    break
-                # Loading the learner's code counts against the first exercise's limit.
-                if time.monotonic() - started > hard_limit:
-                    proc.kill()
-                    proc.wait()
-                    killed = True
-                    break
-                time.sleep(0.05)
-            todo = [i for i in todo if i not in results]
-            if todo:
-                # The worker stopped (killed, crashed or exited) during `current` (or while loading).
-                victim = current or todo[0]
-                why = (f"took longer than {hard_limit:g} s and was stopped" if killed
-                       else f"stopped the grading process (exit status {proc.returncode})")
-                results[victim] = _failed(by_id[victim], f"your code {why}", seed)
-                todo.remove(victim)
-    return [results[ex.id] for ex in exercises]
+        scratch = Path(tmp, "scratch")
+        scratch.mkdir()
+        run = 0
+        while grade.todo() and not grade.stop_reason():
+            log = Path(tmp, f"results-{run}.jsonl")
+            run += 1
+            proc = _worker(src, log, grade.todo(), seed, scratch, memory_gb)
+            try:
+                current, why = _watch(proc, log, grade, hard_limit)
+            finally:
+                _end_group(proc)
+            todo = grade.todo()
+            if not todo or grade.stop_reason():
+                break
+            # The worker stopped (killed, crashed or exited) during `current` (or while loading).
+            victim = current or todo[0]
+            why = why or f"stopped the grading process (exit status {proc.returncode})"
+            r = _failed(grade.by_id[victim], f"your code {why}", seed)
+            r.timed_out = "longer than" in why
+            grade.add(r)
+        if grade.todo():
+            grade.stop_rest(grade.stop_reason() or "not run")
+    return grade.ordered()
 
 
 def check_file(path: str | Path, seed: int | None = None, only: list[str] | None = None,
-               hard_limit: float = HARD_LIMIT) -> tuple[list[ExerciseResult], str]:
+               hard_limit: float = HARD_LIMIT, time_budget: float = TIME_BUDGET, max_timeouts: int = MAX_TIMEOUTS,
+               memory_gb: float = MEMORY_GB,
+               on_result: Callable[[list[ExerciseResult]], None] | None = None) -> tuple[list[ExerciseResult], str]:
     """Grade every exercise of the chapter(s) in `path`. Returns (results, message)."""
     path = Path(path)
     seed = secrets.randbits(32) if seed is None else seed
@@ -115,10 +206,15 @@ def check_file(path: str | Path, seed: int | None = None, only: list[str] | None
         msg = f"{path} does not exist"
         return [_failed(ex, msg, seed) for ex in exercises], msg
     message = "\n".join(extracted.problems)
-    return run_workers(extracted.source, exercises, seed, hard_limit), message
+    return run_workers(extracted.source, exercises, seed, hard_limit, time_budget, max_timeouts, memory_gb,
+                       on_result), message
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["fairness"]:
+        from .fairness import main as fairness
+        return fairness(argv[1:])
     ap = argparse.ArgumentParser(prog="python -m graders")
     sub = ap.add_subparsers(dest="command", required=True)
     c = sub.add_parser("check", help="grade every exercise in a notebook (.ipynb) or module (.py)")
@@ -127,15 +223,28 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--seed", type=int, help="replay the hidden cases of an earlier run")
     c.add_argument("--only", help="comma-separated exercise ids, e.g. 1.5,1.6")
     c.add_argument("--hard-limit", type=float, default=HARD_LIMIT, help="seconds per exercise")
+    c.add_argument("--time-budget", type=float, default=TIME_BUDGET, help="seconds for the whole grade")
+    c.add_argument("--max-timeouts", type=int, default=MAX_TIMEOUTS,
+                   help="exercises that may hit their time limit before the rest are not run")
+    c.add_argument("--memory-gb", type=float, default=MEMORY_GB, help="address-space limit of the grading process")
+    sub.add_parser("fairness", help="grade the reference on fresh seeds: does a correct answer lose points?")
     args = ap.parse_args(argv)
+    message_box = [""]
+
+    def save(results: list[ExerciseResult]) -> None:
+        if args.json:
+            write_gradescope(args.json, results, message_box[0])
+
+    if args.json:   # valid from the first moment: an outer kill before any result still leaves a file
+        write_gradescope(args.json, [], "grading started; no exercise finished")
     results, message = check_file(args.file, args.seed, args.only.split(",") if args.only else None,
-                                  args.hard_limit)
+                                  args.hard_limit, args.time_budget, args.max_timeouts, args.memory_gb, save)
+    message_box[0] = message
     if message:
         print(message, end="\n\n")
     for r in results:
         print(r, end="\n\n")
     total, best = sum(r.score for r in results), sum(r.max_score for r in results)
     print(f"total: {total:g}/{best:g} points")
-    if args.json:
-        write_gradescope(args.json, results, message)
+    save(results)
     return 0

@@ -313,6 +313,7 @@ def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None) -> ExerciseRe
         result.cases.append(row)
         weights.append(case.weight)
         if kind == "timeout":
+            result.timed_out = True
             # One endless loop costs one time limit, not one per case: the rest are reported, not run.
             _stop_after_timeout(result, weights, drawn, cases, len(result.cases), ex.timeout)
             break

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import html
 import json
+import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -46,6 +47,7 @@ class ExerciseResult:
     explanation: str = ""
     cases: list[CaseResult] = field(default_factory=list)
     replayable: bool = True  # False for fixed questions: no hidden draw to replay
+    timed_out: bool = False  # a case hit the time limit (the shell grader's time-out budget counts these)
 
     @property
     def passed(self) -> bool:
@@ -140,4 +142,9 @@ def gradescope(results: list[ExerciseResult], message: str = "") -> dict:
 
 
 def write_gradescope(path: str | Path, results: list[ExerciseResult], message: str = "") -> None:
-    Path(path).write_text(json.dumps(gradescope(results, message), indent=2))
+    """Write atomically (a temporary file renamed over the target): an outer kill at any moment
+    leaves either the previous valid file or the new one, never half a file."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(gradescope(results, message), indent=2))
+    os.replace(tmp, path)
