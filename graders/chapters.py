@@ -98,3 +98,7 @@ def readme_table() -> str:
         rows.append(f"| {c.number} | {name}{': ' + c.summary if c.summary else ''} | "
                     f"{'ready' if c.ready else 'planned'} |")
     return "\n".join(rows)
+
+
+if __name__ == "__main__":   # python -m graders.chapters: print the README's chapter table
+    print(readme_table())

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -38,3 +39,67 @@ def test_graders_import_and_grade_with_solutions_hidden():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().endswith("passed")
+
+
+ALLOWED_GRADERS = {"engine", "convert", "report", "compare", "geometry", "scene", "oracles", "datasets", "viz3d",
+                   "sandbox", "chapters"}
+
+
+def _imports(path: Path) -> list[str]:
+    """Absolute names of the modules `path` imports (relative imports resolved inside graders)."""
+    package = ".".join(path.relative_to(GRADERS.parent).with_suffix("").parts[:-1])
+    names = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names += [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = package.rsplit(".", node.level - 1)[0] if node.level else ""
+            module = ".".join(p for p in (base, node.module or "") if p)
+            names += [module] + ([f"{module}.{a.name}" for a in node.names] if not node.module else [])
+    return names
+
+
+def test_no_chapter_grader_imports_another_or_anything_but_the_shared_modules():
+    from graders.chapters import READY
+    offenders = []
+    for ch in READY:
+        package = GRADERS / ch.prefix
+        for path in package.rglob("*.py"):
+            for name in _imports(path):
+                parts = name.split(".")
+                if parts[0] != "graders" or len(parts) < 2 or parts[1] == ch.prefix:
+                    continue
+                if parts[1] not in ALLOWED_GRADERS:
+                    offenders.append(f"{path.relative_to(GRADERS.parent)} imports {name}")
+    assert not offenders, "\n".join(offenders)
+
+
+def test_shared_modules_import_no_chapter_package():
+    chapter = re.compile(r"^graders\.ch\d\d_")
+    offenders = [f"{p.relative_to(GRADERS)}: {n}" for p in GRADERS.rglob("*.py")
+                 if not chapter.match("graders." + p.relative_to(GRADERS).parts[0])
+                 for n in _imports(p) if chapter.match(n)]
+    assert not offenders, offenders
+
+
+def test_notebooks_use_public_grader_names_only():
+    import nbformat
+    from graders.chapters import READY
+    root = GRADERS.parent
+    private = re.compile(r"\b(?:ch\d+|graders(?:\.\w+)*)\._[A-Za-z]\w*|from\s+graders[\w.]*\s+import\s+[^\n]*\b_[A-Za-z]")
+    offenders = []
+    for ch in READY:
+        for i, cell in enumerate(nbformat.read(str(root / ch.notebook), as_version=4).cells, 1):
+            if cell.cell_type == "code":
+                offenders += [f"{ch.notebook} cell {i}: {m.group(0)}" for m in private.finditer(cell.source)]
+    assert not offenders, "\n".join(offenders)
+
+
+def test_every_public_name_a_chapter_exports_exists():
+    from graders.chapters import READY
+    import importlib
+    missing = []
+    for ch in READY:
+        package = importlib.import_module(ch.grader)
+        missing += [f"{ch.grader}.{n}" for n in getattr(package, "__all__", ["<no __all__>"]) if not hasattr(package, n)]
+    assert not missing, missing

@@ -20,17 +20,11 @@ import nbformat
 import pytest
 from nbclient import NotebookClient
 
+from graders.chapters import READY
+
 ROOT = Path(__file__).resolve().parents[1]
-NOTEBOOKS = sorted((ROOT / "notebooks").glob("[0-9][0-9]_*.ipynb"))
-# Where the reference answers of each chapter live (instructor-only package).
-SOLUTION_MODULES = {
-    "01": ["solutions.camera_models", "solutions.camera_debug", "solutions.camera_questions"],
-    "02": ["solutions.epipolar", "solutions.epipolar_debug", "solutions.epipolar_questions"],
-    "03": ["solutions.features", "solutions.features_debug", "solutions.features_questions"],
-    "04": ["solutions.sfm", "solutions.sfm_pipeline", "solutions.colmap_io", "solutions.sfm_debug",
-           "solutions.sfm_questions", "solutions.sfm_frontier"],
-    "05": ["solutions.bundle_adjustment", "solutions.bundle_adjustment_debug", "solutions.bundle_adjustment_questions"],
-}
+NOTEBOOKS = [ROOT / c.notebook for c in READY]
+CHAPTER_OF = {c.notebook.split("/")[-1]: c for c in READY}
 BUDGET_S = 60.0
 PLOT_CALL = re.compile(r"\b(plt|ax|axes|fig)\.\w*(plot|imshow|scatter|quiver|hist|bar|contour)\w*\(")
 
@@ -112,11 +106,13 @@ def _replace_stubs(path: Path, source_for) -> nbformat.NotebookNode:
 
 def _solved(path: Path) -> nbformat.NotebookNode:
     """The notebook with every stub cell replaced by imports of the reference answers."""
-    modules = [importlib.import_module(m) for m in SOLUTION_MODULES[path.name[:2]]]
+    package = CHAPTER_OF[path.name].solutions     # exports every learner name of the chapter
+    module = importlib.import_module(package)
 
     def source_for(name):
-        module = next(m for m in modules if hasattr(m, name))
-        return f"from {module.__name__} import {name}"
+        if not hasattr(module, name):
+            raise LookupError(f"{package} does not export `{name}`, which a stub of {path.name} defines")
+        return f"from {package} import {name}"
 
     return _replace_stubs(path, source_for)
 
