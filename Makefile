@@ -25,7 +25,7 @@ $(STAMP): environment.txt pyproject.toml
 	touch $(STAMP)
 
 lab: install
-	$(BIN)/jupyter lab notebooks/
+	$(BIN)/python -m graders.lab $(LAB_ARGS)
 
 test: install
 	$(BIN)/python -m pytest
