@@ -201,3 +201,97 @@ def test_a_hint_can_quote_what_it_measured():
     ex = Exercise("0.7", "double", "double", "code", 1, _double_cases, timeout=1.0,
                   hints=[Hint(text, lambda case, out: True)])
     assert "off by 5.0 px" in grade(ex, lambda x: 2 * x + 5).cases[0].hint
+
+
+# ------------------------------------------------------------ engine features shared by chapters
+
+def _four_cases(rng):
+    x = rng.normal(size=(5, 2))
+    return [Case(f"case {i}", (x,), 2 * x, max_distance, 1e-9, "px", shape=(5, 2)) for i in range(4)]
+
+
+LOOPY = Exercise(id="0.2", title="double it, four times", name="double", kind="code", points=4,
+                 cases=_four_cases, timeout=0.5)
+
+
+def test_a_loop_costs_one_time_limit_not_one_per_case():
+    import time
+
+    def loop(x):
+        while True:
+            pass
+    start = time.perf_counter()
+    r = grade(LOOPY, loop, seed=1)
+    assert time.perf_counter() - start < 4 * 0.5       # one limit, not four
+    assert r.timed_out and r.score == 0 and len(r.cases) == 4
+    assert all("not run: stopped after a time-out in case 1" in c.message for c in r.cases[1:])
+
+
+def test_lazy_cases_after_a_time_out_are_not_built():
+    built = []
+
+    def cases(rng):
+        for i in range(3):
+            built.append(i)
+            yield Case(f"lazy {i}", (np.ones(2),), np.full(2, 2.0), max_distance, 1e-9, shape=(2,))
+
+    def slow_second(x):
+        while len(built) > 1:
+            pass
+        return 2 * x
+    ex = Exercise(id="0.3", title="lazy", name="double", kind="code", points=3, cases=cases, timeout=0.3)
+    r = grade(ex, slow_second, seed=1)
+    assert built == [0, 1] and r.cases[0].passed and not r.cases[1].passed and r.score == 1
+    assert r.cases[-1].name == "remaining cases"
+
+
+def test_case_key_is_stable_and_separate_from_the_display_name():
+    c = Case("100 points, 1 px noise", (), None, max_distance, 0)
+    assert c.key == "100-points-1-px-noise"
+    assert Case("renamed row", (), None, max_distance, 0, key="noisy", tags=["noise"]).tags == ("noise",)
+
+
+def test_shared_run_runs_the_learner_once_per_draw():
+    from graders.engine import shared_run
+    calls = []
+    call = shared_run(lambda fn: fn(3))
+
+    def learner(v):
+        calls.append(v)
+        return 2 * v
+    assert call(learner) == 6 and call(learner) == 6 and calls == [3]
+
+    def broken(v):
+        raise ValueError("boom")
+    for _ in range(2):
+        with pytest.raises(ValueError, match="boom"):
+            call(broken)
+
+
+def test_debug_cases_and_practice():
+    from graders.engine import debug_cases, debug_practice
+
+    def generator(rng):
+        truth = rng.normal(size=3)
+        return {"broken": truth + 1}, truth
+    cases = list(debug_cases(generator, max_distance, 1e-9, unit="", n=2)(np.random.default_rng(0)))
+    assert [c.key for c in cases] == ["hidden-problem-1", "hidden-problem-2"]
+    ex = Exercise(id="0.4", title="fix", name="fix", kind="debug", points=2,
+                  cases=debug_cases(generator, lambda out, truth: float(np.abs(out - truth).max()), 1e-9,
+                                    unit="", shape=(3,), n=2))
+    assert grade(ex, lambda case: case["broken"] - 1, seed=3).passed
+    practice = debug_practice({"0.4": generator})
+    assert set(practice("0.4", seed=1)) == {"broken"}
+    with pytest.raises(KeyError, match="0.4"):
+        practice("0.9")
+
+
+def test_converters_say_what_is_wrong():
+    from graders.convert import OutputError, as_mask, as_points, as_sim3
+    with pytest.raises(OutputError, match="homogeneous"):
+        as_points(np.ones((4, 4)), 4)
+    assert as_mask([0, 1, 1], 3).dtype == bool
+    with pytest.raises(OutputError, match="boolean"):
+        as_mask([0, 2, 1], 3)
+    with pytest.raises(OutputError, match="positive"):
+        as_sim3((-1.0, np.eye(3), np.zeros(3)))
