@@ -120,28 +120,53 @@ class _Grade:
         return [self.results[ex.id] for ex in self.exercises if ex.id in self.results]
 
 
-def _worker(src: Path, log: Path, ids: list[str], seed: int, scratch: Path, memory_gb: float) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "graders.worker", str(src), str(log), "--ids", ",".join(ids), "--seed", str(seed)]
-    env = dict(os.environ, MPLBACKEND="Agg", TMPDIR=str(scratch), TEMP=str(scratch), TMP=str(scratch))
-    return subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
-                            cwd=scratch, env=env, start_new_session=True, preexec_fn=_limit_memory(memory_gb))
+def _worker(src: Path, ids: list[str], seed: int, scratch: Path, memory_gb: float,
+            graded: bool) -> tuple[subprocess.Popen, int]:
+    """A worker and the read end of its event pipe. The seed travels in the environment, not argv."""
+    read_fd, write_fd = os.pipe()
+    cmd = [sys.executable, "-m", "graders.worker", str(src), str(write_fd), "--ids", ",".join(ids)]
+    cmd += ["--graded"] if graded else []
+    env = dict(os.environ, MPLBACKEND="Agg", TMPDIR=str(scratch), TEMP=str(scratch), TMP=str(scratch),
+               CV3D_SEED=str(seed))
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
+                            cwd=scratch, env=env, start_new_session=True, pass_fds=(write_fd,),
+                            preexec_fn=_limit_memory(memory_gb))
+    os.close(write_fd)
+    os.set_blocking(read_fd, False)
+    return proc, read_fd
 
 
-def _watch(proc: subprocess.Popen, log: Path, grade: _Grade, hard_limit: float) -> tuple[str | None, str]:
-    """Follow a worker's log until it ends. Returns (exercise it was on, why it was stopped or '')."""
-    current, started, seen = None, time.monotonic(), 0
+def _events(fd: int, pending: bytearray) -> list[dict]:
+    """Complete JSON lines that have arrived on the worker's pipe (a partial line waits for the rest)."""
+    while True:
+        try:
+            chunk = os.read(fd, 1 << 16)
+        except BlockingIOError:
+            break
+        if not chunk:
+            break
+        pending += chunk
+    *lines, rest = bytes(pending).split(b"\n")
+    pending[:] = rest
+    return [json.loads(line) for line in lines if line.strip()]
+
+
+def _watch(proc: subprocess.Popen, fd: int, grade: _Grade, hard_limit: float) -> tuple[str | None, str]:
+    """Follow a worker's events until it ends. Returns (exercise it was on, why it was stopped or '')."""
+    current, started, pending = None, time.monotonic(), bytearray()
     while True:
         done = proc.poll() is not None
-        lines = log.read_text(encoding="utf-8").splitlines() if log.exists() else []
-        for line in lines[seen:]:
-            event = json.loads(line)
+        for event in _events(fd, pending):
             if "start" in event:
                 current, started = event["start"], time.monotonic()
             else:
                 grade.add(_from_dict(event["result"]))
                 current = None
-        seen = len(lines)
         if done:
+            for event in _events(fd, pending):   # what it wrote just before it ended
+                if "result" in event:
+                    grade.add(_from_dict(event["result"]))
+                    current = None
             return current, ""
         if grade.stop_reason():
             return current, grade.stop_reason()
@@ -153,22 +178,20 @@ def _watch(proc: subprocess.Popen, log: Path, grade: _Grade, hard_limit: float) 
 
 def run_workers(source: str, exercises: list, seed: int, hard_limit: float = HARD_LIMIT,
                 time_budget: float = TIME_BUDGET, max_timeouts: int = MAX_TIMEOUTS, memory_gb: float = MEMORY_GB,
-                on_result: Callable[[list[ExerciseResult]], None] | None = None) -> list[ExerciseResult]:
+                graded: bool = False, on_result: Callable[[list[ExerciseResult]], None] | None = None) -> list[ExerciseResult]:
     grade = _Grade(exercises, seed, time_budget, max_timeouts, on_result)
     with tempfile.TemporaryDirectory(prefix="cv3d-grade-") as tmp:
         src = Path(tmp, "learner.py")
         src.write_text(source, encoding="utf-8")
         scratch = Path(tmp, "scratch")
         scratch.mkdir()
-        run = 0
         while grade.todo() and not grade.stop_reason():
-            log = Path(tmp, f"results-{run}.jsonl")
-            run += 1
-            proc = _worker(src, log, grade.todo(), seed, scratch, memory_gb)
+            proc, fd = _worker(src, grade.todo(), seed, scratch, memory_gb, graded)
             try:
-                current, why = _watch(proc, log, grade, hard_limit)
+                current, why = _watch(proc, fd, grade, hard_limit)
             finally:
                 _end_group(proc)
+                os.close(fd)
             todo = grade.todo()
             if not todo or grade.stop_reason():
                 break
@@ -185,7 +208,7 @@ def run_workers(source: str, exercises: list, seed: int, hard_limit: float = HAR
 
 def check_file(path: str | Path, seed: int | None = None, only: list[str] | None = None,
                hard_limit: float = HARD_LIMIT, time_budget: float = TIME_BUDGET, max_timeouts: int = MAX_TIMEOUTS,
-               memory_gb: float = MEMORY_GB,
+               memory_gb: float = MEMORY_GB, graded: bool = False,
                on_result: Callable[[list[ExerciseResult]], None] | None = None) -> tuple[list[ExerciseResult], str]:
     """Grade every exercise of the chapter(s) in `path`. Returns (results, message)."""
     path = Path(path)
@@ -207,7 +230,7 @@ def check_file(path: str | Path, seed: int | None = None, only: list[str] | None
         return [_failed(ex, msg, seed) for ex in exercises], msg
     message = "\n".join(extracted.problems)
     return run_workers(extracted.source, exercises, seed, hard_limit, time_budget, max_timeouts, memory_gb,
-                       on_result), message
+                       graded, on_result), message
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -227,6 +250,8 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--max-timeouts", type=int, default=MAX_TIMEOUTS,
                    help="exercises that may hit their time limit before the rest are not run")
     c.add_argument("--memory-gb", type=float, default=MEMORY_GB, help="address-space limit of the grading process")
+    c.add_argument("--graded", action="store_true",
+                   help="graded mode: learner code in its own sandboxed process, CODE exercises from scratch")
     sub.add_parser("fairness", help="grade the reference on fresh seeds: does a correct answer lose points?")
     args = ap.parse_args(argv)
     message_box = [""]
@@ -238,7 +263,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:   # valid from the first moment: an outer kill before any result still leaves a file
         write_gradescope(args.json, [], "grading started; no exercise finished")
     results, message = check_file(args.file, args.seed, args.only.split(",") if args.only else None,
-                                  args.hard_limit, args.time_budget, args.max_timeouts, args.memory_gb, save)
+                                  args.hard_limit, args.time_budget, args.max_timeouts, args.memory_gb,
+                                  args.graded, save)
     message_box[0] = message
     if message:
         print(message, end="\n\n")

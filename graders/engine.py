@@ -13,6 +13,7 @@ from __future__ import annotations
 import importlib
 import re
 import secrets
+import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Sequence
 
@@ -24,6 +25,7 @@ from .report import CaseResult, ExerciseResult
 from .sandbox import safe_call
 
 KINDS = ("concept", "code", "debug", "design", "frontier")
+LIBRARIES = ("cv2", "pycolmap", "kornia")    # what graded mode watches (see graders.learner)
 
 
 @dataclass
@@ -132,9 +134,12 @@ class Exercise:
     timeout: float = 10.0
     explanation: str = ""
     arg_names: tuple[str, ...] = ()
+    libraries: tuple[str, ...] | None = None   # libraries graded work may call; None: by kind (below)
 
     def __post_init__(self):
         assert self.kind in KINDS, f"{self.id}: kind {self.kind!r} is not one of {KINDS}"
+        if self.libraries is None:   # CODE is from scratch; the other kinds may use any library
+            self.libraries = () if self.kind == "code" else LIBRARIES
 
 
 # ---------------------------------------------------------------- registry ----------
@@ -359,7 +364,21 @@ def _judge_case(ex: Exercise, fn: Callable, case: Case) -> tuple[CaseResult, str
     learner's code raised NotImplementedError."""
     row = CaseResult(name=case.name, tol=case.tol, unit=case.unit)
     target = fn if case.call is None else (lambda *args, **kwargs: case.call(fn))
-    outcome = safe_call(target, case.args, case.kwargs, timeout=ex.timeout, names=ex.arg_names)
+    remote = hasattr(fn, "drain")     # graded mode: the learner's code runs in its own process
+    if remote:
+        fn.deadline = time.monotonic() + ex.timeout        # shared by every call this case makes
+    # In graded mode the learner's process enforces the time limit; the judge's own is a backstop.
+    outcome = safe_call(target, case.args, case.kwargs, timeout=ex.timeout + (10.0 if remote else 0.0),
+                        names=ex.arg_names)
+    if remote:
+        stdout, mutated, used = fn.drain()
+        outcome.stdout, outcome.mutated = outcome.stdout + stdout, outcome.mutated + mutated
+        banned = [u for u in used if u.split(".")[0] not in ex.libraries]
+        if banned and outcome.kind in ("ok", "exception"):
+            row.message = (f"calls {', '.join(banned[:3])}: exercise {ex.id} is from scratch, so graded work "
+                           f"may not use {', '.join(sorted({b.split('.')[0] for b in banned}))} "
+                           "(self-study checks allow it)")
+            return row, outcome.kind
     if outcome.kind == "not_implemented":
         return None
     row.stdout = outcome.stdout + (f"\n… {outcome.stdout_truncated} more characters of output dropped"

@@ -136,8 +136,11 @@ def safe_call(fn: Callable, args: tuple = (), kwargs: dict | None = None,
     except SystemExit as exc:
         out.kind, out.error = "exit", f"called sys.exit({exc.code!r}); a function must return a value"
     except BaseException as exc:  # noqa: BLE001 — anything the learner raises is reported, not re-raised
-        out.kind, out.error = "exception", f"raised {type(exc).__name__}: {exc}"
-        out.traceback = _short_traceback(exc)
+        if hasattr(exc, "remote_kind"):   # graded mode: the learner's error, as its own process reported it
+            out.kind, out.error, out.traceback = exc.remote_kind, exc.error, exc.traceback
+        else:
+            out.kind, out.error = "exception", f"raised {type(exc).__name__}: {exc}"
+            out.traceback = _short_traceback(exc)
     out.seconds = time.perf_counter() - start
     out.stdout, out.stdout_truncated = buffer.getvalue(), buffer.dropped
     for label, old, new in zip(labels, before[0], args):

@@ -1,10 +1,16 @@
-"""Worker process of `python -m graders check`: loads extracted learner code and grades exercises.
+"""Worker process of `python -m graders check`: grades exercises of one submission.
 
-    python -m graders.worker SOURCE.py RESULTS.jsonl --ids 1.5,1.6 --seed 123
+    python -m graders.worker SOURCE.py EVENTS_FD --ids 1.5,1.6 [--graded]
 
-Writes one JSON line per event to RESULTS.jsonl (never to stdout, which the learner's prints may
-fill): {"start": id} before an exercise, then {"result": {...}}. The parent kills this process if
-an exercise overruns and starts a new worker for the exercises that remain.
+The seed comes in the environment (`CV3D_SEED`), never on the command line (which every process can
+read). Events go to the pipe EVENTS_FD as JSON lines: {"start": id} before an exercise, then
+{"result": {...}}. The parent kills this process if an exercise overruns and starts a new worker
+for the exercises that remain.
+
+Self-study mode loads the learner's definitions into this process. Graded mode (`--graded`) never
+does: the learner's code runs in a `graders.isolation.LearnerProcess` that receives only a case's
+inputs, so it cannot reach the cases, the seed or this pipe, and its library calls are checked
+against each exercise's from-scratch policy.
 """
 from __future__ import annotations
 
@@ -23,7 +29,7 @@ LOAD_TIMEOUT = 60.0  # seconds for the learner's imports and definitions to run
 
 
 def load(source: str) -> tuple[dict, str]:
-    """Run the learner's extracted definitions; returns (namespace, problem or '')."""
+    """Run the learner's extracted definitions here (self-study mode); returns (namespace, problem or '')."""
     namespace: dict = {"__name__": "learner"}
     outcome = safe_call(lambda: exec(compile(source, "<your notebook>", "exec"), namespace),
                         timeout=LOAD_TIMEOUT)
@@ -32,31 +38,75 @@ def load(source: str) -> tuple[dict, str]:
     return namespace, ""
 
 
+def _not_there(ex, seed: int, problem: str) -> ExerciseResult:
+    r = ExerciseResult(id=ex.id, title=ex.title, name=ex.name, kind=ex.kind, max_score=ex.points, seed=seed)
+    if problem:
+        r.message = problem
+    else:
+        r.status, r.message = "not_attempted", f"no top-level `{ex.name}` found: not attempted"
+    return r
+
+
+class _SelfStudy:
+    def __init__(self, source: str):
+        self.namespace, self.problem = load(source)
+
+    def answer(self, ex):
+        return self.namespace[ex.name] if ex.name in self.namespace else None
+
+    def has(self, ex) -> bool:
+        return ex.name in self.namespace
+
+    def close(self) -> None:
+        pass
+
+
+class _Graded:
+    def __init__(self, source: str, exercises: list):
+        from .isolation import LearnerProcess
+        self.learner = LearnerProcess(source)
+        self.learner.start()
+        self.problem = self.learner.problem
+        self.present = set(self.learner.names([ex.name for ex in exercises])) if not self.problem else set()
+
+    def has(self, ex) -> bool:
+        return ex.name in self.present
+
+    def answer(self, ex):
+        return self.learner.value(ex.name) if ex.value else self.learner.function(ex.name, ex)
+
+    def close(self) -> None:
+        self.learner.close()
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("source")
-    ap.add_argument("results")
+    ap.add_argument("events_fd", type=int)
     ap.add_argument("--ids", required=True)
-    ap.add_argument("--seed", type=int, default=None)
+    ap.add_argument("--graded", action="store_true")
     args = ap.parse_args(argv)
+    seed = int(os.environ.pop("CV3D_SEED", "0"))
     with open(args.source, encoding="utf-8") as f:
         source = f.read()
-    namespace, problem = load(source)
-    with open(args.results, "a", encoding="utf-8", buffering=1) as out:
-        for exercise_id in args.ids.split(","):
-            out.write(json.dumps({"start": exercise_id}) + "\n")
-            ex = get(exercise_id)
-            if problem:
-                result = ExerciseResult(id=ex.id, title=ex.title, name=ex.name, kind=ex.kind,
-                                        max_score=ex.points, seed=args.seed or 0, message=problem)
-            elif ex.name not in namespace:
-                result = ExerciseResult(id=ex.id, title=ex.title, name=ex.name, kind=ex.kind,
-                                        max_score=ex.points, seed=args.seed or 0, status="not_attempted",
-                                        message=f"no top-level `{ex.name}` found: not attempted")
-            else:
-                result = grade(ex, namespace[ex.name], seed=args.seed)
-            out.write(json.dumps({"result": result.to_dict()}) + "\n")
-    sys.stdout.flush()
+    exercises = [get(i) for i in args.ids.split(",")]
+    judge = _Graded(source, exercises) if args.graded else _SelfStudy(source)
+    with os.fdopen(args.events_fd, "w", encoding="utf-8", buffering=1) as out:
+        try:
+            for ex in exercises:
+                out.write(json.dumps({"start": ex.id}) + "\n")
+                if judge.problem or not judge.has(ex):
+                    result = _not_there(ex, seed, judge.problem)
+                else:
+                    try:
+                        answer = judge.answer(ex)
+                    except Exception as exc:   # a value that cannot cross from the learner's process
+                        answer, result = None, _not_there(ex, seed, f"could not read `{ex.name}`: {exc}")
+                    if answer is not None or not ex.value:
+                        result = grade(ex, answer, seed=seed)
+                out.write(json.dumps({"result": result.to_dict()}) + "\n")
+        finally:
+            judge.close()
     return 0
 
 
