@@ -12,7 +12,7 @@ from benchmarks.timing import median_time, table
 from graders import ch01_camera_models as ch1
 from graders import scene
 from graders.compare import max_angle_deg, max_distance
-from solutions import camera_models as ref
+import solutions.ch01_camera_models as ref
 
 N = 100_000
 

@@ -15,6 +15,8 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
+from .geometry import kb_theta_d
+
 # skimage.data images that ship inside the scikit-image wheel (no download needed).
 TEXTURES: tuple[str, ...] = (
     "astronaut", "brick", "camera", "cell", "chelsea", "coffee", "coins", "grass", "gravel",
@@ -92,10 +94,16 @@ def random_distortion(rng: np.random.Generator, strength: str = "moderate", r_ma
 
 
 def fisheye_theta_d(D: np.ndarray, theta: np.ndarray) -> np.ndarray:
-    """Kannala-Brandt distorted angle theta (1 + k1 theta^2 + ... + k4 theta^8). theta: (N,) -> (N,)."""
-    k1, k2, k3, k4 = np.asarray(D, float)
-    t2 = np.asarray(theta, float) ** 2
-    return theta * (1 + k1 * t2 + k2 * t2**2 + k3 * t2**3 + k4 * t2**4)
+    """Kannala-Brandt distorted angle: `graders.geometry.kb_theta_d(theta, D)` (the one copy), kept
+    under this name and argument order for existing callers. theta: (N,) -> (N,)."""
+    return kb_theta_d(theta, D)
+
+
+def fisheye_rises(D: np.ndarray, theta_max: float, min_slope: float = 0.3) -> bool:
+    """True if theta_d(theta) rises with slope > `min_slope` on [0, theta_max] (radians): the lens maps
+    those angles one-to-one, and its inverse is well conditioned there (no turnover near the range)."""
+    theta = np.linspace(0.0, float(theta_max), 512)
+    return bool(np.all(np.diff(kb_theta_d(theta, D)) / np.diff(theta) > min_slope))
 
 
 def random_fisheye(rng: np.random.Generator, width: int = 1280, height: int = 1024,
@@ -109,11 +117,11 @@ def random_fisheye(rng: np.random.Generator, width: int = 1280, height: int = 10
     K = np.array([[f, 0.0, (width - 1) / 2 + rng.uniform(-0.015, 0.015) * width],
                   [0.0, f * rng.uniform(0.995, 1.005), (height - 1) / 2 + rng.uniform(-0.015, 0.015) * height],
                   [0.0, 0.0, 1.0]])
-    theta = np.linspace(0.0, np.radians(fov_deg / 2 + 5), 512)
+    theta_max = np.radians(fov_deg / 2 + 5)
     for _ in range(max_tries):
         D = np.array([rng.uniform(-0.04, 0.04), rng.uniform(-0.02, 0.02), rng.uniform(-0.01, 0.01),
                       rng.uniform(-0.003, 0.003)])
-        if np.all(np.diff(fisheye_theta_d(D, theta)) / np.diff(theta) > 0.3):
+        if fisheye_rises(D, theta_max):
             return K, D
     raise RuntimeError("no monotonic fisheye distortion found")
 

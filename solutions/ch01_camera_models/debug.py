@@ -7,16 +7,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from .camera_models import frame_change, project_points, rodrigues
+from ..geometry import rodrigues
+from .frames import frame_change
+from .projection import pixels_to_normalised, project_points
 
-
-def _normalised(uv: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """Pixels (N, 2) -> normalised image coordinates (N, 2)."""
-    return np.linalg.solve(K, np.c_[uv, np.ones(len(uv))].T).T[:, :2]
+__all__ = ["fix_distortion", "fix_extrinsics", "fix_principal_point", "fix_frame_convention"]
 
 
 def fix_distortion(case: dict) -> np.ndarray:
-    """Edges warped → the distortion is wrong → refit (k1, k2, p1, p2, k3) with K and poses fixed.
+    """Exercise 1.11: edges warped → the distortion is wrong → refit (k1, k2, p1, p2, k3) with K and poses fixed.
 
     With K and the board poses known, the distortion offset x_d - x is *linear* in the five
     coefficients, so one least-squares solve gives them. Returns dist: (5,).
@@ -29,13 +28,13 @@ def fix_distortion(case: dict) -> np.ndarray:
         # rows for the x and y offsets; columns k1, k2, p1, p2, k3
         A.append(np.c_[x * r2, x * r2 ** 2, 2 * x * y, r2 + 2 * x * x, x * r2 ** 3])
         A.append(np.c_[y * r2, y * r2 ** 2, r2 + 2 * y * y, 2 * x * y, y * r2 ** 3])
-        x_d = _normalised(uv, case["K"])
+        x_d = pixels_to_normalised(uv, case["K"])
         b += [x_d[:, 0] - x, x_d[:, 1] - y]
     return np.linalg.lstsq(np.vstack(A), np.concatenate(b), rcond=None)[0]
 
 
 def fix_extrinsics(case: dict, iters: int = 15) -> tuple[np.ndarray, np.ndarray]:
-    """Cameras disagree → camera 2's extrinsics are stale → re-estimate (R, t) from X ↔ uv2.
+    """Exercise 1.12: cameras disagree → camera 2's extrinsics are stale → re-estimate (R, t) from X ↔ uv2.
 
     Gauss-Newton on a left rotation increment and t, starting from the stale file values (close
     to the truth: a mount shifts by degrees, not tens of degrees). Jacobian by central differences:
@@ -59,7 +58,7 @@ def fix_extrinsics(case: dict, iters: int = 15) -> tuple[np.ndarray, np.ndarray]
 
 
 def fix_principal_point(case: dict) -> np.ndarray:
-    """Constant offset → the principal point is wrong → shift (cx, cy) by the mean residual.
+    """Exercise 1.13: constant offset → the principal point is wrong → shift (cx, cy) by the mean residual.
 
     Without distortion a principal-point error moves every projection by the same vector, so
     the mean of uv_observed - uv_predicted is its least-squares estimate. Returns K: (3, 3).
@@ -71,7 +70,7 @@ def fix_principal_point(case: dict) -> np.ndarray:
 
 
 def fix_frame_convention(case: dict) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Mirrored → camera-to-world poses in OpenGL axes read as OpenCV → change axes, invert.
+    """Exercise 1.14: mirrored → camera-to-world poses in OpenGL axes read as OpenCV → change axes, invert.
 
     X_w = R_wc_gl v_gl + C and v_gl = M^T v_cv with M = frame_change('opengl', 'opencv'), so the
     OpenCV world-to-camera pose is R = M R_wc_gl^T, t = -R C.

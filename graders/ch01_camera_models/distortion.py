@@ -1,0 +1,109 @@
+"""1.6 — undoing Brown-Conrady distortion: OpenCV (converged) as the oracle, real and synthetic cases, hints."""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import cv2
+import numpy as np
+
+from .. import datasets, scene
+from ..compare import max_distance
+from ..engine import Case, Exercise, Hint, like, register
+from ..geometry import pixels_to_normalised
+from .pinhole import cv_project
+
+
+def cv_undistort(uv: np.ndarray, K: np.ndarray, dist: np.ndarray, iters: int = 20) -> np.ndarray:
+    """OpenCV-backed `undistort_points`: (N, 2) pixels -> (N, 2) undistorted normalised coordinates.
+
+    `cv2.undistortPoints` without `criteria` runs a fixed 5 iterations, too few for strong
+    distortion at the corners; with a tight criterion it converges.
+    """
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, max(iters, 200), 1e-14)
+    x = cv2.undistortPoints(np.asarray(uv, float).reshape(-1, 1, 2), np.asarray(K, float),
+                            np.asarray(dist, float), None, None, None, criteria)
+    return x.reshape(-1, 2)
+
+
+@lru_cache(maxsize=1)
+def real_chessboard_corners() -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Corners detected in OpenCV's 13 real left chessboard views, with OpenCV's calibration of
+    that camera: (uv: (N, 2) pixels, K, dist), or None when the dataset is not available."""
+    if not datasets.available("chessboard"):
+        return None
+    calib = datasets.load_chessboard_intrinsics()
+    corners = []
+    for p in datasets.chessboard_images("left"):
+        gray = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
+        found, c = cv2.findChessboardCorners(gray, calib["pattern_size"])
+        if found:
+            criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 1e-3)
+            corners.append(cv2.cornerSubPix(gray, c, (11, 11), (-1, -1), criteria).reshape(-1, 2))
+    return np.concatenate(corners).astype(float), calib["K"], calib["dist"]
+
+
+def _in_pixels(fx: float):
+    """Normalised-coordinate distance x fx: the tolerance then reads in pixels like the others."""
+    return lambda a, b: fx * max_distance(a, b)
+
+
+def cases_undistort(rng) -> list[Case]:
+    out = []
+    real = real_chessboard_corners()
+    if real is not None:
+        uv, K, dist = real
+        # Real lens, real corners: OpenCV (converged) is the oracle; 0.01 px as below.
+        out.append(Case("real chessboard corners (OpenCV sample, 13 views)", (uv, K, dist), cv_undistort(uv, K, dist),
+                        _in_pixels(K[0, 0]), 0.01, "px", shape=uv.shape, key="real", tags=("real",)))
+    for key, name, strength, n in [("mild", "mild radial", "mild", 100),
+                                   ("strong", "strong radial, corners included", "strong", 400),
+                                   ("tangential", "tangential terms", "tangential", 200)]:
+        w, h = 1280, 960
+        K = scene.random_intrinsics(rng, width=w, height=h)
+        dist = scene.random_distortion(rng, "moderate" if strength == "tangential" else strength)
+        if strength == "tangential":
+            dist[2:4] = rng.choice([-1, 1], 2) * rng.uniform(0.002, 0.006, 2)
+        # Truth first: undistorted normalised points whose distorted images fill the frame.
+        x = pixels_to_normalised(np.c_[rng.uniform(0, w - 1, n), rng.uniform(0, h - 1, n)], K)
+        uv = cv_project(np.c_[x, np.ones(n)], K, np.eye(3), np.zeros(3), dist)
+        # 0.01 px is far below detector noise; a converged solver reaches ~1e-9 px, 5 fixed-point
+        # steps do not.
+        out.append(Case(name, (uv, K, dist), x, _in_pixels(K[0, 0]), 0.01, "px", shape=(n, 2), key=key,
+                        tags=(strength,)))
+    return out
+
+
+def _bug_undistort_returns_pixels(case):
+    uv, K, dist = case.args
+    return case.expected @ K[:2, :2].T + K[:2, 2]  # the undistorted points, but in pixels
+
+
+def _bug_undistort_radial_only(case):
+    uv, K, dist = case.args
+    d = np.array(dist, float)
+    d[2:4] = 0
+    return cv_undistort(uv, K, d)
+
+
+def _undistort_without_centre(case, out):
+    """True if `out` undistorts uv / (fx, fy): the distorted point maps back to uv + (cx, cy)."""
+    uv, K, dist = case.args
+    back = cv_project(np.c_[out, np.ones(len(out))], K, np.eye(3), np.zeros(3), dist)
+    return float(np.median(np.linalg.norm(back - (uv + K[:2, 2]), axis=1))) < 0.5
+
+
+UNDISTORT_HINTS = [
+    like(_bug_undistort_returns_pixels, "you returned pixels: return normalised coordinates (apply K⁻¹, no K at the end)."),
+    like(_bug_undistort_radial_only, "the tangential terms are ignored: the inverse must undo p1, p2 too."),
+    Hint("not converged: a few fixed-point steps are not enough for strong distortion near the corners — "
+         "iterate to convergence or use Newton's method with the 2×2 Jacobian.",
+         lambda case, out: "strong" in case.tags and case.metric(out, case.expected) < 50),
+    Hint("(cx, cy) was not subtracted: normalise with K⁻¹, x = (u − cx) / fx, y = (v − cy) / fy, before undoing "
+         "the distortion.", _undistort_without_centre),
+]
+
+register(
+    Exercise(id="1.6", title="Iterative undistortion that converges", name="undistort_points", kind="code",
+             points=4, cases=cases_undistort, hints=UNDISTORT_HINTS, fallback=cv_undistort,
+             arg_names=("uv", "K", "dist")),
+)
