@@ -31,10 +31,34 @@ import tempfile
 import time
 from typing import Any, Callable
 
-from .learner import receive_bytes, send
+from .learner import send
 from .sandbox import TimeLimitExceeded
 
 MARGIN_S = 5.0          # the judge waits this much longer than the learner's own time limit
+MAX_FRAME = 4 << 30     # bytes: a reply that claims more is not a reply
+
+
+def _read_until(fd: int, n: int, deadline: float) -> bytes:
+    """Exactly n bytes from fd by the deadline (the learner may write a header and then stall)."""
+    chunks, left = [], n
+    while left:
+        ready, _, _ = select.select([fd], [], [], max(deadline - time.monotonic(), 0.0))
+        if not ready:
+            raise TimeoutError
+        chunk = os.read(fd, min(left, 1 << 20))
+        if not chunk:
+            raise EOFError
+        chunks.append(chunk)
+        left -= len(chunk)
+    return b"".join(chunks)
+
+
+def _receive(fd: int, deadline: float) -> bytes:
+    import struct
+    (n,) = struct.unpack("!Q", _read_until(fd, 8, deadline))
+    if n > MAX_FRAME:
+        raise pickle.UnpicklingError(f"a reply of {n} bytes")
+    return _read_until(fd, n, deadline)
 
 
 class RemoteError(Exception):
@@ -44,7 +68,7 @@ class RemoteError(Exception):
     def __init__(self, kind: str, error: str, traceback: str = ""):
         super().__init__(error)
         self.kind, self.error, self.traceback = kind, error, traceback
-        self.remote_kind = {"crash": "exit"}.get(kind, kind)   # what graders.sandbox reports
+        self.remote_kind = {"crash": "exit", "garbage": "exception"}.get(kind, kind)   # what graders.sandbox reports
 
 
 # ------------------------------------------------------------------ what may come back
@@ -189,8 +213,11 @@ class LearnerProcess:
         os.close(req_r)
         os.close(res_w)
         self.req, self.res = req_w, res_r
-        reply = self._exchange({"op": "load", "source": self.source}, timeout=120.0)
-        self.problem = "" if reply.get("ok") else reply.get("error", "your code failed to load")
+        try:
+            reply = self._exchange({"op": "load", "source": self.source}, timeout=120.0)
+            self.problem = "" if reply.get("ok") else reply.get("error", "your code failed to load")
+        except (RemoteError, TimeLimitExceeded) as exc:
+            self.problem = f"your code failed to load: {exc}"
 
     def stop(self) -> None:
         if self.proc is None:
@@ -232,16 +259,14 @@ class LearnerProcess:
             raise RemoteError("crash", self._death()) from None
         deadline = time.monotonic() + timeout
         while True:
-            left = deadline - time.monotonic()
-            ready, _, _ = select.select([self.res], [], [], max(left, 0.0))
-            if not ready:
-                raise TimeLimitExceeded(f"time limit of {timeout - MARGIN_S:g} s exceeded")
             try:
-                reply = _loads(receive_bytes(self.res))
+                reply = _loads(_receive(self.res, deadline))
+            except TimeoutError:
+                raise TimeLimitExceeded(f"time limit of {max(timeout - MARGIN_S, 0.05):.3g} s exceeded") from None
             except EOFError:
                 raise RemoteError("crash", self._death()) from None
-            except pickle.UnpicklingError as exc:
-                raise RemoteError("exception", f"returned an object the grader cannot receive ({exc}): return "
+            except (pickle.UnpicklingError, ValueError, TypeError, AttributeError, IndexError) as exc:
+                raise RemoteError("garbage", f"returned an object the grader cannot receive ({exc}): return "
                                                "numpy arrays, numbers, strings, lists, tuples or dicts") from None
             if reply.get("op") != "callback":
                 return reply
@@ -256,7 +281,11 @@ class LearnerProcess:
         send(self.req, reply)
 
     def _death(self) -> str:
-        code = self.proc.wait() if self.proc else None
+        try:
+            code = self.proc.wait(timeout=2) if self.proc else None
+        except subprocess.TimeoutExpired:     # it closed its channel but lives on: end it
+            self.stop()
+            return "your code closed the grading channel"
         return f"your code stopped the grading process (exit status {code})"
 
     def names(self, wanted: list[str]) -> list[str]:
@@ -291,7 +320,7 @@ class RemoteFunction:
             self.learner._restart()       # it did not answer: a fresh process for the next case
             raise
         except RemoteError as exc:
-            if exc.kind == "crash":
+            if exc.kind in ("crash", "garbage"):   # a dead process, or a channel that cannot be trusted now
                 self.learner._restart()
             raise
         self._stdout.append(reply.get("stdout", ""))
