@@ -1,6 +1,6 @@
 """Chapter 5: bundle adjustment of the real BAL problem-49-7776-pre, three solvers side by side.
 
-- reference: `solutions.bundle_adjustment.bundle_adjust` (numpy LM, analytic Jacobians, Schur
+- reference: `solutions.ch05_bundle_adjustment.bundle_adjust` (numpy LM, analytic Jacobians, Schur
   complement, dense solve of the 441x441 reduced camera system), run twice: stopped like scipy's
   cookbook run (relative cost decrease below ftol = 1e-4) and like Ceres by default (1e-6).
 - scipy: `scipy.optimize.least_squares` exactly as in the SciPy cookbook ("Large-scale bundle
@@ -46,7 +46,7 @@ def _load():
 
 
 def _reference(args, ftol):
-    from solutions import bundle_adjustment as ba
+    from solutions import ch05_bundle_adjustment as ba
     evaluations = [0]
     residuals = ba.residuals
 

@@ -12,15 +12,16 @@ import pytest
 import grader_checks as checks
 from graders import chapter, datasets, get
 from graders import ch05_bundle_adjustment as ch5
-from mutants.ch05 import MUTANTS
-from solutions import bundle_adjustment, bundle_adjustment_debug, bundle_adjustment_questions
+from graders.ch05_bundle_adjustment.common import column_relative
+from mutants.ch05_bundle_adjustment import MUTANTS
+from solutions import ch05_bundle_adjustment as bundle_adjustment
 
 SEEDS = [0, 1, 2]
 EXERCISES = {ex.id: ex for ex in chapter(5)}
 
 
 def reference(ex) -> object:
-    return checks.reference(ex, (bundle_adjustment, bundle_adjustment_debug, bundle_adjustment_questions))
+    return checks.reference(ex, (bundle_adjustment,))
 
 
 # Library-backed implementations: exercise id -> (function, cases it cannot answer and why).
@@ -41,7 +42,7 @@ def test_torch_and_finite_difference_jacobians_agree():
     prob = ch5.make_problem(np.random.default_rng(0), n_cams=5, n_points=60)
     args = ch5.problem_args(prob)[:4]
     for a, b in zip(ch5.torch_jacobians(*args), ch5.fd_jacobians(*args)):
-        assert ch5._column_relative(b, a) < 1e-6
+        assert column_relative(b, a) < 1e-6
 
 
 def test_analytic_and_autograd_gradients_agree():
@@ -148,3 +149,25 @@ def test_specific_hints_stay_quiet_on_other_mistakes():
     result = grade(EXERCISES["5.23"], pose_not_refined, seed=0)
     assert result.score < EXERCISES["5.23"].points  # the pose rows fail (the derivative rows are exact)
     assert not any(row.hint for row in result.cases), checks.show(result)
+
+
+def test_read_bal_leaves_no_temporary_files():
+    # 5.5 hands the learner a BAL file in a temporary folder that exists only during the call: nothing is
+    # left in the temp directory, whether the learner's code reads it, raises or is stopped by the time limit.
+    import tempfile
+    from pathlib import Path
+
+    from graders import grade
+
+    def leftovers():
+        return sorted(p.name for p in Path(tempfile.gettempdir()).glob("cv3d_ch05_*"))
+
+    before = leftovers()
+
+    def crashes(path):
+        open(path).read()
+        raise RuntimeError("learner bug")
+
+    for fn in (bundle_adjustment.read_bal, crashes):
+        grade(EXERCISES["5.5"], fn, seed=0)
+    assert leftovers() == before

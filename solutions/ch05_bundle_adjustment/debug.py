@@ -1,13 +1,14 @@
 """Chapter 5 — fixes for the four DEBUG cases (symptom → diagnosis → fix), from scratch.
 
-Each takes the case dict of `graders.ch05_bundle_adjustment.debug_case` (cameras, points,
+Each takes the case dict of `debug_case` of the chapter's grader (cameras, points,
 cam_idx, pt_idx, obs, settings) and returns the repaired reconstruction.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .bundle_adjustment import bundle_adjust, residuals, rotate
+from .bal import residuals, rotate
+from .lm import bundle_adjust
 
 
 def _args(case: dict) -> tuple:
@@ -26,7 +27,7 @@ def _restrict(points: np.ndarray, cam_idx, pt_idx, obs, keep_obs: np.ndarray, mi
 
 
 def fix_divergence(case: dict):
-    """Diverges → (1) points at (0, 0, 0) = camera 0's centre make 0/0 = NaN in the residuals and
+    """Exercise 5.15: Diverges → (1) points at (0, 0, 0) = camera 0's centre make 0/0 = NaN in the residuals and
     Jacobians, and (2) lambda0 = 1e-12 is plain Gauss-Newton, which trusts its linearisation far
     from the minimum. Fix: drop the points whose start is not finite or not in front of every
     camera that sees them (failed triangulations: re-triangulate them after BA), then run LM with a
@@ -45,7 +46,7 @@ def fix_divergence(case: dict):
 
 
 def fix_outliers(case: dict):
-    """Wrong solution → 10 % wrong matches drag an L2 fit → a Cauchy loss with a scale of ~2x the
+    """Exercise 5.16: Wrong solution → 10 % wrong matches drag an L2 fit → a Cauchy loss with a scale of ~2x the
     noise (robust first, then a few L2 iterations on the inliers would also do)."""
     cams, pts, ci, pi, obs = _args(case)
     new_cams, new_pts, _ = bundle_adjust(cams, pts, ci, pi, obs, loss="cauchy", scale=1.0)
@@ -53,7 +54,7 @@ def fix_outliers(case: dict):
 
 
 def fix_too_slow(case: dict):
-    """Too slow → the full normal equations (9 nc + 3 np unknowns) are factorised densely, O(n^3)
+    """Exercise 5.17: Too slow → the full normal equations (9 nc + 3 np unknowns) are factorised densely, O(n^3)
     → eliminate the points (Schur complement: 9 nc unknowns) and keep everything sparse."""
     cams, pts, _ = bundle_adjust(*_args(case), ftol=1e-6)
     return cams, pts
@@ -82,7 +83,7 @@ def ray_angles(cameras: np.ndarray, cam_idx: np.ndarray, pt_idx: np.ndarray, obs
 
 
 def fix_points_at_infinity(case: dict):
-    """Points fly to infinity → points seen by one camera have no depth information at all, and
+    """Exercise 5.18: Points fly to infinity → points seen by one camera have no depth information at all, and
     points seen only by two cameras 1-2 cm apart almost none (parallax ~0.1°: half a pixel of noise
     moves them by metres); nothing pins the 7-DOF gauge either → keep the points seen 3+ times
     and hold camera 0 and the scale. (Production systems also filter by triangulation angle —

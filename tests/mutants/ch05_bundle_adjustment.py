@@ -15,8 +15,11 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from solutions import bundle_adjustment as ref
-from solutions import bundle_adjustment_debug as ref_debug
+from solutions import ch05_bundle_adjustment as ref
+from solutions.ch05_bundle_adjustment import debug as ref_debug
+from solutions.ch05_bundle_adjustment import linear_algebra as ref_la
+from solutions.ch05_bundle_adjustment import lm as ref_lm
+from solutions.geometry import rodrigues, skew
 
 # ----------------------------------------------------------------- 5.5 read_bal
 
@@ -131,13 +134,13 @@ def jac_rotation_sign(cameras, points, cam_idx, pt_idx):
 
 def jac_right_perturbation(cameras, points, cam_idx, pt_idx):
     Jc, Jp = ref.reprojection_jacobians(cameras, points, cam_idx, pt_idx)
-    Jc[:, :, :3] = -Jp @ ref._skew(points[pt_idx])  # R Exp(d) X: dP/dd = -R [X]x
+    Jc[:, :, :3] = -Jp @ skew(points[pt_idx])  # R Exp(d) X: dP/dd = -R [X]x
     return Jc, Jp
 
 
 def jac_no_distortion_derivative(cameras, points, cam_idx, pt_idx):
     c = cameras[cam_idx]
-    R = ref.rodrigues(cameras[:, :3])[cam_idx]
+    R = rodrigues(cameras[:, :3])[cam_idx]
     RX = np.einsum("mij,mj->mi", R, points[pt_idx])
     P = RX + c[:, 3:6]
     z = P[:, 2]
@@ -149,7 +152,7 @@ def jac_no_distortion_derivative(cameras, points, cam_idx, pt_idx):
     dp_dP[:, :, 2] = -p / z[:, None]
     du_dP = (c[:, 6] * d)[:, None, None] * dp_dP  # the distortion factor treated as a constant
     Jc = np.empty((len(z), 2, 9))
-    Jc[:, :, :3] = -du_dP @ ref._skew(RX)
+    Jc[:, :, :3] = -du_dP @ skew(RX)
     Jc[:, :, 3:6] = du_dP
     Jc[:, :, 6] = d[:, None] * p
     Jc[:, :, 7] = (c[:, 6] * r2)[:, None] * p
@@ -159,7 +162,7 @@ def jac_no_distortion_derivative(cameras, points, cam_idx, pt_idx):
 
 def jac_point_R_transposed(cameras, points, cam_idx, pt_idx):
     Jc, Jp = ref.reprojection_jacobians(cameras, points, cam_idx, pt_idx)
-    R = ref.rodrigues(cameras[:, :3])[cam_idx]
+    R = rodrigues(cameras[:, :3])[cam_idx]
     return Jc, Jp @ R.transpose(0, 2, 1) @ R.transpose(0, 2, 1)  # du/dP R^T instead of du/dP R
 
 
@@ -228,12 +231,12 @@ def _schur(U, V, W, g_c, g_p, cam_idx, pt_idx, use_V=False, sign=1.0, back=1.0, 
     if with_U:
         for c in range(nc):
             S[9 * c:9 * c + 9, 9 * c:9 * c + 9] = U[c]
-    Ysp = sp.bsr_matrix(ref._bsr_by_rows(Y, cam_idx, pt_idx, nc, 3 * n_pts))
-    WTsp = ref._bsr_by_rows(W.transpose(0, 2, 1), pt_idx, cam_idx, n_pts, 9 * nc)
+    Ysp = sp.bsr_matrix(ref_la._bsr_by_rows(Y, cam_idx, pt_idx, nc, 3 * n_pts))
+    WTsp = ref_la._bsr_by_rows(W.transpose(0, 2, 1), pt_idx, cam_idx, n_pts, 9 * nc)
     S -= (Ysp @ WTsp).toarray()
-    rhs = -g_c.ravel() + ref._segment_sum(cam_idx, np.einsum("mij,mj->mi", Y, g_p[pt_idx]), nc).ravel()
+    rhs = -g_c.ravel() + ref_la._segment_sum(cam_idx, np.einsum("mij,mj->mi", Y, g_p[pt_idx]), nc).ravel()
     dc = (sign * np.linalg.lstsq(S, rhs, rcond=None)[0]).reshape(nc, 9)
-    WT_dc = ref._segment_sum(pt_idx, np.einsum("mij,mi->mj", W, dc[cam_idx]), n_pts)
+    WT_dc = ref_la._segment_sum(pt_idx, np.einsum("mij,mi->mj", W, dc[cam_idx]), n_pts)
     dp = np.einsum("nij,nj->ni", Vi, -g_p - back * WT_dc)
     return dc, (sign * dp if sign < 0 else dp)
 
@@ -319,7 +322,7 @@ def _lm(cameras, points, cam_idx, pt_idx, obs, loss="linear", scale=1.0, fix_gau
     cams, pts = np.array(cameras, float), np.array(points, float)
     if ignore_loss:
         loss = "linear"
-    fixed = ref._gauge_mask(cams) if fix_gauge and not ignore_gauge else np.zeros(cams.shape, bool)
+    fixed = ref_lm._gauge_mask(cams) if fix_gauge and not ignore_gauge else np.zeros(cams.shape, bool)
     nc, n_pts = len(cams), len(pts)
     r = ref.residuals(cams, pts, cam_idx, pt_idx, obs)
     cost = ref.robust_cost(r, loss, scale)
@@ -343,7 +346,7 @@ def _lm(cameras, points, cam_idx, pt_idx, obs, loss="linear", scale=1.0, fix_gau
             Vd[:, np.arange(3), np.arange(3)] += lam * dV
             dc, dp = ref.schur_solve(Ud, Vd, W, g_c, g_p, cam_idx, pt_idx)
             dc[fixed] = 0.0
-            new_cams, new_pts = ref._apply_step(cams, pts, dc, dp)
+            new_cams, new_pts = ref_lm._apply_step(cams, pts, dc, dp)
             r_new = ref.residuals(new_cams, new_pts, cam_idx, pt_idx, obs)
             new_cost = ref.robust_cost(r_new, loss, scale)
             if accept_all or new_cost < cost:
@@ -364,12 +367,12 @@ def ba_lambda_inverted(cameras, points, cam_idx, pt_idx, obs, loss="linear", sca
 def ba_rotation_added(cameras, points, cam_idx, pt_idx, obs, loss="linear", scale=1.0, fix_gauge=False,
                       max_iter=50):
     """Jacobians for the left increment, but the increment added to the rotation vector."""
-    original = ref.compose_left
+    original = ref_lm.compose_left  # the name bundle_adjust's step looks up
     try:
-        ref.compose_left = lambda d, w: w + d
+        ref_lm.compose_left = lambda d, w: w + d
         return ref.bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss, scale, fix_gauge, max_iter)
     finally:
-        ref.compose_left = original
+        ref_lm.compose_left = original
 
 
 def ba_robust_loss_ignored(cameras, points, cam_idx, pt_idx, obs, loss="linear", scale=1.0, fix_gauge=False,
@@ -437,12 +440,12 @@ def fix_too_slow_two_iterations(case):
 
 
 def fix_too_slow_schur_with_V(case):
-    original = ref.schur_solve
+    original = ref_lm.schur_solve  # the name bundle_adjust looks up
     try:
-        ref.schur_solve = schur_with_V
+        ref_lm.schur_solve = schur_with_V
         cams, pts, _ = ref.bundle_adjust(*_args(case), max_iter=20)
     finally:
-        ref.schur_solve = original
+        ref_lm.schur_solve = original
     return cams, pts
 
 
