@@ -21,6 +21,8 @@ The learner's file is only read, never written.
 from __future__ import annotations
 
 import argparse
+import hashlib
+import hmac
 import json
 import os
 import re
@@ -37,7 +39,7 @@ from typing import Callable
 from .chapters import READY
 from .engine import chapter
 from .extract import extract
-from .report import CaseResult, ExerciseResult, write_gradescope
+from .report import ExerciseResult, result_from_dict, write_gradescope
 
 HARD_LIMIT = 120.0    # seconds per exercise before its worker is killed; generous on a slow 2-core machine
 TIME_BUDGET = 540.0   # seconds for a whole grade: inside Gradescope's default 10-minute limit
@@ -53,11 +55,6 @@ def chapters_of(path: Path, source: str) -> list[str]:
         return [str(int(m.group(1)))]
     found = [n for n in keys if any(re.search(rf"\b{re.escape(ex.name)}\b", source) for ex in chapter(n))]
     return found or keys
-
-
-def _from_dict(d: dict) -> ExerciseResult:
-    cases = [CaseResult(**c) for c in d.pop("cases")]
-    return ExerciseResult(**d, cases=cases)
 
 
 def _failed(ex, message: str, seed: int, status: str = "error") -> ExerciseResult:
@@ -120,14 +117,30 @@ class _Grade:
         return [self.results[ex.id] for ex in self.exercises if ex.id in self.results]
 
 
+def hidden_seeds(secret: bytes, submission: str, ids: list[str]) -> dict[str, int]:
+    """Instructor grading: one seed per (submission, exercise) from the secret (HMAC-SHA256), so every
+    submission gets its own hidden draw and nobody without the secret can reproduce it."""
+    return {i: int.from_bytes(hmac.new(secret, f"{submission}\0{i}".encode(), hashlib.sha256).digest()[:4], "big")
+            for i in ids}
+
+
+def read_secret(path: str | None) -> bytes | None:
+    """The instructor's secret: a file (`--secret-file`) or $CV3D_GRADING_SECRET; None in self-study."""
+    if path:
+        return Path(path).read_bytes().strip()
+    value = os.environ.get("CV3D_GRADING_SECRET")
+    return value.encode() if value else None
+
+
 def _worker(src: Path, ids: list[str], seed: int, scratch: Path, memory_gb: float,
-            graded: bool) -> tuple[subprocess.Popen, int]:
+            graded: bool, hidden: dict[str, int] | None = None) -> tuple[subprocess.Popen, int]:
     """A worker and the read end of its event pipe. The seed travels in the environment, not argv."""
     read_fd, write_fd = os.pipe()
     cmd = [sys.executable, "-m", "graders.worker", str(src), str(write_fd), "--ids", ",".join(ids)]
     cmd += ["--graded"] if graded else []
     env = dict(os.environ, MPLBACKEND="Agg", TMPDIR=str(scratch), TEMP=str(scratch), TMP=str(scratch),
-               CV3D_SEED=str(seed))
+               CV3D_SEED=str(seed), CV3D_HIDDEN_SEEDS=json.dumps(hidden or {}))
+    env.pop("CV3D_GRADING_SECRET", None)        # the worker needs the seeds, not the secret
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
                             cwd=scratch, env=env, start_new_session=True, pass_fds=(write_fd,),
                             preexec_fn=_limit_memory(memory_gb))
@@ -160,12 +173,12 @@ def _watch(proc: subprocess.Popen, fd: int, grade: _Grade, hard_limit: float) ->
             if "start" in event:
                 current, started = event["start"], time.monotonic()
             else:
-                grade.add(_from_dict(event["result"]))
+                grade.add(result_from_dict(event["result"]))
                 current = None
         if done:
             for event in _events(fd, pending):   # what it wrote just before it ended
                 if "result" in event:
-                    grade.add(_from_dict(event["result"]))
+                    grade.add(result_from_dict(event["result"]))
                     current = None
             return current, ""
         if grade.stop_reason():
@@ -178,7 +191,8 @@ def _watch(proc: subprocess.Popen, fd: int, grade: _Grade, hard_limit: float) ->
 
 def run_workers(source: str, exercises: list, seed: int, hard_limit: float = HARD_LIMIT,
                 time_budget: float = TIME_BUDGET, max_timeouts: int = MAX_TIMEOUTS, memory_gb: float = MEMORY_GB,
-                graded: bool = False, on_result: Callable[[list[ExerciseResult]], None] | None = None) -> list[ExerciseResult]:
+                graded: bool = False, on_result: Callable[[list[ExerciseResult]], None] | None = None,
+                hidden: dict[str, int] | None = None) -> list[ExerciseResult]:
     grade = _Grade(exercises, seed, time_budget, max_timeouts, on_result)
     with tempfile.TemporaryDirectory(prefix="cv3d-grade-") as tmp:
         src = Path(tmp, "learner.py")
@@ -186,7 +200,7 @@ def run_workers(source: str, exercises: list, seed: int, hard_limit: float = HAR
         scratch = Path(tmp, "scratch")
         scratch.mkdir()
         while grade.todo() and not grade.stop_reason():
-            proc, fd = _worker(src, grade.todo(), seed, scratch, memory_gb, graded)
+            proc, fd = _worker(src, grade.todo(), seed, scratch, memory_gb, graded, hidden)
             try:
                 current, why = _watch(proc, fd, grade, hard_limit)
             finally:
@@ -209,8 +223,10 @@ def run_workers(source: str, exercises: list, seed: int, hard_limit: float = HAR
 def check_file(path: str | Path, seed: int | None = None, only: list[str] | None = None,
                hard_limit: float = HARD_LIMIT, time_budget: float = TIME_BUDGET, max_timeouts: int = MAX_TIMEOUTS,
                memory_gb: float = MEMORY_GB, graded: bool = False,
-               on_result: Callable[[list[ExerciseResult]], None] | None = None) -> tuple[list[ExerciseResult], str]:
-    """Grade every exercise of the chapter(s) in `path`. Returns (results, message)."""
+               on_result: Callable[[list[ExerciseResult]], None] | None = None,
+               secret: bytes | None = None, submission: str | None = None) -> tuple[list[ExerciseResult], str]:
+    """Grade every exercise of the chapter(s) in `path`. Returns (results, message).
+    secret: instructor grading (hidden cases on a secret seed per submission; implies graded mode)."""
     path = Path(path)
     seed = secrets.randbits(32) if seed is None else seed
     exercises = []
@@ -229,8 +245,9 @@ def check_file(path: str | Path, seed: int | None = None, only: list[str] | None
         msg = f"{path} does not exist"
         return [_failed(ex, msg, seed) for ex in exercises], msg
     message = "\n".join(extracted.problems)
+    hidden = hidden_seeds(secret, submission or path.stem, [ex.id for ex in exercises]) if secret else None
     return run_workers(extracted.source, exercises, seed, hard_limit, time_budget, max_timeouts, memory_gb,
-                       graded, on_result), message
+                       graded or secret is not None, on_result, hidden), message
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -252,6 +269,8 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--memory-gb", type=float, default=MEMORY_GB, help="address-space limit of the grading process")
     c.add_argument("--graded", action="store_true",
                    help="graded mode: learner code in its own sandboxed process, CODE exercises from scratch")
+    c.add_argument("--secret-file", help="instructor grading: hidden cases on a secret seed (or $CV3D_GRADING_SECRET)")
+    c.add_argument("--submission-id", help="instructor grading: who the submission is (default: the file name)")
     sub.add_parser("fairness", help="grade the reference on fresh seeds: does a correct answer lose points?")
     args = ap.parse_args(argv)
     message_box = [""]
@@ -264,7 +283,7 @@ def main(argv: list[str] | None = None) -> int:
         write_gradescope(args.json, [], "grading started; no exercise finished")
     results, message = check_file(args.file, args.seed, args.only.split(",") if args.only else None,
                                   args.hard_limit, args.time_budget, args.max_timeouts, args.memory_gb,
-                                  args.graded, save)
+                                  args.graded, save, read_secret(args.secret_file), args.submission_id)
     message_box[0] = message
     if message:
         print(message, end="\n\n")

@@ -135,6 +135,7 @@ class Exercise:
     explanation: str = ""
     arg_names: tuple[str, ...] = ()
     libraries: tuple[str, ...] | None = None   # libraries graded work may call; None: by kind (below)
+    hidden_cases: Callable[[np.random.Generator], Iterable[Case]] | None = None  # added in instructor grading
 
     def __post_init__(self):
         assert self.kind in KINDS, f"{self.id}: kind {self.kind!r} is not one of {KINDS}"
@@ -275,8 +276,9 @@ def _not_attempted(value: Any) -> bool:
     return value is None or value is Ellipsis
 
 
-def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None) -> ExerciseResult:
-    """Judge `fn_or_value` on fresh hidden cases drawn with `seed` (random if None). Never raises."""
+def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None, hidden: bool = False) -> ExerciseResult:
+    """Judge `fn_or_value` on fresh hidden cases drawn with `seed` (random if None). Never raises.
+    hidden: the instructor's grade, which adds the exercise's `hidden_cases` to the usual ones."""
     seed = secrets.randbits(32) if seed is None else int(seed)
     result = ExerciseResult(id=ex.id, title=ex.title, name=ex.name, kind=ex.kind,
                             max_score=ex.points, seed=seed, replayable=not ex.value)
@@ -296,7 +298,10 @@ def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None) -> ExerciseRe
     # (real photos, a library run) only once the learner's code has got that far.
     weights = []
     try:
-        drawn = ex.cases(np.random.default_rng(seed))
+        rng = np.random.default_rng(seed)
+        drawn = ex.cases(rng)
+        if hidden and ex.hidden_cases is not None:
+            drawn = _chain(drawn, ex.hidden_cases, rng)
     except Exception as exc:  # a broken case generator is our bug, not the learner's; say so
         drawn = _raise(exc)
     cases = iter(drawn)
@@ -352,6 +357,12 @@ def _stop_after_timeout(result: ExerciseResult, weights: list[float], drawn: Any
 def _error_hint(ex: Exercise, case: Case, error_text: str) -> str:
     """The first `raised` hint whose pattern matches the error, or ''."""
     return next((h.say(case, None) for h in ex.hints if h.raised and re.search(h.raised, error_text)), "")
+
+
+def _chain(first: Iterable[Case], more: Callable, rng: np.random.Generator):
+    """The usual cases, then the hidden ones (drawn from the same generator once the first are done)."""
+    yield from first
+    yield from more(rng)
 
 
 def _raise(exc: Exception):

@@ -48,6 +48,8 @@ class ExerciseResult:
     cases: list[CaseResult] = field(default_factory=list)
     replayable: bool = True  # False for fixed questions: no hidden draw to replay
     timed_out: bool = False  # a case hit the time limit (the shell grader's time-out budget counts these)
+    visibility: str = "visible"   # Gradescope's: visible | after_due_date | hidden | after_published
+    feedback: dict | None = None  # instructor grading: the learner-visible check (a result dict), worth 0
 
     @property
     def passed(self) -> bool:
@@ -128,17 +130,40 @@ def _case_notes(c: CaseResult) -> list[str]:
     return notes
 
 
+def _test(r: ExerciseResult) -> dict:
+    return {"name": f"{r.id} {r.title}", "number": r.id, "score": r.score, "max_score": r.max_score,
+            "status": "passed" if r.passed else "failed", "output": str(r), "visibility": r.visibility}
+
+
 def gradescope(results: list[ExerciseResult], message: str = "") -> dict:
-    """Gradescope's results.json: score, max_score, tests[{name, score, max_score, status, output,
-    visibility}]."""
-    tests = [{"name": f"{r.id} {r.title}", "score": r.score, "max_score": r.max_score,
-              "status": "passed" if r.passed else "failed", "output": str(r),
-              "visibility": "visible"} for r in results]
+    """Gradescope's results.json: score, max_score, tests[{name, number, score, max_score, status, output,
+    visibility}].
+
+    Instructor grading adds, per exercise, the learner-visible check (worth 0, `visible`) before the
+    graded one (secret seed and hidden cases). When any graded test is not visible, the total is shown
+    only after the due date too, so a learner never sees 100 % while failing hidden cases."""
+    tests = []
+    for r in results:
+        if r.feedback:
+            fb = result_from_dict(dict(r.feedback))
+            fb.max_score, fb.score = 0.0, 0.0
+            test = _test(fb) | {"name": f"{r.id} {r.title} — your notebook's check (feedback, 0 points)",
+                                "status": "passed" if fb.passed else "failed"}
+            tests.append(test)
+        tests.append(_test(r))
     doc = {"score": round(sum(r.score for r in results), 6),
            "max_score": sum(r.max_score for r in results), "tests": tests}
+    if any(r.visibility != "visible" for r in results):
+        doc["visibility"] = "after_due_date"
     if message:
         doc["output"] = message
     return doc
+
+
+def result_from_dict(d: dict) -> "ExerciseResult":
+    d = dict(d)
+    cases = [CaseResult(**c) for c in d.pop("cases")]
+    return ExerciseResult(**d, cases=cases)
 
 
 def write_gradescope(path: str | Path, results: list[ExerciseResult], message: str = "") -> None:

@@ -79,6 +79,23 @@ class _Graded:
         self.learner.close()
 
 
+def _grade(ex, answer, seed: int, hidden_seed: int | None) -> ExerciseResult:
+    """The learner's check (seed); in instructor grading also the graded run on the secret seed with
+    the hidden cases, which carries the points; the check becomes its visible feedback."""
+    visible = grade(ex, answer, seed=seed)
+    if hidden_seed is None:
+        return visible
+    if visible.timed_out or visible.status == "not_attempted":   # it would only do the same again
+        graded = ExerciseResult(**{**visible.to_dict(), "cases": []})
+        graded.cases = visible.cases
+    else:
+        graded = grade(ex, answer, seed=hidden_seed, hidden=True)
+    graded.replayable = False          # the secret seed is never printed
+    graded.visibility = "after_due_date"
+    graded.feedback = visible.to_dict()
+    return graded
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("source")
@@ -87,6 +104,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--graded", action="store_true")
     args = ap.parse_args(argv)
     seed = int(os.environ.pop("CV3D_SEED", "0"))
+    hidden = json.loads(os.environ.pop("CV3D_HIDDEN_SEEDS", "{}"))   # instructor grading: id -> secret seed
     with open(args.source, encoding="utf-8") as f:
         source = f.read()
     exercises = [get(i) for i in args.ids.split(",")]
@@ -103,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
                     except Exception as exc:   # a value that cannot cross from the learner's process
                         answer, result = None, _not_there(ex, seed, f"could not read `{ex.name}`: {exc}")
                     if answer is not None or not ex.value:
-                        result = grade(ex, answer, seed=seed)
+                        result = _grade(ex, answer, seed, hidden.get(ex.id))
                 out.write(json.dumps({"result": result.to_dict()}) + "\n")
         finally:
             judge.close()
