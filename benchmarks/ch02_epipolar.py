@@ -27,13 +27,13 @@ from benchmarks.timing import median_time, table
 from graders import ch02_epipolar as ch2
 from graders import datasets
 from graders.compare import max_angle_deg, rotation_angle_deg, sampson_rms_px
-from solutions import epipolar as ref
+import solutions.ch02_epipolar as ref
 
 N, OUTLIERS, NOISE, SCENES, H_SEEDS = 500, 0.3, 0.5, 5, 15
 
 
 def _f1(inl: np.ndarray, is_outlier: np.ndarray) -> float:
-    return ch2._f1(np.asarray(inl, bool).ravel(), is_outlier)
+    return ch2.inlier_f1(np.asarray(inl, bool).ravel(), is_outlier)
 
 
 def _camera(K: np.ndarray, w: int, h: int):
@@ -157,7 +157,7 @@ def run() -> list[dict]:
         keep = ratio < 0.85
         a, b = x1[keep], x3[keep]
         truth_out = ch2.transfer_px(H_true, a, b) >= 3.0
-        grid = {"held_out": ch2._graf_grid(H_true)}
+        grid = {"held_out": ch2.graf_grid(H_true)}
         per = {}
         for seed in range(H_SEEDS):             # one real pair: vary the RANSAC seeds instead of the scene
             opts = pycolmap.RANSACOptions(max_error=2.0, random_seed=seed)
@@ -180,7 +180,7 @@ def run() -> list[dict]:
                 H, inl = fn()
                 m = per.setdefault(name, {"time": [], "held-out px": [], "inlier F1": [],
                                           "fmt": {"held-out px": "{:.2f}", "inlier F1": "{:.3f}"}})
-                m["held-out px"].append(ch2._rms_transfer(H, grid))
+                m["held-out px"].append(ch2.rms_transfer(H, grid))
                 m["inlier F1"].append(_f1(inl, truth_out))
                 m["time"].append(median_time(fn, repeat=5))
         rows += _rows(f"H: real graf1→graf3, {len(a)} SIFT matches ({truth_out.mean():.0%} off the true H)", per,

@@ -1,4 +1,4 @@
-"""Chapter 2 — fixes for the four DEBUG cases (symptom → diagnosis → fix), from scratch.
+"""Exercises 2.17-2.20 — fixes for the four DEBUG cases (symptom → diagnosis → fix), from scratch.
 
 Each takes the case dict of `graders.ch02_epipolar.debug_case` and returns the repaired result.
 Conventions: docs/CONVENTIONS.md; x2h^T F x1h = 0, x2h ~ H x1h, X_2 = R X_1 + t.
@@ -7,11 +7,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .epipolar import eight_point, ransac_fundamental, ransac_homography, recover_pose
+from .eight_point import eight_point
+from .pose import recover_pose
+from .ransac import ransac_fundamental, ransac_homography
 
 
 def fix_garbage_F(case: dict) -> np.ndarray:
-    """F is garbage → the 8-point ran on raw pixels (σ1/σ8 of A ~ 1e6) → Hartley-normalise first.
+    """Exercise 2.17: F is garbage → the 8-point ran on raw pixels (σ1/σ8 of A ~ 1e6) → Hartley-normalise first.
 
     Returns F: (3, 3), rank 2.
     """
@@ -19,7 +21,7 @@ def fix_garbage_F(case: dict) -> np.ndarray:
 
 
 def fix_planar_scene(case: dict, ratio: float = 0.5) -> tuple[str, np.ndarray]:
-    """Degenerate F → the matches lie on a plane or the camera only rotated → fit both models by
+    """Exercise 2.18: Degenerate F → the matches lie on a plane or the camera only rotated → fit both models by
     RANSAC and keep H when it explains at least `ratio` times as many matches as F.
 
     On a plane F has a family of exact solutions, so RANSAC returns an arbitrary member with as
@@ -37,7 +39,7 @@ def fix_planar_scene(case: dict, ratio: float = 0.5) -> tuple[str, np.ndarray]:
 
 
 def fix_matcher(case: dict, ratio: float = 0.8) -> np.ndarray:
-    """Too few inliers → nearest-neighbour matching keeps every feature, clutter and repeated
+    """Exercise 2.19: Too few inliers → nearest-neighbour matching keeps every feature, clutter and repeated
     patterns included → Lowe's ratio test and a mutual nearest-neighbour check.
 
     Returns (M, 2) int index pairs (i1, i2).
@@ -57,7 +59,7 @@ def fix_matcher(case: dict, ratio: float = 0.8) -> np.ndarray:
 
 
 def fix_cheirality(case: dict) -> tuple[np.ndarray, np.ndarray]:
-    """Wrong R, t → the candidate was chosen by depth in camera 1 only, and "all points in front"
+    """Exercise 2.20: Wrong R, t → the candidate was chosen by depth in camera 1 only, and "all points in front"
     lets one bad match veto the right answer → count points in front of both cameras, best of four.
 
     Returns (R, t), t of unit length.

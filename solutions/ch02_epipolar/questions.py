@@ -1,4 +1,4 @@
-"""Chapter 2 — answers to the CONCEPT and DESIGN questions, computed from their formulas."""
+"""Questions 2.1-2.4 (CONCEPT) and 2.21-2.24 (DESIGN): the answers, computed from their formulas."""
 import numpy as np
 
 

@@ -179,7 +179,7 @@ def seven_least_squares(x1, x2):
 
 def _five(x1, x2, basis="last", keep_complex=False):
     """The action-matrix 5-point solver of the reference, with knobs for two classic mistakes."""
-    from solutions import epipolar as ep
+    from solutions.ch02_epipolar import minimal as ep
     A = _rows(x1, x2)
     Vt = np.linalg.svd(A, full_matrices=True)[2]
     null = Vt[-4:] if basis == "last" else Vt[:4]              # "first": the largest singular vectors
@@ -406,12 +406,12 @@ def fix_F_no_rank2(case):
 
 
 def fix_planar_always_F(case):
-    from solutions.epipolar import ransac_fundamental
+    from solutions.ch02_epipolar import ransac_fundamental
     return "F", ransac_fundamental(case["x1"], case["x2"], rng=0)[0]
 
 
 def fix_planar_always_H(case):
-    from solutions.epipolar import ransac_homography
+    from solutions.ch02_epipolar import ransac_homography
     return "H", ransac_homography(case["x1"], case["x2"], rng=0)[0]
 
 

@@ -1,0 +1,46 @@
+"""Exercise 2.15: the normalised DLT homography (HZ algorithm 4.2), and the transfer error that
+scores it. Homographies map image 1 to image 2: `x2h ~ H x1h`."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..geometry import to_h
+from .basics import model_blocks
+from .eight_point import normalise_points
+
+
+def homography_dlt(x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
+    """Exercise 2.15: normalised DLT (HZ algorithm 4.2): H with x2h ~ H x1h, H[2, 2] = 1 (unit norm if H[2, 2] ~ 0).
+
+    x1, x2: (..., N, 2) pixels, N >= 4. Each correspondence gives two rows of A h = 0:
+    x2h x (H x1h) = 0.
+    """
+    n1, T1 = normalise_points(x1)
+    n2, T2 = normalise_points(x2)
+    p = to_h(n1)                                                     # (..., N, 3)
+    z = np.zeros_like(p)
+    u, v = n2[..., 0:1], n2[..., 1:2]
+    rows1 = np.concatenate([z, -p, v * p], axis=-1)                # (..., N, 9)
+    rows2 = np.concatenate([p, z, -u * p], axis=-1)
+    A = np.concatenate([rows1, rows2], axis=-2)                    # (..., 2N, 9)
+    _, V = np.linalg.eigh(np.swapaxes(A, -1, -2) @ A)
+    Hn = V[..., :, 0].reshape(A.shape[:-2] + (3, 3))
+    H = np.linalg.solve(T2, Hn @ T1)                               # H = T2^-1 Hn T1
+    scale = H[..., 2:3, 2:3]
+    bad = np.abs(scale) < 1e-12 * np.linalg.norm(H, axis=(-2, -1), keepdims=True)
+    return np.where(bad, H / np.linalg.norm(H, axis=(-2, -1), keepdims=True), H / np.where(bad, 1.0, scale))
+
+
+def transfer_error(H: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
+    """Distance in image 2 between x2 and H x1, in pixels. H: (..., 3, 3); x1, x2: (N, 2) -> (..., N)."""
+    H = np.asarray(H, float)
+    x1h, x2 = to_h(x1), np.asarray(x2, float)
+    Hs = H.reshape(-1, 3, 3)
+    out = np.empty((len(Hs), len(x1h)))
+    for block in model_blocks(len(Hs), len(x1h)):
+        y = (Hs[block].reshape(-1, 3) @ x1h.T).reshape(-1, 3, len(x1h))   # (M, 3, N)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d = np.hypot(y[:, 0] / y[:, 2] - x2[:, 0], y[:, 1] / y[:, 2] - x2[:, 1])
+        out[block] = np.where(np.isfinite(d), d, np.inf)
+    return out.reshape(H.shape[:-2] + (len(x1h),))
+

@@ -1,0 +1,141 @@
+"""Exercises 2.11-2.12: the minimal solvers — the 7-point algorithm (HZ 11.1.2) and the 5-point
+essential-matrix solver (Nistér, "An efficient solution to the five-point relative pose problem",
+PAMI 2004; Stewénius, Engels & Nistér, "Recent developments on direct relative orientation", ISPRS J.
+2006: the action-matrix form used here). Batched: RANSAC solves many samples in one call.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .eight_point import epipolar_rows, normalise_points, unit
+
+
+def _real_cubic_roots(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Real roots of c0 a^3 + c1 a^2 + c2 a + c3 = 0 for a batch. c: (B, 4) -> (roots (B, 3), valid (B, 3))."""
+    lead = c[:, :1]
+    small = np.abs(lead[:, 0]) < 1e-12 * np.abs(c).max(1)
+    lead = np.where(np.abs(lead) < 1e-300, 1e-300, lead)
+    comp = np.zeros((len(c), 3, 3))                       # companion matrix of the monic cubic
+    comp[:, 0, :] = -c[:, 1:] / lead
+    comp[:, 1, 0] = comp[:, 2, 1] = 1.0
+    roots = np.linalg.eigvals(comp)
+    valid = np.abs(roots.imag) <= 1e-8 * np.maximum(1.0, np.abs(roots.real))
+    valid &= ~small[:, None]
+    return roots.real, valid
+
+
+def _seven_point_batch(x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """7-point solver for a batch. x1, x2: (B, 7, 2) -> (F: (B, 3, 3, 3), valid: (B, 3))."""
+    n1, T1 = normalise_points(x1)
+    n2, T2 = normalise_points(x2)
+    A = epipolar_rows(n1, n2)                                    # (B, 7, 9)
+    _, _, Vt = np.linalg.svd(A, full_matrices=True)               # (B, 9, 9)
+    F1, F2 = Vt[:, -1].reshape(-1, 3, 3), Vt[:, -2].reshape(-1, 3, 3)
+    # det(a F1 + (1 - a) F2) = det(F2 + a D) is a cubic in a; its 4 coefficients follow exactly
+    # from 4 evaluations (the Vandermonde system of a cubic through 4 points).
+    D = F1 - F2
+    a = np.array([0.0, 1.0, -1.0, 2.0])
+    dets = np.linalg.det(F2[:, None] + a[None, :, None, None] * D[:, None])  # (B, 4)
+    V = np.vander(a, 4)                                           # columns a^3, a^2, a, 1
+    coeffs = np.linalg.solve(V, dets.T).T                         # (B, 4)
+    roots, valid = _real_cubic_roots(coeffs)
+    Fn = F2[:, None] + roots[:, :, None, None] * D[:, None]       # (B, 3, 3, 3)
+    F = np.swapaxes(T2, -1, -2)[:, None] @ Fn @ T1[:, None]
+    return unit(F), valid
+
+
+def seven_point(x1: np.ndarray, x2: np.ndarray) -> list[np.ndarray]:
+    """Exercise 2.11: the 7-point algorithm (HZ 11.1.2): every real F of rank 2 through 7 correspondences.
+
+    x1, x2: (7, 2) pixels. The 7 x 9 system leaves a 2-D null space a F1 + (1 - a) F2; det = 0 is a
+    cubic in a with 1 or 3 real roots. Returns a list of 1 or 3 F: (3, 3), each of unit norm.
+    """
+    F, valid = _seven_point_batch(np.asarray(x1, float)[None, :7], np.asarray(x2, float)[None, :7])
+    return [f for f, ok in zip(F[0], valid[0]) if ok]
+
+
+# ------------------------------------------------------------ five-point (action matrix) ----
+# E = x E0 + y E1 + z E2 + E3 spans the null space of the 5 epipolar equations. Ten cubic
+# equations in (x, y, z) remain: det E = 0 and 2 E E^T E - tr(E E^T) E = 0. Eliminating the ten
+# cubic monomials (Gauss-Jordan) expresses each of them in the basis
+# b = (x^2, xy, xz, y^2, yz, z^2, x, y, z, 1); multiplication by x maps b into itself, and the
+# eigenvectors of that 10 x 10 "action matrix" are b evaluated at the (up to 10) solutions.
+_MON1 = [(1, 0, 0), (0, 1, 0), (0, 0, 1), (0, 0, 0)]                 # x, y, z, 1
+_MON2 = [(2, 0, 0), (1, 1, 0), (1, 0, 1), (0, 2, 0), (0, 1, 1), (0, 0, 2)] + _MON1  # = the basis b
+_CUBIC = [(3, 0, 0), (2, 1, 0), (2, 0, 1), (1, 2, 0), (1, 1, 1), (1, 0, 2), (0, 3, 0), (0, 2, 1),
+          (0, 1, 2), (0, 0, 3)]
+_MON3 = _CUBIC + _MON2                                                # 20 monomials, cubics first
+
+
+def _product_map(left: list, right: list, out: list) -> np.ndarray:
+    """P: (len(left) * len(right), len(out)) with (a ⊗ b) @ P = coefficients of the product."""
+    index = {m: i for i, m in enumerate(out)}
+    P = np.zeros((len(left) * len(right), len(out)))
+    for i, a in enumerate(left):
+        for j, b in enumerate(right):
+            P[i * len(right) + j, index[tuple(p + q for p, q in zip(a, b))]] = 1.0
+    return P
+
+
+_P11 = _product_map(_MON1, _MON1, _MON2)   # linear x linear -> quadratic (coefficients over b)
+_P21 = _product_map(_MON2, _MON1, _MON3)   # quadratic x linear -> cubic (20 monomials)
+# Row i of the action matrix: x * b_i. For the first six b_i it is a cubic monomial (reduced by
+# elimination), for the last four it is another element of b.
+_X_TIMES_B = [(3, 0, 0), (2, 1, 0), (2, 0, 1), (1, 2, 0), (1, 1, 1), (1, 0, 2), (2, 0, 0), (1, 1, 0),
+              (1, 0, 1), (1, 0, 0)]
+
+
+def _five_point_batch(x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """5-point solver for a batch. x1, x2: (B, N, 2) normalised coordinates, N >= 5 (least squares
+    null space for N > 5). Returns (E: (B, 10, 3, 3) unit norm, valid: (B, 10) real solutions)."""
+    A = epipolar_rows(x1, x2)                                    # (B, N, 9)
+    _, _, Vt = np.linalg.svd(A, full_matrices=True)               # (B, 9, 9)
+    basis = Vt[:, -4:].reshape(-1, 4, 3, 3)                       # E0..E3, the 4-D null space
+    # E as a 3 x 3 matrix of linear polynomials: coefficients over (x, y, z, 1), shape (B, 3, 3, 4)
+    Ep = np.moveaxis(basis, 1, -1)
+    B = len(Ep)
+    # E E^T: quadratic entries (B, 3, 3, 10)
+    EEt = np.einsum("bika,bjkc->bijac", Ep, Ep).reshape(B, 3, 3, 16) @ _P11
+    trace = EEt[:, 0, 0] + EEt[:, 1, 1] + EEt[:, 2, 2]             # (B, 10)
+    # 2 E E^T E - tr(E E^T) E: cubic entries (B, 3, 3, 20)
+    EEtE = np.einsum("bikm,bkjn->bijmn", EEt, Ep).reshape(B, 3, 3, 40) @ _P21
+    trE = np.einsum("bm,bijn->bijmn", trace, Ep).reshape(B, 3, 3, 40) @ _P21
+    trace_eqs = (2 * EEtE - trE).reshape(B, 9, 20)
+    # det E = row0 . (row1 x row2): a quadratic cross product, then a cubic dot product
+    r0, r1, r2 = Ep[:, 0], Ep[:, 1], Ep[:, 2]                     # (B, 3, 4)
+    cross = np.stack([np.einsum("ba,bc->bac", r1[:, (i + 1) % 3], r2[:, (i + 2) % 3])
+                      - np.einsum("ba,bc->bac", r1[:, (i + 2) % 3], r2[:, (i + 1) % 3]) for i in range(3)], 1)
+    cross = cross.reshape(B, 3, 16) @ _P11                        # (B, 3, 10)
+    det = np.einsum("bkm,bkn->bmn", cross, r0).reshape(B, 40) @ _P21  # (B, 20)
+    M = np.concatenate([det[:, None], trace_eqs], axis=1)         # (B, 10, 20)
+    # Gauss-Jordan on the cubic monomials: cubic_j = -G_j . b
+    G = np.linalg.solve(M[:, :, :10], M[:, :, 10:])               # (B, 10, 10)
+    act = np.zeros((B, 10, 10))
+    index3 = {m: i for i, m in enumerate(_MON3)}
+    for row, m in enumerate(_X_TIMES_B):
+        col = index3[m]
+        if col < 10:
+            act[:, row] = -G[:, col]
+        else:
+            act[:, row, col - 10] = 1.0
+    vals, vecs = np.linalg.eig(act)                               # (B, 10), (B, 10, 10)
+    real = np.abs(vals.imag) <= 1e-8 * np.maximum(1.0, np.abs(vals.real))
+    vecs = vecs.real
+    w = vecs[:, 9]                                                 # the "1" component
+    ok = real & (np.abs(w) > 1e-12 * np.abs(vecs).max(1))
+    w = np.where(ok, w, 1.0)
+    xyz = vecs[:, 6:9] / w[:, None]                                # (B, 3, 10): x, y, z per solution
+    coef = np.concatenate([xyz, np.ones((B, 1, 10))], axis=1)      # (B, 4, 10)
+    E = np.einsum("bkij,bks->bsij", basis, coef)
+    return unit(E), ok
+
+
+def five_point(x1: np.ndarray, x2: np.ndarray) -> list[np.ndarray]:
+    """Exercise 2.12: every real essential matrix through 5 correspondences (Nistér 2004, Stewénius 2006).
+
+    x1, x2: (5, 2) normalised image coordinates K^-1 (u, v, 1) (more rows: least-squares null
+    space). Returns a list of up to 10 E: (3, 3), unit Frobenius norm, x2h^T E x1h = 0.
+    """
+    E, ok = _five_point_batch(np.asarray(x1, float)[None], np.asarray(x2, float)[None])
+    return [e for e, good in zip(E[0], ok[0]) if good]
+
