@@ -255,6 +255,9 @@ def main(argv: list[str] | None = None) -> int:
     if argv[:1] == ["fairness"]:
         from .fairness import main as fairness
         return fairness(argv[1:])
+    if argv[:1] == ["batch"]:
+        from .batch import main as batch
+        return batch(argv[1:])
     ap = argparse.ArgumentParser(prog="python -m graders")
     sub = ap.add_subparsers(dest="command", required=True)
     c = sub.add_parser("check", help="grade every exercise in a notebook (.ipynb) or module (.py)")
@@ -272,6 +275,7 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--secret-file", help="instructor grading: hidden cases on a secret seed (or $CV3D_GRADING_SECRET)")
     c.add_argument("--submission-id", help="instructor grading: who the submission is (default: the file name)")
     sub.add_parser("fairness", help="grade the reference on fresh seeds: does a correct answer lose points?")
+    sub.add_parser("batch", help="grade a folder of submissions into results.json files and a gradebook CSV")
     args = ap.parse_args(argv)
     message_box = [""]
 

@@ -117,11 +117,9 @@ def main(argv: list[str] | None = None) -> int:
                     result = _not_there(ex, seed, judge.problem)
                 else:
                     try:
-                        answer = judge.answer(ex)
+                        result = _grade(ex, judge.answer(ex), seed, hidden.get(ex.id))
                     except Exception as exc:   # a value that cannot cross from the learner's process
-                        answer, result = None, _not_there(ex, seed, f"could not read `{ex.name}`: {exc}")
-                    if answer is not None or not ex.value:
-                        result = _grade(ex, answer, seed, hidden.get(ex.id))
+                        result = _not_there(ex, seed, f"could not read `{ex.name}`: {exc}")
                 out.write(json.dumps({"result": result.to_dict()}) + "\n")
         finally:
             judge.close()
