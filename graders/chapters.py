@@ -75,7 +75,16 @@ CHAPTERS: tuple[Chapter, ...] = (
     Chapter(11, "capstone", "Capstone: cascading pipeline failures", ready=False),
 )
 
-READY: tuple[Chapter, ...] = tuple(c for c in CHAPTERS if c.ready)
+def _released() -> set[int] | None:
+    """A student release (graders.release) lists the chapters it holds beside this file."""
+    import json
+    from pathlib import Path
+    path = Path(__file__).with_name("released.json")
+    return set(json.loads(path.read_text())) if path.exists() else None
+
+
+_RELEASED = _released()
+READY: tuple[Chapter, ...] = tuple(c for c in CHAPTERS if c.ready and (_RELEASED is None or c.number in _RELEASED))
 
 
 def by_number(number: str | int) -> Chapter:

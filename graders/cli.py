@@ -255,6 +255,9 @@ def main(argv: list[str] | None = None) -> int:
     if argv[:1] == ["fairness"]:
         from .fairness import main as fairness
         return fairness(argv[1:])
+    if argv[:1] in (["release"], ["gradescope"], ["gradescope-run"]):
+        from .release import main as release
+        return release(argv)
     if argv[:1] == ["batch"]:
         from .batch import main as batch
         return batch(argv[1:])
@@ -275,6 +278,8 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--secret-file", help="instructor grading: hidden cases on a secret seed (or $CV3D_GRADING_SECRET)")
     c.add_argument("--submission-id", help="instructor grading: who the submission is (default: the file name)")
     sub.add_parser("fairness", help="grade the reference on fresh seeds: does a correct answer lose points?")
+    sub.add_parser("release", help="write the student edition (no solutions) of some chapters")
+    sub.add_parser("gradescope", help="build a Gradescope autograder zip for one chapter")
     sub.add_parser("batch", help="grade a folder of submissions into results.json files and a gradebook CSV")
     args = ap.parse_args(argv)
     message_box = [""]
