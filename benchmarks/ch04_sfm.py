@@ -3,7 +3,7 @@
 - pycolmap 4.2: `extract_features` (SIFT, one camera per image, images downscaled to MAX_SIDE) +
   `match_exhaustive` + `incremental_mapping`, default options, on a temporary database; the
   largest reconstruction is kept.
-- reference: `solutions.sfm_pipeline.reconstruct_folder` — SIFT-lite (Chapter 3) on images
+- reference: `solutions.ch04_sfm.reconstruct_folder` — SIFT-lite (Chapter 3) on images
   downscaled to the same MAX_SIDE, mutual-NN + ratio matching, F-RANSAC verification (Chapter 2),
   `incremental_sfm` with unknown focal lengths (1.2 x max side prior, self-calibrated from F,
   refined with k1, k2 by Chapter 5's BA).
@@ -78,7 +78,7 @@ def run_pycolmap(folder: Path, max_side: int = MAX_SIDE) -> dict:
 
 
 def run_reference(folder: Path, max_side: int = MAX_SIDE) -> dict:
-    from solutions.sfm_pipeline import reconstruct_folder, reprojection_stats
+    from solutions.ch04_sfm import reconstruct_folder, reprojection_stats
 
     rec = reconstruct_folder(folder, max_side=max_side, workers=2)
     stats = reprojection_stats(rec, rec["keypoints"])
@@ -98,7 +98,7 @@ def rotation_agreement(a: dict, b: dict) -> dict:
     aligned: the similarity mapping our camera centres onto pycolmap's (Umeyama), then the angle
     between R_i S^T and pycolmap's R_i for every image.
     """
-    from solutions.sfm import camera_centre, umeyama
+    from solutions.geometry import camera_centre, umeyama
 
     names = sorted(set(a) & set(b))
     if len(names) < 2:

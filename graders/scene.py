@@ -378,3 +378,104 @@ def random_homography_pair(rng: np.random.Generator, texture_img: np.ndarray, ma
     img1, H1 = render_plane(texture_img, K, R1, t1, size, width, height)
     img2, H2 = render_plane(texture_img, K, R2, t2, size, width, height)
     return img1, img2, _normalised(H2 @ np.linalg.inv(H1))
+
+
+# ============================================================ two-view scenes ====
+# The two-view scenes of chapters 2 (epipolar geometry) and 4 (triangulation, two-view initialisation).
+
+class _NotVisible(Exception):
+    pass
+
+
+def two_view(rng: np.random.Generator, n: int, **kw) -> dict:
+    """A two-view scene with known geometry; see `_two_view_once` for the options. A draw in which
+    camera 2 hardly sees the points is replaced by a fresh one (same generator, so still seeded)."""
+    for _ in range(100):
+        try:
+            return _two_view_once(rng, n, **kw)
+        except _NotVisible:
+            continue
+    raise RuntimeError(f"two_view: no visible scene for {kw}")
+
+
+def _two_view_camera(rng, K1, depth, motion, baseline):
+    """Camera 2's pose (R, t) and the scene's target for `_two_view_once`."""
+    target = np.array([0.0, 0.0, np.mean(depth)]) + rng.normal(0, 0.1 * np.mean(depth), 3) * [1, 1, 0]
+    if motion == "general":
+        d = rng.normal(size=3) * [1.0, 0.5, 0.5]
+    elif motion == "sideways":
+        d = np.array([rng.choice([-1, 1]), 0.0, 0.0]) + rng.normal(0, 0.05, 3)
+    elif motion == "forward":
+        d = np.array([0.0, 0.0, 1.0]) + rng.normal(0, 0.08, 3) * [1, 1, 0]
+        target = np.array([0.0, 0.0, 50.0]) + rng.normal(0, 3.0, 3) * [1, 1, 0]
+    elif motion == "rotation":
+        d = np.zeros(3)
+    else:
+        raise ValueError(motion)
+    C2 = baseline * d / max(np.linalg.norm(d), 1e-12)
+    up = np.array([0.0, -1.0, 0.0]) + rng.normal(0, 0.15, 3)   # a little roll
+    if motion == "rotation":
+        return random_rotation(rng, 12.0), np.zeros(3), target
+    R, t = look_at(C2, target, up)
+    return R, t, target
+
+
+def _two_view_once(rng: np.random.Generator, n: int, *, width: int = 1280, height: int = 960,
+                   noise: float = 0.0, outliers: float = 0.0, depth: tuple[float, float] = (2.0, 10.0),
+                   motion: str = "general", baseline: float = 1.0,
+                   roi: tuple[float, float, float, float] | None = None, planar: bool = False,
+                   same_K: bool = False, held_out: int = 300,
+                   hfov_deg: tuple[float, float] = (50.0, 90.0)) -> dict:
+    """A two-view scene with known geometry. Camera 1 is (I, 0); camera 2 (R, t) looks at the scene.
+
+    motion: 'general', 'sideways' (along camera 1's x), 'forward' (along its optical axis: the epipoles
+    fall inside the images), 'rotation' (no translation: H = K2 R K1^-1). roi: (x0, y0, w, h) region of
+    image 1 the points come from. planar: the points lie on one plane. Returns dict(K1, K2, R, t (unit,
+    or 0), E, F, H (plane or rotation, else None), x1, x2 (noisy pixels, with outliers in x2), x1_true,
+    x2_true, is_outlier, X, held_out=(x1, x2) noise-free matches of the same scene, width, height)."""
+    from .geometry import project, skew, to_h
+    K1 = random_intrinsics(rng, width, height, hfov_deg=hfov_deg)
+    K2 = K1.copy() if same_K else random_intrinsics(rng, width, height, hfov_deg=hfov_deg)
+    R, t, target = _two_view_camera(rng, K1, depth, motion, baseline)
+    plane = None
+    if planar:
+        n_plane = -np.array([0.0, 0.0, 1.0]) + rng.normal(0, 0.35, 3) * [1, 1, 0]
+        n_plane /= np.linalg.norm(n_plane)
+        plane = (n_plane, -n_plane @ target)                    # n . X + d0 = 0 through the target
+
+    def draw(m):
+        X, rounds = [], 0
+        while sum(len(a) for a in X) < m:
+            rounds += 1
+            if rounds > 25:   # camera 2 hardly sees this region: draw another scene
+                raise _NotVisible
+            k = 4 * m
+            box = (0, 0, width - 1, height - 1) if roi is None else roi
+            uv = np.c_[rng.uniform(box[0], box[0] + box[2], k), rng.uniform(box[1], box[1] + box[3], k)]
+            rays = np.linalg.solve(K1, to_h(uv).T).T
+            Xi = rays * (rng.uniform(*depth, (k, 1)) if plane is None else (-plane[1] / (rays @ plane[0]))[:, None])
+            u2, z2 = project(Xi, K2, R, t)
+            inside = (u2[:, 0] >= 0) & (u2[:, 0] <= width - 1) & (u2[:, 1] >= 0) & (u2[:, 1] <= height - 1)
+            X.append(Xi[(Xi[:, 2] > 0.5) & (z2 > 0.5) & inside])
+        X = np.concatenate(X)[:m]
+        return X, project(X, K1, np.eye(3), np.zeros(3))[0], project(X, K2, R, t)[0]
+
+    X, x1_true, x2_true = draw(n)
+    _, h1, h2 = draw(held_out)
+    x1, x2 = add_noise(rng, x1_true, noise), add_noise(rng, x2_true, noise)
+    is_outlier = np.zeros(n, bool)
+    if outliers > 0:
+        x2, is_outlier = add_outliers(rng, x2, outliers, width, height, min_offset=10.0)
+    t_unit = t / np.linalg.norm(t) if np.linalg.norm(t) > 0 else t
+    E = skew(t_unit) @ R
+    H = None
+    if plane is not None:   # X on n.X + d0 = 0:  X_2 = (R - t n^T / d0) X_1
+        H = K2 @ (R - np.outer(t, plane[0]) / plane[1]) @ np.linalg.inv(K1)
+    elif motion == "rotation":
+        H = K2 @ R @ np.linalg.inv(K1)
+    F = np.linalg.inv(K2).T @ E @ np.linalg.inv(K1)
+    return {"K1": K1, "K2": K2, "R": R, "t": t_unit, "E": E,
+            "F": F / np.linalg.norm(F) if np.linalg.norm(t) > 0 else np.zeros((3, 3)),
+            "H": None if H is None else H / H[2, 2], "x1": x1, "x2": x2, "x1_true": x1_true,
+            "x2_true": x2_true, "is_outlier": is_outlier, "X": X, "held_out": (h1, h2), "width": width,
+            "height": height}

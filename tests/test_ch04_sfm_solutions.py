@@ -1,4 +1,4 @@
-"""solutions.sfm, solutions.sfm_pipeline and solutions.colmap_io against exact synthetic ground
+"""solutions.ch04_sfm (triangulation, PnP, tracks, two-view, the pipeline, COLMAP I/O) against exact synthetic ground
 truth, OpenCV 5 (triangulatePoints, solvePnP EPNP / SQPNP, solveP3P) and pycolmap 4.2 (it must
 read what we write, and compute the same reprojection errors from it).
 
@@ -14,13 +14,20 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from solutions.bundle_adjustment import bundle_adjust
-from solutions.colmap_io import read_colmap_text, write_colmap_text
-from solutions.epipolar import fundamental_from_essential, essential_from_Rt
-from solutions.sfm import (build_tracks, camera_centre, decompose_homography, epnp, focal_from_fundamental, p3p,
-                           pnp_dlt, pnp_ransac, project, rank_initial_pairs, rotation_averaging, triangulate_dlt,
-                           triangulate_midpoint, triangulate_multiview, triangulation_angles, two_view_init, umeyama)
-from solutions.sfm_pipeline import distort, incremental_sfm, match_features, reprojection_stats, undistort
+from solutions.ch02_epipolar import essential_from_Rt, fundamental_from_essential
+from solutions.ch04_sfm import (build_tracks, decompose_homography, distort, epnp, focal_from_fundamental,
+                                incremental_sfm, match_features, p3p, pnp_dlt, pnp_ransac, rank_initial_pairs,
+                                read_colmap_text, reprojection_stats, rotation_averaging, triangulate_dlt,
+                                triangulate_midpoint, triangulate_multiview, triangulation_angles, two_view_init,
+                                umeyama, undistort, write_colmap_text)
+from solutions.ch05_bundle_adjustment import bundle_adjust
+from solutions.geometry import camera_centre
+from solutions.geometry import project as _project
+
+
+def project(K, R, t, X):
+    """Pixels (N, 2) of X in K [R | t] (solutions.geometry.project without the depths)."""
+    return _project(X, K, R, t)[0]
 
 SEEDS = [0, 1, 2]
 W, H = 1280, 960
@@ -367,7 +374,7 @@ def test_bundle_adjust_fixed_parameters_and_points():
                  np.full((3, 1), 500.0), np.zeros((3, 2))]
     pts = rng.normal(0, 1, (40, 3))
     ci, pi = np.repeat(np.arange(3), 40), np.tile(np.arange(40), 3)
-    from solutions.bundle_adjustment import bal_project
+    from solutions.ch05_bundle_adjustment import bal_project
     obs = bal_project(cams, pts, ci, pi) + rng.normal(0, 0.5, (120, 2))
     fixed = np.zeros((3, 9), bool)
     fixed[0] = True
@@ -439,7 +446,7 @@ def test_colmap_text_roundtrip_and_pycolmap_reads_it(tmp_path):
 
 
 def test_colmap_opencv_camera_with_tangential_distortion_is_refused():
-    from solutions.colmap_io import _K_and_k
+    from solutions.ch04_sfm.colmap_io import _K_and_k
     K, k = _K_and_k("OPENCV", [700.0, 710.0, 320.5, 240.5, -0.1, 0.02, 0.0, 0.0])
     assert np.allclose(k, [-0.1, 0.02]) and K[0, 2] == 320.0
     with pytest.raises(ValueError, match="p1, p2"):

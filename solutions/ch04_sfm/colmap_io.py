@@ -47,7 +47,7 @@ def _camera_line(cam_id: int, K: np.ndarray, k: np.ndarray, size) -> str:
 
 
 def write_colmap_text(recon: dict, folder) -> None:
-    """Write recon as cameras.txt, images.txt and points3D.txt into folder (created if missing).
+    """Exercise 4.16: Write recon as cameras.txt, images.txt and points3D.txt into folder (created if missing).
 
     recon: {"cameras": {i: {"R", "t", "K", "k"}}, "points": (P, 3), "tracks": list of {i: kp}},
     optionally "keypoints", "names", "image_sizes", "colors" (see the module docstring). Without
@@ -138,7 +138,7 @@ def _K_and_k(model: str, params: list[float]) -> tuple[np.ndarray, np.ndarray]:
 
 
 def read_colmap_text(folder) -> dict:
-    """Read a COLMAP text model. Returns the reconstruction dict: "cameras" {i: {"R", "t", "K", "k"}}
+    """Exercise 4.17: Read a COLMAP text model. Returns the reconstruction dict: "cameras" {i: {"R", "t", "K", "k"}}
     (i = IMAGE_ID - 1), "points" (P, 3), "tracks" (list of {i: POINT2D_IDX}), "keypoints" {i: (N, 2)}
     in our pixel convention, "names" {i: NAME}, "image_sizes" {i: (w, h)}, "point_ids" (P,) and
     "colors" (P, 3) uint8."""

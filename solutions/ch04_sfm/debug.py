@@ -7,11 +7,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .sfm import rank_initial_pairs, two_view_init
+from .initial_pair import rank_initial_pairs, two_view_init
 
 
 def fix_components(case: dict) -> list[list[int]]:
-    """2+ disconnected components → a handful of 'verified' inliers between two groups of images is
+    """Exercise 4.18: 2+ disconnected components → a handful of 'verified' inliers between two groups of images is
     not a connection (repetitive windows) → keep only pairs with ≥ min_inliers, then take the
     connected components of the view graph (union-find); each is reconstructed on its own, largest
     first, and merged later through shared 3D points (or bridged by more images / retrieval).
@@ -38,7 +38,7 @@ def fix_components(case: dict) -> list[list[int]]:
 
 
 def fix_registration(case: dict) -> dict:
-    """Many images fail to register → with 1.5 px keypoint noise a 1 px PnP threshold rejects most
+    """Exercise 4.19: Many images fail to register → with 1.5 px keypoint noise a 1 px PnP threshold rejects most
     true 2D-3D matches, and 100 inliers is more than many images have → COLMAP-like settings: a
     threshold of a few pixels (4 px here: ≥ 2.5 σ), ≥ 30 inliers (still far above what a wrong
     image reaches by chance), enough iterations for 50 % outliers (k = 35 at p = 0.99; 1,000 is cheap).
@@ -47,7 +47,7 @@ def fix_registration(case: dict) -> dict:
 
 
 def fix_scale_drift(case: dict, smooth: float = 30.0) -> np.ndarray:
-    """Scale drift → monocular steps carry their scale from the previous one, so the error random-walks
+    """Exercise 4.20: Scale drift → monocular steps carry their scale from the previous one, so the error random-walks
     → tie the scale to an absolute reference (GPS here; a known distance or a loop closure elsewhere):
     unknowns C_0 and one scale correction s_k per step, C_i = C_0 + Σ_{k<i} s_k ℓ_k d_k, solved by
     linear least squares with the GPS residuals weighted by 1/σ and a smoothness prior
@@ -76,7 +76,7 @@ def fix_scale_drift(case: dict, smooth: float = 30.0) -> np.ndarray:
 
 
 def fix_initial_pair(case: dict) -> int:
-    """Initialisation fails → the pair with the most matches is a camera turning on the spot (no
+    """Exercise 4.21: Initialisation fails → the pair with the most matches is a camera turning on the spot (no
     parallax; H explains as much as E) → score every candidate COLMAP-style: E and H inlier counts and
     the median triangulation angle from `two_view_init`, then `rank_initial_pairs`.
 

@@ -10,22 +10,18 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import geometry
+
 
 def umeyama(X: np.ndarray, Y: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """Least-squares similarity Y ≈ s R X + t (Umeyama, PAMI 1991, eqs. 40-42).
+    """Exercise 4.25: the least-squares similarity Y ≈ s R X + t (Umeyama, PAMI 1991, eqs. 40-42).
 
     X, Y: (N, 3), N ≥ 3 and not collinear. Σ = (1/N) Σ (y − ȳ)(x − x̄)ᵀ = U D Vᵀ;
     S = diag(1, 1, sign det(U Vᵀ)); R = U S Vᵀ; s = tr(D S) / σx² with σx² = (1/N) Σ |x − x̄|²;
-    t = ȳ − s R x̄. Returns (s, R (3, 3), t (3,)).
+    t = ȳ − s R x̄. Returns (s, R (3, 3), t (3,)). The closed form is the course's one copy,
+    solutions.geometry.umeyama.
     """
-    X, Y = np.asarray(X, float), np.asarray(Y, float)
-    mx, my = X.mean(0), Y.mean(0)
-    Xc, Yc = X - mx, Y - my
-    U, D, Vt = np.linalg.svd(Yc.T @ Xc / len(X))              # (3, 3) cross-covariance
-    S = np.diag([1.0, 1.0, 1.0 if np.linalg.det(U @ Vt) >= 0 else -1.0])
-    R = U @ S @ Vt
-    s = float(np.sum(D * np.diag(S)) / np.mean(np.sum(Xc ** 2, 1)))
-    return s, R, my - s * R @ mx
+    return geometry.umeyama(X, Y)
 
 
 def pose_from_pointmaps(X1: np.ndarray, X2: np.ndarray, thresh: float = 0.05, iters: int = 200,

@@ -6,13 +6,23 @@ for output-format mistakes such as a reflection instead of a rotation, in its me
 mistakes are the chapter's DEBUG material and the classics: an unnormalised DLT, a missing
 homogeneous divide, the wrong cheirality test, a P3P root mix-up, R not orthonormalised, RANSAC with
 a fixed iteration count, no final refinement, tracks that merge two 3D points, no bundle adjustment.
+
+Every mutant is a standalone wrong implementation: written here from scratch, on OpenCV calls other than
+the grader's oracle, or a copy of the reference solution's idea (solutions.ch04_sfm) with the bug injected
+(4.14's run the reference pipeline with one step switched off). None calls a grader oracle, stand-in or
+hint model (graders.ch04_sfm, graders.oracles).
 """
 from __future__ import annotations
+
+import contextlib
+from pathlib import Path
 
 import cv2
 import numpy as np
 
-from graders import ch04_sfm as ch4
+import solutions.ch04_sfm as ref
+from solutions.ch04_sfm import pipeline as ref_pipeline
+from solutions.geometry import project as _project, umeyama as _umeyama
 
 # ----------------------------------------------------------------- small shared pieces
 
@@ -32,6 +42,22 @@ def _null(A):
 
 def _normalised_K(x, K):
     return np.linalg.solve(K, _h(x).T).T[:, :2]
+
+
+def _hartley(x):
+    mu = x.mean(0)
+    s = np.sqrt(2) / np.linalg.norm(x - mu, axis=1).mean()
+    return np.array([[s, 0, -s * mu[0]], [0, s, -s * mu[1]], [0, 0, 1.0]])
+
+
+def _dlt_normalised(pose1, pose2, n1, n2):
+    """Linear triangulation from normalised coordinates and [R | t] (the mutants' own)."""
+    Xh = _null(_rows(np.c_[pose1], np.c_[pose2], n1, n2))
+    return Xh[:, :3] / Xh[:, 3:]
+
+
+def _pixels(X, K, R, t):
+    return _project(X, K, R, t)[0]
 
 
 def _kabsch(A, B):
@@ -73,13 +99,22 @@ def _rays(P, x):
 
 
 def mid_is_dlt(P1, P2, x1, x2):
-    return ch4.cv_triangulate(P1, P2, x1, x2)
+    """The Hartley-normalised DLT (T x, T P at unit norm) returned as the midpoint."""
+    T1, T2 = _hartley(x1), _hartley(x2)
+    Q1, Q2 = T1 @ P1, T2 @ P2
+    Q1, Q2 = Q1 / np.linalg.norm(Q1), Q2 / np.linalg.norm(Q2)
+    Xh = _null(_rows(Q1, Q2, (_h(x1) @ T1.T)[:, :2], (_h(x2) @ T2.T)[:, :2]))
+    return Xh[:, :3] / Xh[:, 3:]
 
 
 def mid_on_ray1(P1, P2, x1, x2):
-    C1, d1 = _rays(P1, x1)
-    Xm = ch4.gt_midpoint(P1, P2, x1, x2)
-    return C1 + np.sum((Xm - C1) * d1, 1)[:, None] * d1
+    """The closest point of ray 1 to ray 2 (the midpoint's first half only)."""
+    (C1, d1), (C2, d2) = _rays(P1, x1), _rays(P2, x2)
+    b = C2 - C1
+    a11, a12, a22 = np.sum(d1 * d1, 1), -np.sum(d1 * d2, 1), np.sum(d2 * d2, 1)
+    r1, r2 = d1 @ b, -(d2 @ b)
+    s1 = (a22 * r1 - a12 * r2) / (a11 * a22 - a12 * a12)
+    return C1 + s1[:, None] * d1
 
 
 def mid_camera_frame_rays(P1, P2, x1, x2):
@@ -108,7 +143,8 @@ def _rq(M):
 
 
 def angles_radians(C1, C2, X):
-    return np.radians(ch4.gt_triangulation_angles(C1, C2, X))
+    a, b = C1 - X, C2 - X
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.sum(a * b, 1))      # forgot np.degrees
 
 
 def angles_supplementary(C1, C2, X):
@@ -126,7 +162,7 @@ def angles_at_camera(C1, C2, X):
 
 def _pnp_P(X, x, K, normalise_rays=True, normalise_3d=True):
     n = _normalised_K(x, K) if normalise_rays else np.asarray(x, float)
-    T = ch4.hartley(n) if normalise_rays else np.eye(3)
+    T = _hartley(n) if normalise_rays else np.eye(3)
     n = (_h(n) @ T.T)[:, :2]
     U = np.eye(4)
     if normalise_3d:
@@ -149,12 +185,24 @@ def pnp_no_scale(X, x, K):
     return U @ Vt, P[:, 3]                              # t not divided by the scale
 
 
+def _pnp_dlt_column(X, x, K):
+    """A normalised DLT ending the textbook way: R the nearest rotation, t read off P's 4th column."""
+    P = _pnp_P(X, x, K)
+    if np.median(_h(X) @ P[2]) < 0:
+        P = -P
+    U, S, Vt = np.linalg.svd(P[:, :3])
+    R = U @ Vt
+    if np.linalg.det(R) < 0:
+        R, P = -R, -P
+    return R, P[:, 3] / S.mean()
+
+
 def pnp_t_from_column(X, x, K):
-    return ch4.gt_pnp_dlt(X, x, K, t_from="column")
+    return _pnp_dlt_column(X, x, K)
 
 
 def epnp_returns_centre_dlt(X, x, K):
-    R, t = ch4.gt_pnp_dlt(X, x, K)
+    R, t = ref.pnp_dlt(X, x, K)
     return R, -R.T @ t
 
 
@@ -195,7 +243,7 @@ def pnp_not_orthonormal(X, x, K):
 # ----------------------------------------------------------------- 4.8 P3P
 
 def p3p_first_only(X, x, K):
-    return ch4.cv_p3p(X, x, K)[:1]
+    return ref.p3p(X, x, K)[:1]
 
 
 def p3p_root_mixup(X, x, K):
@@ -203,7 +251,7 @@ def p3p_root_mixup(X, x, K):
     f = _h(_normalised_K(x, K))
     f /= np.linalg.norm(f, axis=1, keepdims=True)
     out = []
-    for R, t in ch4.cv_p3p(X, x, K):
+    for R, t in ref.p3p(X, x, K):
         d = np.linalg.norm(X @ R.T + t, axis=1)
         Pc = d[[0, 2, 1], None] * f
         out.append(_kabsch(X, Pc))
@@ -211,24 +259,23 @@ def p3p_root_mixup(X, x, K):
 
 
 def p3p_with_duplicates(X, x, K):
-    sols = ch4.cv_p3p(X, x, K)
+    sols = ref.p3p(X, x, K)
     return sols + sols[:1]
 
 
 # ----------------------------------------------------------------- 4.9 EPnP
 
 def epnp_forgot_K(X, x, K):
-    ok, r, t = cv2.solvePnP(X, _h(x)[:, :2] / 1.0, np.eye(3), None, flags=cv2.SOLVEPNP_EPNP)
-    return cv2.Rodrigues(r)[0], t.ravel()
+    return ref.epnp(X, x, np.eye(3))                    # pixels used as rays
 
 
 def epnp_camera_to_world(X, x, K):
-    R, t = ch4.cv_epnp(X, x, K)
+    R, t = ref.epnp(X, x, K)
     return R.T, -R.T @ t
 
 
 def epnp_returns_centre(X, x, K):
-    R, t = ch4.cv_epnp(X, x, K)
+    R, t = ref.epnp(X, x, K)
     return R, -R.T @ t
 
 
@@ -242,8 +289,8 @@ def _ransac(X, x, K, thresh_px=4.0, seed=0, iters=None, refine=True, squared=Fal
     while i < (limit if iters is not None else min(k, limit)):
         i += 1
         idx = rng.choice(n, 3, replace=False)
-        for R, t in ch4.cv_p3p(X[idx], x[idx], K):
-            uv, z = ch4.project(X, K, R, t)
+        for R, t in ref.p3p(X[idx], x[idx], K):
+            uv, z = _project(X, K, R, t)
             r = np.linalg.norm(uv - x, axis=1)
             inl = (z > 0) & ((r ** 2 if squared else r) < thresh_px)
             if inl.sum() > best_cnt:
@@ -251,13 +298,13 @@ def _ransac(X, x, K, thresh_px=4.0, seed=0, iters=None, refine=True, squared=Fal
                 w = best_cnt / n
                 k = np.log(0.01) / np.log(max(1 - w ** 3, 1e-12)) if w < 1 else 1
     R, t = best
-    uv, z = ch4.project(X, K, R, t)
+    uv, z = _project(X, K, R, t)
     r = np.linalg.norm(uv - x, axis=1)
     inl = (z > 0) & ((r ** 2 if squared else r) < thresh_px)
     if refine and inl.sum() >= 4:
         rv, tv = cv2.solvePnPRefineLM(X[inl], x[inl], K, None, cv2.Rodrigues(R)[0], t.reshape(3, 1))
         R, t = cv2.Rodrigues(rv)[0], tv.ravel()
-        uv, z = ch4.project(X, K, R, t)
+        uv, z = _project(X, K, R, t)
         r = np.linalg.norm(uv - x, axis=1)
         inl = (z > 0) & ((r ** 2 if squared else r) < thresh_px)
     return R, t, inl
@@ -343,12 +390,11 @@ def _two_view(x1, x2, K1, K2, choose, thresh_px=2.0):
     n1, n2 = _normalised_K(x1, K1), _normalised_K(x2, K2)
     E, mask = cv2.findEssentialMat(n1, n2, np.eye(3), cv2.USAC_MAGSAC, 0.999, thresh_px / K1[0, 0])
     inl = mask.ravel().astype(bool)
-    E = ch4.refine_essential(E[:3], x1[inl], x2[inl], K1, K2)
-    R1, R2, t = cv2.decomposeEssentialMat(E)
+    R1, R2, t = cv2.decomposeEssentialMat(E[:3])
     t = t.ravel() / np.linalg.norm(t)
     cands = [(R1, t), (R1, -t), (R2, t), (R2, -t)]
     R, t = choose(cands, n1[inl], n2[inl])
-    X = ch4._dlt_normalised((np.eye(3), np.zeros(3)), (R, t), n1, n2)
+    X = _dlt_normalised((np.eye(3), np.zeros(3)), (R, t), n1, n2)
     z1, z2 = X[:, 2], (X @ R.T + t)[:, 2]
     inl &= (z1 > 0) & (z2 > 0)
     return R, t, X[inl], inl
@@ -357,7 +403,7 @@ def _two_view(x1, x2, K1, K2, choose, thresh_px=2.0):
 def _count(cands, a, b, both):
     scores = []
     for R, t in cands:
-        X = ch4._dlt_normalised((np.eye(3), np.zeros(3)), (R, t), a, b)
+        X = _dlt_normalised((np.eye(3), np.zeros(3)), (R, t), a, b)
         z1, z2 = X[:, 2], (X @ R.T + t)[:, 2]
         scores.append(np.sum((z1 > 0) & (z2 > 0)) if both else np.sum(z1 > 0))
     return scores
@@ -408,27 +454,51 @@ def rank_no_H_check(stats):
 
 # ----------------------------------------------------------------- 4.14 incremental SfM
 
+@contextlib.contextmanager
+def _patched(**attrs):
+    """The reference pipeline with some of its steps or constants replaced, restored afterwards."""
+    old = {k: getattr(ref_pipeline, k) for k in attrs}
+    for k, v in attrs.items():
+        setattr(ref_pipeline, k, v)
+    try:
+        yield
+    finally:
+        for k, v in old.items():
+            setattr(ref_pipeline, k, v)
+
+
 def sfm_no_bundle_adjustment(problem):
-    return ch4.cv_incremental_sfm(problem, refine=False)
+    with _patched(_bundle_adjust=lambda m, *a, **kw: None):          # every BA skipped
+        return ref.incremental_sfm(problem)
 
 
 def sfm_no_angle_filter(problem):
-    return ch4.cv_incremental_sfm(problem, min_angle=0.0)
+    with _patched(MIN_TRI_ANGLE_DEG=0.0):                            # points from parallel rays kept
+        return ref.incremental_sfm(problem)
 
 
 def sfm_initial_pair_only(problem):
-    return ch4.cv_incremental_sfm(problem, max_images=2)
+    with _patched(_register=lambda m, i, seed=0: False):            # no image registered after the pair
+        return ref.incremental_sfm(problem)
 
 
 def sfm_points_out_of_order(problem):
-    rec = ch4.cv_incremental_sfm(problem)
+    rec = ref.incremental_sfm(problem)
     rec["tracks"] = rec["tracks"][1:] + rec["tracks"][:1]
     return rec
 
 
 def sfm_focal_never_refined(problem):
-    # K unknown: every focal length kept at the 1.2 max(w, h) prior (no self-calibration, none refined)
-    return ch4.cv_incremental_sfm(problem, refine_focal=False)
+    # K unknown: every focal length kept at the 1.2 max(w, h) prior (no self-calibration, no focal search
+    # in PnP, none refined by BA or with the pose)
+    ba = ref_pipeline._bundle_adjust
+
+    def refine_pose(X, x, K, R, t, iters=10, refine_focal=False):
+        R, t = ref.refine_pose(X, x, K, R, t, iters=iters)
+        return (R, t, K) if refine_focal else (R, t)
+    with _patched(_self_calibrate=lambda *a, **kw: None, FOCAL_FACTORS=np.array([1.0]), refine_pose=refine_pose,
+                  _bundle_adjust=lambda m, *a, **kw: ba(m, *a, **dict(kw, refine="none"))):
+        return ref.incremental_sfm(problem)
 
 
 # ----------------------------------------------------------------- 4.15 rotation averaging
@@ -441,7 +511,7 @@ def rotavg_spanning_tree(R_rel, n):
 
 
 def rotavg_transposed(R_rel, n):
-    return ch4.gt_rotation_averaging({k: v.T for k, v in R_rel.items()}, n)
+    return ref.rotation_averaging({k: v.T for k, v in R_rel.items()}, n)       # R_ij read as R_i R_jᵀ
 
 
 def rotavg_no_projection(R_rel, n):
@@ -471,12 +541,11 @@ def _shift_pixels(recon, d):
 
 
 def write_no_half_pixel(recon, folder):
-    ch4.gt_write_colmap_text(_shift_pixels(recon, -0.5), folder)     # pixel centres written as corners
+    ref.write_colmap_text(_shift_pixels(recon, -0.5), folder)     # pixel centres written as corners
 
 
 def write_quaternion_xyzw(recon, folder):
-    from pathlib import Path
-    ch4.gt_write_colmap_text(recon, folder)
+    ref.write_colmap_text(recon, folder)
     f = Path(folder) / "images.txt"
     lines = f.read_text().splitlines()
     data = [k for k, ln in enumerate(lines) if not ln.startswith("#")]
@@ -490,11 +559,11 @@ def write_quaternion_xyzw(recon, folder):
 def write_camera_to_world(recon, folder):
     recon = dict(recon)
     recon["cameras"] = {i: dict(c, R=c["R"].T, t=-c["R"].T @ c["t"]) for i, c in recon["cameras"].items()}
-    ch4.gt_write_colmap_text(recon, folder)
+    ref.write_colmap_text(recon, folder)
 
 
 def read_no_half_pixel(folder):
-    return _shift_pixels_read(ch4.colmap_read_text(folder), 0.5)
+    return _shift_pixels_read(ref.read_colmap_text(folder), 0.5)
 
 
 def _shift_pixels_read(rec, d):
@@ -506,7 +575,7 @@ def _shift_pixels_read(rec, d):
 
 def read_quaternion_xyzw(folder):
     from scipy.spatial.transform import Rotation
-    rec = ch4.colmap_read_text(folder)
+    rec = ref.read_colmap_text(folder)
     for c in rec["cameras"].values():
         x, y, z, w = Rotation.from_matrix(c["R"]).as_quat()
         c["R"] = Rotation.from_quat([w, x, y, z]).as_matrix()             # scalar-first read as scalar-last
@@ -514,7 +583,7 @@ def read_quaternion_xyzw(folder):
 
 
 def read_ids_not_shifted(folder):
-    rec = ch4.colmap_read_text(folder)
+    rec = ref.read_colmap_text(folder)
     rec["cameras"] = {i + 1: c for i, c in rec["cameras"].items()}
     rec["keypoints"] = {i + 1: k for i, k in rec["keypoints"].items()}
     rec["tracks"] = [{i + 1: k for i, k in tr.items()} for tr in rec["tracks"]]
@@ -524,15 +593,26 @@ def read_ids_not_shifted(folder):
 # ----------------------------------------------------------------- 4.18-4.21 debug
 
 def components_all_edges(case):
-    return ch4.broken_components(case)
+    """The colleague's idea rewritten: one BFS over every matched pair, however few its inliers."""
+    adj = {}
+    for (i, j) in case["pair_inliers"]:
+        adj.setdefault(i, set()).add(j)
+        adj.setdefault(j, set()).add(i)
+    start = min(adj)
+    seen, todo = {start}, [start]
+    while todo:
+        for j in adj[todo.pop()] - seen:
+            seen.add(j)
+            todo.append(j)
+    return [sorted(seen)]
 
 
 def components_unordered(case):
-    return sorted(ch4.gt_components(case), key=lambda c: c[0])
+    return sorted(ref.fix_components(case), key=lambda c: c[0])          # by first image, not by size
 
 
 def components_largest_only(case):
-    return ch4.gt_components(case)[:1]
+    return ref.fix_components(case)[:1]
 
 
 def registration_unchanged(case):
@@ -547,8 +627,12 @@ def registration_anything_goes(case):
     return {"thresh_px": 50.0, "min_inliers": 5, "iterations": 1000}
 
 
+def _chain(case):
+    return case["gps"][0] + np.r_[np.zeros((1, 3)), np.cumsum(case["step_lengths"][:, None] * case["directions"], 0)]
+
+
 def drift_unchanged(case):
-    return ch4.broken_trajectory(case)
+    return _chain(case)
 
 
 def drift_gps_only(case):
@@ -556,23 +640,36 @@ def drift_gps_only(case):
 
 
 def drift_global_sim3(case):
-    C = ch4.broken_trajectory(case)
-    s, R, t = ch4.gt_umeyama(C, case["gps"])
+    C = _chain(case)
+    s, R, t = _umeyama(C, case["gps"])
     return s * C @ R.T + t
 
 
 def initial_most_matches(case):
-    return ch4.broken_initial_pair(case)
+    return int(np.argmax([len(p["x1"]) for p in case["pairs"]]))
+
+
+def _pair_stats(x1, x2, K):
+    """E inliers (OpenCV RANSAC, 1 px) and the median triangulation angle of the inliers."""
+    n1, n2 = _normalised_K(x1, K), _normalised_K(x2, K)
+    E, mask = cv2.findEssentialMat(n1, n2, np.eye(3), cv2.RANSAC, 0.999, 1.0 / K[0, 0])
+    if E is None or mask.sum() < 5:
+        return 0, 0.0
+    inl = mask.ravel().astype(bool)
+    _, R, t, _ = cv2.recoverPose(E[:3], n1[inl], n2[inl], np.eye(3))
+    t = t.ravel()
+    X = _dlt_normalised((np.eye(3), np.zeros(3)), (R, t), n1[inl], n2[inl])
+    a, b = -X, -R.T @ t - X
+    ang = np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.sum(a * b, 1)))
+    return int(inl.sum()), float(np.median(ang))
 
 
 def initial_widest_angle(case):
-    stats = [ch4.cv_pair_stats(p["x1"], p["x2"], case["K"]) for p in case["pairs"]]
-    return int(np.argmax([s["median_angle_deg"] for s in stats]))
+    return int(np.argmax([_pair_stats(p["x1"], p["x2"], case["K"])[1] for p in case["pairs"]]))
 
 
 def initial_most_E_inliers(case):
-    stats = [ch4.cv_pair_stats(p["x1"], p["x2"], case["K"]) for p in case["pairs"]]
-    return int(np.argmax([s["n_inliers_E"] for s in stats]))
+    return int(np.argmax([_pair_stats(p["x1"], p["x2"], case["K"])[0] for p in case["pairs"]]))
 
 
 # ----------------------------------------------------------------- 4.25 frontier
@@ -587,7 +684,7 @@ def umeyama_transposed(X, Y):
 
 
 def umeyama_std_ratio(X, Y):
-    s, R, t = ch4.gt_umeyama(X, Y)
+    s, R, t = _umeyama(X, Y)
     s2 = np.sqrt(np.sum((Y - Y.mean(0)) ** 2) / np.sum((X - X.mean(0)) ** 2))
     return s2, R, Y.mean(0) - s2 * R @ X.mean(0)
 
