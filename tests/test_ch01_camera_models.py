@@ -14,6 +14,7 @@ import grader_checks as checks
 import solutions.ch01_camera_models as ref
 from graders import chapter, get, scene
 from graders import ch01_camera_models as ch1
+from graders.geometry import angle_between_deg
 from mutants.ch01_camera_models import MUTANTS
 
 SEEDS = [0, 1, 2]
@@ -88,3 +89,37 @@ def test_every_code_and_debug_exercise_has_mutants():
 @pytest.mark.parametrize("exercise_id", [i for i, ex in EXERCISES.items() if ex.value])
 def test_value_hints_are_quiet_on_the_answer(exercise_id):
     checks.assert_value_hints_quiet(EXERCISES[exercise_id], reference(EXERCISES[exercise_id]))
+
+
+def _taught_fisheye_unproject(uv, K, D, iters=20):
+    """1.8 exactly as section 1 teaches it: plain Newton on θ_d(θ) = |a| from θ = θ_d, no safeguard."""
+    a = np.linalg.solve(K, np.c_[uv, np.ones(len(uv))].T).T[:, :2]
+    theta_d = np.linalg.norm(a, axis=1)
+    theta = theta_d.copy()
+    k1, k2, k3, k4 = D
+    for _ in range(iters):
+        t2 = theta * theta
+        f = theta * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)))) - theta_d
+        theta = theta - f / (1 + t2 * (3 * k1 + t2 * (5 * k2 + t2 * (7 * k3 + t2 * 9 * k4))))
+    azimuth = np.divide(a, theta_d[:, None], out=np.zeros_like(a), where=theta_d[:, None] > 0)
+    return np.c_[np.sin(theta)[:, None] * azimuth, np.cos(theta)]
+
+
+@pytest.mark.parametrize("seed", [3080781605, *SEEDS])
+def test_taught_newton_gets_full_marks_on_fisheye_unproject(seed):
+    # 3080781605 drew a lens whose θ_d(θ) turns over near 113°, with the Newton start θ_d of a 92.6° ray
+    # at 111° where the slope is ~0.2: plain Newton 2-cycled (18.6° off) and so did the reference.
+    # Such lenses are now redrawn (slope > 0.3 up to θ_d(95°)); see fisheye._unproject_lens.
+    checks.assert_full_marks(EXERCISES["1.8"], _taught_fisheye_unproject, seed)
+    checks.assert_full_marks(EXERCISES["1.8"], reference(EXERCISES["1.8"]), seed)
+
+
+def test_bisection_oracle_stays_on_the_lens_rising_branch():
+    D = np.array([0.03695349, 0.01692808, 0.00624264, -0.00263019])  # rises to ~113°, then falls below 0
+    K = np.array([[335.7, 0, 647.8], [0, 335.7, 498.8], [0, 0, 1]])
+    theta = np.radians([10.0, 60.0, 92.6, 100.0])
+    rays = np.c_[np.sin(theta), np.zeros(4), np.cos(theta)]
+    uv = ch1.gt_fisheye_project(rays, K, D)
+    assert 1.9 < ch1.lens_max_angle(D) < 2.0
+    # was 179.8° for the 92.6° ray: bisection on [0, π) followed the polynomial past its turnover
+    assert angle_between_deg(ch1.gt_fisheye_unproject(uv, K, D), rays).max() < 1e-9
