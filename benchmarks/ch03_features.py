@@ -17,8 +17,8 @@ import numpy as np
 
 from benchmarks.timing import median_time, table
 from graders import ch03_features as ch3
-from graders import datasets
-from solutions import features as ref
+from graders import datasets, scene
+from solutions import ch03_features as ref
 
 N_FEATURES = 1000
 
@@ -76,7 +76,7 @@ def _pairs():
         g1, g3, H = datasets.load_homography_pair()
         yield "graf1→graf3", g1, g3, H
     for tex in ("astronaut", "brick", "coffee", "grass", "text"):
-        a, b, H = ch3.homography_pair_from(rng, ch3.scene.texture(tex), max_angle_deg=40)
+        a, b, H = ch3.homography_pair_from(rng, scene.texture(tex), max_angle_deg=40)
         yield tex, a, b, H
 
 

@@ -1,4 +1,6 @@
-"""Chapter 3 — answers to the CONCEPT and DESIGN questions, computed from their formulas."""
+"""Exercises 3.1-3.4, 3.17-3.18, 3.20-3.22: answers to the CONCEPT and DESIGN questions, computed from their formulas."""
+from __future__ import annotations
+
 import numpy as np
 
 # 3.1  eigenvalues (250, 180), (300, 2), (0.6, 0.3): both large, one large, both small

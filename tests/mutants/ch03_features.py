@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from solutions import features as F
+from solutions import ch03_features as F
 
 
 # ----------------------------------------------------------------- 3.5 detect_corners
@@ -107,7 +107,7 @@ def fast_row_col(img, threshold=20, nms=True):
 # ----------------------------------------------------------------- 3.7 orb_descriptors
 
 def _orb(img, kps, pattern, angle):
-    I = F._gray(img)
+    I = F.gray(img)
     S = ndimage.uniform_filter(I, size=5, mode="nearest")
     kps = np.asarray(kps, float)
     theta = angle(I, kps)
@@ -186,19 +186,19 @@ def dog_constant_sigma(img, n_features=1000):
 def sift_swapped_gradient(img, kps):
     # gx, gy = np.gradient(P, axis=(1, 2)) — but np.gradient returns d/dy (axis 0 of the patch) first.
     # Every angle becomes atan2(gx, gy) = 90° - theta: the dominant orientation and the patch's angles.
-    I = F._gray(img)
+    I = F.gray(img)
     kps = np.asarray(kps, float)
-    pyr = F._pyramid(I, 5)
+    pyr = F.pyramid(I, 5)
     theta = (np.pi / 2 - F.dominant_orientation(pyr, kps)) % (2 * np.pi)
-    P = F._sample_patches(pyr, kps, theta, 18, 0.75)
+    P = F.sample_patches(pyr, kps, theta, 18, 0.75)
     return _histograms(P, swap=True)
 
 
 def sift_no_orientation(img, kps):
-    I = F._gray(img)
+    I = F.gray(img)
     kps = np.asarray(kps, float)
-    pyr = F._pyramid(I, 5)
-    P = F._sample_patches(pyr, kps, np.zeros(len(kps)), 18, 0.75)
+    pyr = F.pyramid(I, 5)
+    P = F.sample_patches(pyr, kps, np.zeros(len(kps)), 18, 0.75)
     return _histograms(P)
 
 
@@ -404,7 +404,7 @@ MUTANTS = [
 
 # ----------------------------------------------------------------- value questions: classic slips
 # (exercise id, short name, wrong answer, hint fragment): each answer makes one slip, and the hint
-# naming it must fire (tests/test_ch03_graders.py::test_value_slip_is_caught).
+# naming it must fire (tests/test_ch03_features.py::test_value_slip_is_caught).
 SLIPS = [
     ("3.20", "s + 2 Gaussian images", [5, 4, 2 ** (1 / 3), 3], "count backwards"),
     ("3.20", "as many DoG as Gaussian images", [6, 6, 2 ** (1 / 3), 3], "one fewer than the Gaussian"),
