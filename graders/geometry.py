@@ -84,10 +84,12 @@ def hartley(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     with x_n = from_h(to_h(x) @ Tᵀ). A degenerate set (all points equal) gets scale 1e300, not a
     division error: the caller's estimate is then judged, not this function."""
     x = np.asarray(x, float)
-    mu = x.mean(0)
-    s = np.sqrt(2.0) / max(float(np.linalg.norm(x - mu, axis=1).mean()), 1e-300)
-    T = np.array([[s, 0, -s * mu[0]], [0, s, -s * mu[1]], [0, 0, 1.0]])
-    return (x - mu) * s, T
+    shift = np.eye(3)
+    shift[:2, 2] = -x.mean(0)                       # T = S · shift: translate, then scale
+    centred = from_h(to_h(x) @ shift.T)
+    scale = np.sqrt(2.0) / max(float(np.hypot(*centred.T).mean()), 1e-300)
+    T = np.diag([scale, scale, 1.0]) @ shift
+    return from_h(to_h(x) @ T.T), T
 
 
 # ----------------------------------------------------------------- rotations

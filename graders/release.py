@@ -91,7 +91,7 @@ PY=$(command -v python3.11 || command -v python3)
 $PY -m venv /autograder/venv
 /autograder/venv/bin/python -m pip install -q torch==2.13.0 --index-url https://download.pytorch.org/whl/cpu
 /autograder/venv/bin/python -m pip install -q -r environment.txt
-/autograder/venv/bin/python -m pip install -q --no-deps .
+/autograder/venv/bin/python -m pip install -q --no-deps -e .   # editable, as make install: data/ stays beside graders/
 """
 
 RUN_AUTOGRADER = """#!/usr/bin/env bash

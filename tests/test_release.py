@@ -22,18 +22,26 @@ from test_notebooks import ROOT, _solved
 SITE = next(p for p in sys.path if p.endswith("site-packages") and Path(p, "numpy").exists())
 
 
-def _reference_snippets() -> set[str]:
-    """Distinctive lines of every reference function body (long enough to be nobody else's code)."""
-    snippets = set()
-    for path in (ROOT / "solutions").rglob("*.py"):
-        tree = ast.parse(path.read_text())
-        for node in ast.walk(tree):
-            if isinstance(node, ast.FunctionDef):
-                for stmt in node.body[1:] if ast.get_docstring(node) else node.body:
-                    line = ast.unparse(stmt).splitlines()[0].strip()
-                    if len(line) > 45 and not line.startswith(("raise NotImplementedError", "return", "#")):
-                        snippets.add(line)
-    return snippets
+def _bodies(source: str) -> dict[str, str]:
+    """Every function body of `source` (docstring dropped, AST-normalised) with >= 3 statements: body -> name."""
+    try:
+        tree = ast.parse(source)
+    except SyntaxError:
+        return {}
+    out = {}
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            body = node.body[1:] if ast.get_docstring(node) else node.body
+            if len(body) >= 3:
+                out["\n".join(ast.unparse(stmt) for stmt in body)] = node.name
+    return out
+
+
+def _code_of(path: Path) -> str:
+    if path.suffix == ".ipynb":
+        cells = nbformat.read(path, as_version=4).cells
+        return "\n".join(c.source for c in cells if c.cell_type == "code" and not c.source.lstrip().startswith(("%", "!")))
+    return path.read_text(errors="ignore")
 
 
 @pytest.fixture(scope="module")
@@ -46,9 +54,13 @@ def test_release_has_no_reference_code(release):
     texts = {p: p.read_text(errors="ignore") for p in release.rglob("*") if p.is_file() and p.suffix in (".py", ".ipynb", ".md", ".toml")}
     mentions = [str(p) for p, t in texts.items() if "import solutions" in t or "from solutions" in t]
     assert not mentions, mentions
-    snippets = _reference_snippets()
-    assert len(snippets) > 100     # the check has something to find
-    leaked = {str(p.relative_to(release)): s for p, t in texts.items() for s in snippets if s in t}
+    reference = {}
+    for path in (ROOT / "solutions").rglob("*.py"):
+        reference |= _bodies(path.read_text())
+    assert len(reference) > 100     # the check has something to find
+    leaked = [f"{p.relative_to(release)}: {name} (reference {reference[body]})"
+              for p in texts if p.suffix in (".py", ".ipynb")
+              for body, name in _bodies(_code_of(p)).items() if body in reference]
     assert not leaked, leaked
     for ch in READY:
         assert (release / ch.notebook).exists() and (release / "graders" / ch.prefix).is_dir()
@@ -56,16 +68,16 @@ def test_release_has_no_reference_code(release):
 
 def test_release_installs_in_a_fresh_venv_and_every_notebook_runs(release, tmp_path):
     venv = tmp_path / "venv"
-    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)  # pip and setuptools come with the pinned packages
     pth = next((venv / "lib").glob("python3.*/site-packages"))
     (pth / "_course_dependencies.pth").write_text(SITE + "\n")   # the pinned packages, not this checkout
     py = str(venv / "bin" / "python")
-    subprocess.run([py, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation", "--no-index", str(release)],
+    subprocess.run([py, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation", "--no-index", "-e", str(release)],
                    check=True, timeout=300, cwd=tmp_path)
     probe = subprocess.run([py, "-c", "import graders, graders.chapters as c; print(graders.__file__, len(c.READY));"
                             "import solutions"], capture_output=True, text=True, cwd=tmp_path)
     assert "ModuleNotFoundError: No module named 'solutions'" in probe.stderr, probe.stderr + probe.stdout
-    assert str(tmp_path) in probe.stdout or "site-packages" in probe.stdout, probe.stdout
+    assert probe.stdout.startswith(str(release / "graders")), probe.stdout   # the release, not this checkout
     runner = ("import sys, nbformat\nfrom nbclient import NotebookClient\n"
               "for path in sys.argv[1:]:\n"
               "    nb = nbformat.read(path, as_version=4)\n"
