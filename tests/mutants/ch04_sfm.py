@@ -75,6 +75,13 @@ def tri_unnormalised(P1, P2, x1, x2):
     return Xh[:, :3] / Xh[:, 3:]
 
 
+def tri_unit_P_no_hartley(P1, P2, x1, x2):
+    """Batched DLT with each P scaled to unit norm but the pixels never Hartley-normalised (no T)."""
+    P1, P2 = P1 / np.linalg.norm(P1), P2 / np.linalg.norm(P2)
+    Xh = _null(_rows(P1, P2, x1, x2))
+    return Xh[:, :3] / Xh[:, 3:]
+
+
 def tri_no_divide(P1, P2, x1, x2):
     return _null(_rows(P1, P2, x1, x2))[:, :3]                                      # forgot / w
 
@@ -699,6 +706,7 @@ def umeyama_no_centroid(X, Y):
 
 MUTANTS = [
     ("4.4", "unnormalised DLT", tri_unnormalised, "no normalisation"),
+    ("4.4", "P at unit norm, pixels not Hartley-normalised", tri_unit_P_no_hartley, "Hartley-normalise each image"),
     ("4.4", "homogeneous divide missed", tri_no_divide, "4th coordinate"),
     ("4.4", "homogeneous (N, 4) returned", tri_homogeneous, "homogeneous?"),
     ("4.4", "rows mixed up", tri_rows_mixed, None),
