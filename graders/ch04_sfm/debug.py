@@ -335,7 +335,8 @@ COMPONENT_HINTS = [
 
 REGISTRATION_HINTS = [
     Hint("images still fail: with 1.5 px noise a 1 px threshold rejects most true matches; 100 inliers are more "
-         "than many images have. COLMAP uses 8-12 px (scaled by image size) and ≥ 30 inliers (~15 is the floor).",
+         "than many images have. COLMAP registers with a 12 px threshold (mapper.abs_pose_max_error) and ≥ 30 "
+         "inliers (~15 is the floor).",
          lambda c, out: out["thresh_px"] < 3 or out["min_inliers"] > 40),
     Hint("an image of another place registered: a loose threshold with very few inliers required accepts random "
          "poses. Keep min_inliers ≥ 15-30.", lambda c, out: out["min_inliers"] < 12 or out["thresh_px"] > 20),

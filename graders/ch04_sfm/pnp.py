@@ -265,11 +265,15 @@ def cases_epnp(rng) -> list[Case]:
         s = pnp_scene(rng, kw.pop("n"), **kw)
         exp = dict(K=s["K"], held_out=s["held_out"])
         ref = held_out_px(cv_epnp(s["X"], s["x"], s["K"]), exp)
-        # 8 x OpenCV's EPnP held-out error + 0.2 px: EPnP is not a maximum-likelihood estimator, and how
-        # the β of the 1-4 kernel vectors are chosen and refined matters on unlucky draws (a correct
-        # from-scratch EPnP is within 1.7x of OpenCV's 90 % of the time and up to ~6x in the tail, over
-        # 600 draws). Only gross mistakes fail here; accuracy is the business of 4.10's refinement.
-        out.append(Case(name, (s["X"], s["x"], s["K"]), exp, held_out_px, 8 * ref + 0.2, "px (held-out RMS)",
+        # max(8 x OpenCV's EPnP held-out error + 0.2 px, 10 x the pixel noise): EPnP is not a maximum-likelihood
+        # estimator, and how the β of the 1-4 kernel vectors are chosen and refined matters on unlucky draws.
+        # Over 800 draws of each case the reference is within 1.6x of OpenCV's 90 % of the time but up to 9x
+        # (1 px: 1.6 px at worst) and 13x (12 MP, 2 px: 14.9 px at worst; seed 2373582094: 4.4 px against 8 x
+        # 0.52 + 0.2 = 4.3) in the tail, so a ratio alone is not a fair bar; the gross mistakes this row is for
+        # (pixels as rays, the camera-to-world pose, the centre for t) are 98-1e6 px off on the same draws.
+        # Accuracy is the business of 4.10's refinement.
+        out.append(Case(name, (s["X"], s["x"], s["K"]), exp, held_out_px, max(8 * ref + 0.2, 10 * kw["noise"]),
+                        "px (held-out RMS)", key=f"noise-{int(kw['noise'])}px", tags=("noise",),
                         convert=_convert_pose, info={"ref": ref}))
     return out
 

@@ -2,8 +2,10 @@
 """
 from __future__ import annotations
 
+import numpy as np
+
 from ..compare import max_abs, relative
-from ..engine import choice_question, numeric_question, register, value_hint
+from ..engine import Case, Exercise, choice_question, numeric_question, register, value_hint
 
 
 def sigma_z(Z, f, sigma, B):
@@ -37,6 +39,38 @@ SFM_CHOICE = choice_question(
                 "accuracy gap at 10-100x the speed).")
 
 
+def colmap_thresholds() -> list[float]:
+    """Question 4.2's answer, read from pycolmap's own defaults (pycolmap.IncrementalPipelineOptions().mapper) when
+    the question is graded: [abs_pose_max_error px, abs_pose_min_num_inliers, filter_min_tri_angle °,
+    filter_max_reproj_error px]; pycolmap 4.2.1 gives [12, 30, 1.5, 4]."""
+    import pycolmap
+    m = pycolmap.IncrementalPipelineOptions().mapper
+    return [float(m.abs_pose_max_error), float(m.abs_pose_min_num_inliers), float(m.filter_min_tri_angle),
+            float(m.filter_max_reproj_error)]
+
+
+def _colmap_threshold_cases(rng) -> list[Case]:
+    # exact (1e-6): the four defaults are round numbers; the classic slips (8 px, swapped thresholds) are off by 4+
+    return [Case("your answer (pycolmap's defaults)", (), np.asarray(colmap_thresholds(), float), max_abs, 1e-6, "",
+                 shape=(4,))]
+
+
+COLMAP_THRESHOLDS = Exercise(
+    id="4.2", title="COLMAP's registration thresholds", name="colmap_thresholds", kind="concept", points=1, value=True,
+    cases=_colmap_threshold_cases,
+    hints=[value_hint([4.0, 30.0, 1.5, 12.0], "swapped: 12 px is the PnP RANSAC threshold (mapper.abs_pose_max_error), "
+                      "4 px the filter after bundle adjustment (mapper.filter_max_reproj_error)."),
+           value_hint([8.0, 30.0, 1.5, 4.0], "COLMAP's PnP inlier threshold is 12 px (mapper.abs_pose_max_error), not 8: "
+                      "loose on purpose, because bundle adjustment and the 4 px filter follow.")],
+    explanation="pycolmap's IncrementalPipelineOptions().mapper: P3P inside RANSAC with a 12 px inlier threshold "
+                "(abs_pose_max_error); register with at least 30 inliers (abs_pose_min_num_inliers) making up 25 % of the "
+                "matches; triangulate and keep points only with a triangulation angle of at least 1.5° "
+                "(filter_min_tri_angle); filter observations over 4 px (filter_max_reproj_error). Local BA over 6 "
+                "images, the new one and its 5 most covisible (ba_local_num_images = 6); global BA whenever the model "
+                "has grown by 10 % (ba_global_frames_ratio = 1.1); the next image by a visibility score "
+                "(image_selection_method = MIN_UNCERTAINTY), not by the raw number of matches.")
+
+
 HOURS_10K = 10_000 * 9_999 / 2 * 0.03 / 3600
 
 
@@ -56,12 +90,7 @@ register(
                     "doubling B halves σZ (B is in the denominator)."),
         value_hint([100 * sigma_z(5, 800, 0.5, 0.5), 100 * sigma_z(5, 800, 0.5, 1.0)],
                    "that is in centimetres; the question asks for metres.")]),
-    numeric_question("4.2", "COLMAP's registration thresholds", "colmap_thresholds", "concept", [8.0, 30.0, 1.5, 4.0], 1e-6, "",
-       (4,), max_abs,
-       "P3P inside RANSAC with an 8 px inlier threshold; register if > 30 inliers; triangulate only with a "
-       "triangulation angle > 1.5°; filter points with reprojection error > 4 px (and tracks shorter than 2). "
-       "Local BA over the 10 most recent images after each registration, global BA every 10 registrations.",
-       [value_hint([4.0, 30.0, 1.5, 8.0], "swapped: 8 px is the PnP RANSAC threshold, 4 px the final filter.")]),
+    COLMAP_THRESHOLDS,
     numeric_question("4.3", "How many pairs?", "exhaustive_pairs", "concept", [100 * 99 / 2, 10_000 * 9_999 / 2], 1e-9, "rel.",
        (2,), relative,
        "N(N − 1)/2: 100 images → 4,950 pairs (the seed's '5K'); 10,000 → 49,995,000 (50 M). Quadratic: 100x "

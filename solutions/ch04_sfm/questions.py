@@ -14,9 +14,9 @@ def _pairs(n):
 # 4.1  Z = 5 m, f = 800 px, σ = 0.5 px, baseline 0.5 m and 1 m (the seed's worked example: 3.1 cm, 1.6 cm)
 sigma_z = [_sigma_z(5, 800, 0.5, 0.5), _sigma_z(5, 800, 0.5, 1.0)]
 
-# 4.2  COLMAP: PnP RANSAC threshold (px), minimum inliers to register, minimum triangulation angle (°),
-#      filter threshold on the reprojection error (px)
-colmap_thresholds = [8.0, 30.0, 1.5, 4.0]
+# 4.2  COLMAP (pycolmap 4.2.1's IncrementalPipelineOptions().mapper): PnP RANSAC threshold abs_pose_max_error (px),
+#      abs_pose_min_num_inliers, filter_min_tri_angle (°), filter_max_reproj_error (px)
+colmap_thresholds = [12.0, 30.0, 1.5, 4.0]
 
 # 4.3  pairs for 100 and 10,000 images
 exhaustive_pairs = [_pairs(100), _pairs(10_000)]
