@@ -20,7 +20,7 @@ from .binary import BRIEF_PATTERN, brief_pattern, cv_hamming, gt_orb_descriptors
 from .common import (SIZE, common, cv_ratio_matches, graf_half, homography_pair, homography_pair_from, mma,
                      repeatability, to_u8, transfer)
 from .corners import corners_and_edges, cv_corners, cv_corners_gaussian, cv_fast, set_f1_error
-from .debug import DEFAULT_SETTINGS, DEBUG_GENERATORS, debug_case, pipeline, shelving, true_homography
+from .debug import DEFAULT_SETTINGS, debug_case, pipeline, shelving, true_homography
 from .distribution import cell_of, clustered_keypoints, gt_distribute
 from .frontier import (PATCH, TEST_TEXTURES, TRAIN_STEPS, TRAIN_TEXTURES, cv_sift_patch_descriptor, keypoint_patches,
                        nn_accuracy, patch_pairs, raw_patch_descriptor)
@@ -37,7 +37,7 @@ __all__ = [
     "brief_pattern", "gt_orb_descriptors", "cv_hamming", "cv_dog", "cv_sift_descriptors", "cv_match", "gt_distribute",
     "cell_of", "clustered_keypoints",
     # DEBUG
-    "DEFAULT_SETTINGS", "DEBUG_GENERATORS", "pipeline", "debug_case", "true_homography", "shelving",
+    "DEFAULT_SETTINGS", "pipeline", "debug_case", "true_homography", "shelving",
     # FRONTIER
     "PATCH", "TRAIN_STEPS", "TRAIN_TEXTURES", "TEST_TEXTURES", "patch_pairs", "raw_patch_descriptor",
     "keypoint_patches", "nn_accuracy", "cv_sift_patch_descriptor",

@@ -38,7 +38,7 @@ def dog_detect(img: np.ndarray, n_features: int = 1000, n_octaves: int = 4, n_sc
     first, N <= n_features. Each 3x3x3 extremum is refined by up to 5 Newton steps on the quadratic
     model of D, moving to the neighbouring sample when an offset exceeds MOVE = 0.6 (with Lowe's 0.5 an
     extremum about halfway between two samples makes the steps oscillate between them, the fits on
-    either side disagreeing by a few hundredths, and is lost: about a fifth of Gaussian blobs), then
+    either side disagreeing by a few hundredths, and is lost: one Gaussian blob in ten, up to one in five), then
     rejected if an offset still exceeds 0.6, if |D(x^)| < contrast / n_scales or if the
     principal-curvature ratio exceeds edge_ratio. Two candidates refined to the same extremum keep one.
     """
