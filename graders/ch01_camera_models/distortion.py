@@ -17,9 +17,11 @@ def cv_undistort(uv: np.ndarray, K: np.ndarray, dist: np.ndarray, iters: int = 2
     """OpenCV-backed `undistort_points`: (N, 2) pixels -> (N, 2) undistorted normalised coordinates.
 
     `cv2.undistortPoints` without `criteria` runs a fixed 5 iterations, too few for strong
-    distortion at the corners; with a tight criterion it converges.
+    distortion at the corners; with a tight criterion it converges, but only linearly (with EPS set,
+    OpenCV 5 halves a step that raises the error): on a strong lens (1.6, seed 2582420416) 200 steps
+    left 0.38 px, 1,000 left 5e-5 px, 5,000 reach 4e-13 px. Points stop as soon as they converge.
     """
-    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, max(iters, 200), 1e-14)
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, max(iters, 5000), 1e-14)
     x = cv2.undistortPoints(np.asarray(uv, float).reshape(-1, 1, 2), np.asarray(K, float),
                             np.asarray(dist, float), None, None, None, criteria)
     return x.reshape(-1, 2)
@@ -42,6 +44,15 @@ def real_chessboard_corners() -> tuple[np.ndarray, np.ndarray, np.ndarray] | Non
     return np.concatenate(corners).astype(float), calib["K"], calib["dist"]
 
 
+@lru_cache(maxsize=1)
+def _real_corners_undistorted() -> np.ndarray:
+    """The oracle for the real case, computed once (the corners and the lens do not change with the seed)."""
+    uv, K, dist = real_chessboard_corners()
+    x = cv_undistort(uv, K, dist)
+    x.setflags(write=False)
+    return x
+
+
 def _in_pixels(fx: float):
     """Normalised-coordinate distance x fx: the tolerance then reads in pixels like the others."""
     return lambda a, b: fx * max_distance(a, b)
@@ -53,7 +64,7 @@ def cases_undistort(rng) -> list[Case]:
     if real is not None:
         uv, K, dist = real
         # Real lens, real corners: OpenCV (converged) is the oracle; 0.01 px as below.
-        out.append(Case("real chessboard corners (OpenCV sample, 13 views)", (uv, K, dist), cv_undistort(uv, K, dist),
+        out.append(Case("real chessboard corners (OpenCV sample, 13 views)", (uv, K, dist), _real_corners_undistorted(),
                         _in_pixels(K[0, 0]), 0.01, "px", shape=uv.shape, key="real", tags=("real",)))
     for key, name, strength, n in [("mild", "mild radial", "mild", 100),
                                    ("strong", "strong radial, corners included", "strong", 400),
