@@ -159,14 +159,92 @@ def _level() -> str:
     return _LEVEL
 
 
-def _limits(memory_gb: float, max_processes: int, max_file_gb: float) -> Callable[[], None]:
+PIDS_CGROUP = "/sys/fs/cgroup/pids"   # cgroup v1 pids controller (v2: the unified hierarchy's pids.max)
+
+
+class _PidsLimit:
+    """At most `n` processes and threads for one learner process and everything it starts: a cgroup
+    where the OS offers one to us (a fork bomb then stays in its own box, also beside other
+    submissions graded at the same time), else RLIMIT_NPROC (per user, so only a rough bound)."""
+
+    def __init__(self, n: int):
+        self.n, self.path = n, None
+        for root in (PIDS_CGROUP, "/sys/fs/cgroup"):
+            if os.path.exists(os.path.join(root, "cgroup.procs")) and os.access(root, os.W_OK):
+                path = os.path.join(root, f"cv3d-learner-{os.getpid()}-{id(self)}-{time.monotonic_ns()}")
+                try:
+                    os.mkdir(path)
+                    with open(os.path.join(path, "pids.max"), "w") as f:
+                        f.write(str(n))
+                    self.path = path
+                    break
+                except OSError:
+                    shutil.rmtree(path, ignore_errors=True)
+
+    def enter(self) -> None:   # in the child, between fork and exec
+        if self.path:
+            with open(os.path.join(self.path, "cgroup.procs"), "w") as f:
+                f.write(str(os.getpid()))
+        else:
+            try:
+                resource.setrlimit(resource.RLIMIT_NPROC, (_processes_of_this_user() + self.n,) * 2)
+            except (ValueError, OSError):
+                pass
+
+    def members(self) -> set[int]:
+        try:
+            with open(os.path.join(self.path, "cgroup.procs")) as f:
+                return {int(p) for p in f.read().split()}
+        except (OSError, TypeError):
+            return set()
+
+    def kill_all_but(self, keep: set[int]) -> int:
+        """Stop the processes the learner's code started and left running; returns how many."""
+        stray = 0
+        for _ in range(200):          # until none is left: a fork bomb refills its slots as we kill
+            extra = self.members() - keep
+            if not extra:
+                break
+            for pid in extra:
+                try:
+                    os.kill(pid, 9)
+                    stray += 1
+                except OSError:
+                    pass
+            time.sleep(0.005)
+        return stray
+
+    def close(self) -> None:
+        if not self.path:
+            return
+        for _ in range(100):          # kill until empty: a fork bomb keeps making new members
+            try:
+                with open(os.path.join(self.path, "cgroup.procs")) as f:
+                    pids = [int(p) for p in f.read().split()]
+            except OSError:
+                break
+            if not pids:
+                break
+            for pid in pids:
+                try:
+                    os.kill(pid, 9)
+                except OSError:
+                    pass
+            time.sleep(0.02)
+        for _ in range(50):           # members that were just killed take a moment to leave
+            try:
+                os.rmdir(self.path)
+                break
+            except OSError:
+                time.sleep(0.02)
+        self.path = None
+
+
+def _limits(memory_gb: float, pids: _PidsLimit, max_file_gb: float) -> Callable[[], None]:
     def apply() -> None:   # in the child, between fork and exec
         resource.setrlimit(resource.RLIMIT_AS, (int(memory_gb * 2**30),) * 2)
         resource.setrlimit(resource.RLIMIT_FSIZE, (int(max_file_gb * 2**30),) * 2)
-        try:
-            resource.setrlimit(resource.RLIMIT_NPROC, (max_processes,) * 2)
-        except (ValueError, OSError):
-            pass
+        pids.enter()
     return apply
 
 
@@ -184,7 +262,7 @@ def _processes_of_this_user() -> int:
 class LearnerProcess:
     """One learner process for one submission: load its code once, then call its functions."""
 
-    def __init__(self, source: str, memory_gb: float = 8.0, max_processes: int = 64, max_file_gb: float = 1.0):
+    def __init__(self, source: str, memory_gb: float = 8.0, max_processes: int = 256, max_file_gb: float = 1.0):
         self.source, self.memory_gb = source, memory_gb
         self.max_processes, self.max_file_gb = max_processes, max_file_gb
         self.proc: subprocess.Popen | None = None
@@ -204,12 +282,12 @@ class LearnerProcess:
         env = {k: v for k, v in os.environ.items() if not k.startswith(("COURSE_GRADING", "CV3D_SECRET"))}
         env.update(TMPDIR=self.private, TMP=self.private, TEMP=self.private, HOME=self.private, MPLBACKEND="Agg",
                    OMP_NUM_THREADS=env.get("OMP_NUM_THREADS", "1"))
-        nproc = _processes_of_this_user() + self.max_processes
+        self.pids = _PidsLimit(self.max_processes)
         self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                      stderr=None if os.environ.get("CV3D_LEARNER_STDERR") else subprocess.DEVNULL,
                                      pass_fds=(req_r, res_w), cwd=self.private,
                                      env=env, start_new_session=True,
-                                     preexec_fn=_limits(self.memory_gb, nproc, self.max_file_gb))
+                                     preexec_fn=_limits(self.memory_gb, self.pids, self.max_file_gb))
         os.close(req_r)
         os.close(res_w)
         self.req, self.res = req_w, res_r
@@ -218,6 +296,7 @@ class LearnerProcess:
             self.problem = "" if reply.get("ok") else reply.get("error", "your code failed to load")
         except (RemoteError, TimeLimitExceeded) as exc:
             self.problem = f"your code failed to load: {exc}"
+        self.residents = self.pids.members() | {self.proc.pid}   # what may live between calls
 
     def stop(self) -> None:
         if self.proc is None:
@@ -231,6 +310,7 @@ class LearnerProcess:
             os.killpg(self.proc.pid, 9)
         except (ProcessLookupError, PermissionError):
             pass
+        self.pids.close()
         self.proc.wait()
         self.proc = None
 
@@ -323,6 +403,9 @@ class RemoteFunction:
             if exc.kind in ("crash", "garbage"):   # a dead process, or a channel that cannot be trusted now
                 self.learner._restart()
             raise
+        if self.learner.pids.kill_all_but(self.learner.residents):   # processes it started and left running
+            reply.setdefault("stdout", "")
+            reply["stdout"] += "\n[the grader stopped processes your code started and left running]"
         self._stdout.append(reply.get("stdout", ""))
         self._mutated += reply.get("mutated", [])
         self._used |= set(reply.get("used", []))
@@ -334,7 +417,8 @@ class RemoteFunction:
             return value
         if kind == "not_implemented":
             raise NotImplementedError
-        if kind == "timeout":
+        if kind == "timeout":   # what the timed-out call left running (threads, children) goes with the process
+            self.learner._restart()
             raise TimeLimitExceeded(reply.get("error") or "time limit exceeded")
         raise RemoteError(kind or "exception", reply.get("error", "failed"), reply.get("traceback", ""))
 

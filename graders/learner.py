@@ -191,13 +191,27 @@ def _call(namespace: dict, request: dict) -> dict:
     if not callable(fn):
         return {"kind": "exception", "error": f"`{request['name']}` is not a function", "traceback": ""}
     del _used[:]
+    _reap()            # what the judge stopped after the previous call
     out = _safe_call(fn, _unswap(request["args"]), _unswap(request["kwargs"]), timeout=request["timeout"], names=request["names"])
+    _reap()
     reply = {"kind": out.kind, "error": out.error, "traceback": out.traceback, "stdout": out.stdout,
              "stdout_truncated": out.stdout_truncated, "mutated": out.mutated, "used": sorted(set(_used))}
     if out.kind == "ok":
         reply["value"] = _plain(out.value)
         reply["grads"] = _input_gradients(out.value, request["args"])
     return reply
+
+
+def _reap() -> None:
+    """Collect the children the learner's code left behind that have ended (zombies would hold the
+    process budget); the judge stops those still running."""
+    while True:
+        try:
+            pid, _ = os.waitpid(-1, os.WNOHANG)
+        except ChildProcessError:
+            return
+        if pid == 0:
+            return
 
 
 def _leaves(args: tuple) -> list:
@@ -234,9 +248,20 @@ def _plain(value: Any) -> Any:
     return value
 
 
+def _close_channel_in_child() -> None:
+    """A process the learner's code forks must never speak on the channel (it would answer requests
+    meant for this one): it loses both ends at birth."""
+    for fd in _fds:
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+
+
 def serve(request_fd: int, response_fd: int) -> None:
     global _fds
     _fds = (request_fd, response_fd)
+    os.register_at_fork(after_in_child=_close_channel_in_child)
     namespace: dict = {"__name__": "learner"}
     while True:
         try:
