@@ -103,12 +103,19 @@ def _undistort_without_centre(case, out):
     return float(np.median(np.linalg.norm(back - (uv + K[:2, 2]), axis=1))) < 0.5
 
 
+def _not_converged(case, out):
+    """Close but not there: a few fixed-point steps leave 0.01-50 px. On a strong lens they can also leave
+    hundreds of pixels (an oscillation), so the other cases speak for such a draw (seen: 328 px on the strong
+    case, 0.011 px on the real corners, 0.017 px on the tangential case)."""
+    return case.metric(out, case.expected) < 50
+
+
 UNDISTORT_HINTS = [
     like(_bug_undistort_returns_pixels, "you returned pixels: return normalised coordinates (apply K⁻¹, no K at the end)."),
     like(_bug_undistort_radial_only, "the tangential terms are ignored: the inverse must undo p1, p2 too."),
     Hint("not converged: a few fixed-point steps are not enough for strong distortion near the corners — "
          "iterate to convergence or use Newton's method with the 2×2 Jacobian.",
-         lambda case, out: "strong" in case.tags and case.metric(out, case.expected) < 50),
+         _not_converged),
     Hint("(cx, cy) was not subtracted: normalise with K⁻¹, x = (u − cx) / fx, y = (v − cy) / fy, before undoing "
          "the distortion.", _undistort_without_centre),
 ]
