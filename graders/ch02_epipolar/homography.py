@@ -26,6 +26,23 @@ def broken_dlt(x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
     return np.linalg.svd(A)[2][-1].reshape(3, 3)
 
 
+def gt_homography_dlt(x1: np.ndarray, x2: np.ndarray, h33: bool = False) -> np.ndarray:
+    """The grader's normalised DLT (Hartley-normalised points, rows of x2 × (H x1) = 0), H[2, 2] = 1.
+    h33=False: the null vector of A (SVD, the stub's algorithm); h33=True: H[2, 2] fixed to 1 and the
+    other eight entries by linear least squares (kornia's default `solver="lu"`). On noisy data the two
+    solve different least-squares problems: two correct DLTs."""
+    (n1, T1), (n2, T2) = hartley(x1), hartley(x2)
+    p, z = to_h(n1), np.zeros((len(n1), 3))
+    u, v = n2[:, :1], n2[:, 1:]
+    A = np.r_[np.c_[z, -p, v * p], np.c_[p, z, -u * p]]
+    if h33:
+        h = np.r_[np.linalg.lstsq(A[:, :8], -A[:, 8], rcond=None)[0], 1.0]
+    else:
+        h = np.linalg.svd(A)[2][-1]
+    H = np.linalg.solve(T2, h.reshape(3, 3) @ T1)
+    return H / H[2, 2]
+
+
 def _convert_H(out, case):
     return matrix33(out, "H")
 
@@ -44,12 +61,17 @@ def cases_homography(rng) -> list[Case]:
                            dict(n=60, noise=1.0, width=4000, height=3000, hfov_deg=(50, 70),
                                 roi=(3200, 2200, 400, 400)))]:
         s = two_view(rng, kw.pop("n"), planar=True, held_out=200, **kw)
-        H_cv = cv_homography(s["x1"], s["x2"])
         exp = {"held_out": s["held_out"]}
-        # 1.25 x OpenCV's held-out transfer error + 0.05 px: the same least-squares problem (OpenCV
-        # adds a Levenberg-Marquardt polish; other normalisations differ by up to ~20 % on the corner
-        # case), while the unnormalised DLT is 2-40x over the tolerance there.
-        out.append(Case(name, (s["x1"], s["x2"]), exp, rms_transfer, 1.25 * rms_transfer(H_cv, exp) + 0.05,
+        # 1.25 x the held-out transfer error of the worst of three correct fits on this draw, + 0.05 px:
+        # OpenCV's (the DLT with a Levenberg-Marquardt polish) and the grader's normalised DLT, solved by
+        # SVD and with H[2, 2] = 1. On most draws they agree within 6 %; on a draw in a few hundred of
+        # the corner case they differ by up to 2x (OpenCV's polish, or the other least-squares problem,
+        # fits the noise of the 60 matches differently), and a tolerance tied to OpenCV alone failed the
+        # reference on 3 draws in 3,000 and kornia's DLT on 6 (seed 3759345637: 0.505 px vs ≤ 0.492).
+        # The unnormalised DLT is 3-40x the normalised one on 99 % of the corner draws.
+        err = max(rms_transfer(H, exp) for H in (cv_homography(s["x1"], s["x2"]), gt_homography_dlt(s["x1"], s["x2"]),
+                                                 gt_homography_dlt(s["x1"], s["x2"], h33=True)))
+        out.append(Case(name, (s["x1"], s["x2"]), exp, rms_transfer, 1.25 * err + 0.05,
                         "px (held-out RMS)", convert=_convert_H, info={"scene": s}, key=key, tags=("noise",)))
     real = graf_matches()
     if real is not None:
