@@ -1,6 +1,8 @@
 """Chapter 5, section 2 (Levenberg-Marquardt): 5.14 `bundle_adjust`, judged against scipy, Ceres and the truth."""
 from __future__ import annotations
 
+from typing import Iterator
+
 import numpy as np
 
 from graders.engine import Case, Exercise, Hint, OutputError, register
@@ -15,25 +17,25 @@ from .problems import aligned_points_px, held_out_rms, make_problem, problem_arg
 from .robust import gt_robust_weights
 
 
-def cases_bundle_adjust(rng) -> list[Case]:
-    out = []
+def cases_bundle_adjust(rng) -> Iterator[Case]:
+    """The cases of 5.14, built one by one (the later ones run Ceres for their oracle or tolerance)."""
     # 1) Noise-free observations: the minimum is the truth (up to gauge); judged by fresh points
     #    triangulated in the returned cameras (held_out_rms) and by the returned points after a
     #    similarity alignment onto the true points, reprojected through the true cameras
     #    (aligned_points_px); the worse of the two. 1e-3 px: LM converges to ~1e-9 px; stopping early
     #    or a wrong step leaves > 0.01 px.
     prob = make_problem(rng, n_cams=8, n_points=150, noise=0.0)
-    out.append(Case("noise-free, perturbed start: cameras and points = the truth after similarity alignment",
-                    problem_args(prob), prob["truth"],
-                    lambda o, truth: max(held_out_rms(o[0], truth), aligned_points_px(o[1], truth, *o[3].args[2:4])),
-                    1e-3, "px RMS", convert=_convert_ba, kwargs={}))
+    yield Case("noise-free, perturbed start: cameras and points = the truth after similarity alignment",
+               problem_args(prob), prob["truth"],
+               lambda o, truth: max(held_out_rms(o[0], truth), aligned_points_px(o[1], truth, *o[3].args[2:4])),
+               1e-3, "px RMS", convert=_convert_ba, kwargs={})
     # 2) 0.5 px noise: final cost against scipy's least_squares on the same problem. 1e-4 relative:
     #    the reference lands within ~1e-9 of the optimum; 50 iterations of a broken damping do not.
     prob = make_problem(rng, n_cams=8, n_points=120, noise=0.5)
     args = problem_args(prob)
-    out.append(Case("0.5 px noise: final cost vs scipy.optimize.least_squares", args,
-                    Lazy(lambda a=args: scipy_bundle_adjust(*a)[2][-1]), _metric_cost, 1e-4, "rel. excess",
-                    convert=_convert_ba, info={"args": args, "loss": "linear", "scale": 1.0}))
+    yield Case("0.5 px noise: final cost vs scipy.optimize.least_squares", args,
+               Lazy(lambda a=args: scipy_bundle_adjust(*a)[2][-1]), _metric_cost, 1e-4, "rel. excess",
+               convert=_convert_ba, info={"args": args, "loss": "linear", "scale": 1.0})
     # 3) 5% outliers with a Cauchy loss (scale 2 px): the robust cost against Ceres', same loss.
     #    The oracle is Ceres through pycolmap, whose losses act per observation like the course's
     #    (scipy applies its loss to each scalar residual: another cost). The start is close (0.3°,
@@ -41,27 +43,30 @@ def cases_bundle_adjust(rng) -> list[Case]:
     prob = make_problem(rng, n_cams=8, n_points=120, noise=0.5, outliers=0.05, rot_deg=0.3, pos_frac=0.01,
                         pt_frac=0.01, f_frac=0.005)
     args = problem_args(prob)
-    out.append(Case("5 % outliers, loss='cauchy', scale=2: robust cost vs Ceres (pycolmap)", args,
-                    Lazy(lambda a=args: colmap_bundle_adjust(*a, loss="cauchy", scale=2.0, tight=True)[2][-1]),
-                    _metric_cost, 1e-4, "rel. excess", convert=_convert_ba, kwargs={"loss": "cauchy", "scale": 2.0},
-                    info={"args": args, "loss": "cauchy", "scale": 2.0}))
-    # 4) 10 % outliers with loss='huber', scale=1 px: judged against the truth (held_out_rms). 6 px:
-    #    Huber still gives each outlier a bounded but linear pull, so the robust optimum sits 0.24-0.78 px
-    #    (held-out RMS) from the truth on most draws, for the reference and for Ceres alike, and up to
-    #    3.5 px on an unlucky one (1 in 30); plain L2 (the loss ignored) lands 38-145 px away.
+    yield Case("5 % outliers, loss='cauchy', scale=2: robust cost vs Ceres (pycolmap)", args,
+               Lazy(lambda a=args: colmap_bundle_adjust(*a, loss="cauchy", scale=2.0, tight=True)[2][-1]),
+               _metric_cost, 1e-4, "rel. excess", convert=_convert_ba, kwargs={"loss": "cauchy", "scale": 2.0},
+               info={"args": args, "loss": "cauchy", "scale": 2.0})
+    # 4) 10 % outliers with loss='huber', scale=1 px: judged against the truth (held_out_rms). Huber still
+    #    gives each outlier a bounded but linear pull, so the robust optimum itself sits 0.24-0.78 px
+    #    (held-out RMS) from the truth on most draws, up to 3.5 px on an unlucky one (1 in 30) and 10.3 px
+    #    on a rare one (seed 4135552128: the reference 10.31 px, Ceres 10.32 px, plain L2 46-58 px). The
+    #    tolerance is tied to what Ceres' Huber optimum reaches on the same draw: the larger of 6 px and
+    #    1.5x that; plain L2 (the loss ignored) lands 38-145 px away.
     prob = make_problem(rng, n_cams=8, n_points=120, noise=0.5, outliers=0.10)
-    out.append(Case("10 % outliers, loss='huber', scale=1: the truth recovered", problem_args(prob), prob["truth"],
-                    lambda o, truth: held_out_rms(o[0], truth), 6.0, "px RMS", convert=_convert_ba,
-                    kwargs={"loss": "huber", "scale": 1.0}))
+    args = problem_args(prob)
+    reached = held_out_rms(colmap_bundle_adjust(*args, loss="huber", scale=1.0, tight=True)[0], prob["truth"])
+    yield Case("10 % outliers, loss='huber', scale=1: the truth recovered", args, prob["truth"],
+               lambda o, truth: held_out_rms(o[0], truth), max(6.0, 1.5 * reached), "px RMS", convert=_convert_ba,
+               kwargs={"loss": "huber", "scale": 1.0}, info={"ceres_px": reached})
     # 5) fix_gauge=True: camera 0's pose and camera 1's chosen translation component must not move
     #    (exactly: to 1e-9), and the cost must still reach scipy's (gauge fixing costs nothing).
     prob = make_problem(rng, n_cams=6, n_points=100, noise=0.5)
     args = problem_args(prob)
-    out.append(Case("fix_gauge=True: camera 0 and the scale held, cost vs scipy", args,
-                    Lazy(lambda a=args: scipy_bundle_adjust(*a)[2][-1]), _metric_cost, 1e-4, "rel. excess",
-                    convert=_convert_ba_gauge, kwargs={"fix_gauge": True},
-                    info={"args": args, "loss": "linear", "scale": 1.0}))
-    return out
+    yield Case("fix_gauge=True: camera 0 and the scale held, cost vs scipy", args,
+               Lazy(lambda a=args: scipy_bundle_adjust(*a)[2][-1]), _metric_cost, 1e-4, "rel. excess",
+               convert=_convert_ba_gauge, kwargs={"fix_gauge": True},
+               info={"args": args, "loss": "linear", "scale": 1.0})
 
 
 def _convert_ba(out, case):
@@ -85,7 +90,7 @@ def _convert_ba_gauge(out, case):
     moved = np.abs(cams - start)[fixed].max()
     if moved > 1e-9:
         raise OutputError(f"fix_gauge=True, but a held parameter moved by {moved:.2g}: camera 0's w and t, and "
-                          f"camera 1's translation component {int(np.flatnonzero(fixed[1])[0]) - 3} must stay put")
+                     f"camera 1's translation component {int(np.flatnonzero(fixed[1])[0]) - 3} must stay put")
     return cams, pts, costs, case
 
 
@@ -116,11 +121,11 @@ def _first_order_gain(case, out) -> float:
         Jc, Jp = torch_jacobians(cams, pts, ci, pi)
         r = gt_project(cams, pts, ci, pi) - obs
         U, V, _, g_c, g_p = gt_normal_equations(Jc, Jp, r, ci, pi, len(cams), len(pts),
-                                               gt_robust_weights(r, case.kwargs.get("loss", "linear"),
-                                                                 case.kwargs.get("scale", 1.0)))
+                                          gt_robust_weights(r, case.kwargs.get("loss", "linear"),
+                                                            case.kwargs.get("scale", 1.0)))
         cost = bal_cost(cams, pts, ci, pi, obs, case.kwargs.get("loss", "linear"), case.kwargs.get("scale", 1.0))
         gain = 0.5 * (np.sum(g_c**2 / np.maximum(np.einsum("nii->ni", U), 1e-300))
-                      + np.sum(g_p**2 / np.maximum(np.einsum("nii->ni", V), 1e-300)))
+                 + np.sum(g_p**2 / np.maximum(np.einsum("nii->ni", V), 1e-300)))
         case.info[key] = float(gain / max(cost, 1e-300))
     return case.info[key]
 

@@ -34,6 +34,22 @@ def _apply_step(cameras, points, dc, dp):
     return new_cams, points + dp
 
 
+def _hold(U, V, W, g_c, g_p, fixed, fixed_pts, cam_idx, pt_idx) -> None:
+    """Hold parameters in place (in place on the blocks): a fixed camera parameter gets a unit
+    diagonal, no coupling and no gradient, so its step is 0; a fixed point an identity block."""
+    if fixed.any():
+        W[fixed[cam_idx]] = 0.0                                 # (M, 9) rows of the coupling blocks
+        U[fixed] = 0.0
+        U.transpose(0, 2, 1)[fixed] = 0.0
+        cam, par = fixed.nonzero()
+        U[cam, par, par] = 1.0
+        g_c[fixed] = 0.0
+    if fixed_pts is not None:
+        W[fixed_pts[pt_idx]] = 0.0
+        V[fixed_pts] = np.eye(3)
+        g_p[fixed_pts] = 0.0
+
+
 def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", scale: float = 1.0,
                   fix_gauge: bool = False, max_iter: int = 50, lambda0: float = 1e-4,
                   ftol: float = 1e-8, gtol: float = 1e-10, xtol: float = 1e-10, solver: str = "auto",
@@ -69,18 +85,7 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
         J_cam, J_pt = reprojection_jacobians(cams, pts, cam_idx, pt_idx)
         w = robust_weights(r, loss, scale)
         U, V, W, g_c, g_p = normal_equations(J_cam, J_pt, r, cam_idx, pt_idx, nc, n_pts, weights=w)
-        if fixed.any():  # a fixed parameter gets a unit diagonal and no coupling: its step is 0
-            f_obs = fixed[cam_idx]                              # (M, 9)
-            W[f_obs] = 0.0
-            U[fixed] = 0.0
-            U.transpose(0, 2, 1)[fixed] = 0.0
-            cam, par = fixed.nonzero()
-            U[cam, par, par] = 1.0
-            g_c[fixed] = 0.0
-        if fixed_pts is not None:  # the same for fixed points: identity block, no coupling, no gradient
-            W[fixed_pts[pt_idx]] = 0.0
-            V[fixed_pts] = np.eye(3)
-            g_p[fixed_pts] = 0.0
+        _hold(U, V, W, g_c, g_p, fixed, fixed_pts, cam_idx, pt_idx)
         if max(np.abs(g_c).max(), np.abs(g_p).max(initial=0.0)) < gtol:
             break
         dU = np.clip(np.einsum("nii->ni", U), 1e-6, 1e32)       # Marquardt's diagonal scaling
