@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import argparse
 import csv
-import hashlib
 import inspect
 import json
+import os
 import random
 import resource
 import subprocess
@@ -36,7 +36,7 @@ HOSTILE = {   # name -> body of the attacked function (the exercise is the chapt
     "allocate_30GB": "import numpy as np\n    return np.ones(int(30e9 / 8))",
     "os_exit": "import os\n    os._exit(0)",
     "flood": "print('x' * 100_000_000)\n    return None",
-    "write_outside": "import glob\n    for p in glob.glob(%r + '/graders/*.py'):\n        open(p, 'a').write('#')\n"
+    "write_outside": "import glob\n    for p in glob.glob(%r + '/graders/*.py'):\n        open(p, 'a').write('# cv3d-escaped-marker')\n"
                      "    open('/tmp/cv3d-escaped', 'w').write('x')\n    return None",
     "read_secret": "import os\n    secret = os.environ.get('CV3D_GRADING_SECRET') or os.environ.get('CV3D_HIDDEN_SEEDS')\n"
                    "    for pid in os.listdir('/proc'):\n        try:\n"
@@ -134,19 +134,23 @@ def judge(plan: dict[str, dict], grades: Path) -> list[dict]:
     return verdicts
 
 
-def _tree_hash() -> str:
-    h = hashlib.sha256()
-    for p in sorted((ROOT / "graders").rglob("*.py")):
-        h.update(p.read_bytes())
-    return h.hexdigest()
+ESCAPE_MARKER = "cv3d-escaped-marker"   # what the write_outside submission appends to the graders
 
 
-def run_batch(subs: Path, grades: Path, workers: int, secret_file: Path | None = None) -> float:
+def escaped() -> list[str]:
+    """Files outside the sandbox that a hostile submission managed to write."""
+    hits = [str(p) for p in (ROOT / "graders").rglob("*.py") if ESCAPE_MARKER in p.read_text(errors="ignore")]
+    return hits + (["/tmp/cv3d-escaped"] if Path("/tmp/cv3d-escaped").exists() else [])
+
+
+def run_batch(subs: Path, grades: Path, workers: int, secret_file: Path | None = None,
+              tmpdir: Path | None = None) -> float:
     cmd = [sys.executable, "-m", "graders", "batch", str(subs), "--out", str(grades), "--workers", str(workers)]
     if secret_file:
         cmd += ["--secret-file", str(secret_file)]
+    env = dict(os.environ, **({"TMPDIR": str(tmpdir)} if tmpdir else {}))
     start = time.monotonic()
-    subprocess.run(cmd, check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
+    subprocess.run(cmd, check=True, cwd=ROOT, stdout=subprocess.DEVNULL, env=env)
     return time.monotonic() - start
 
 
@@ -162,7 +166,6 @@ def main(argv=None) -> int:
     plan = build(subs, [int(c) for c in args.chapters.split(",")], args.per_chapter)
     secret = out / "secret"
     secret.write_text("benchmark-secret")
-    before = _tree_hash()
     seconds = run_batch(subs, grades, args.workers, secret)
     verdicts = judge(plan, grades)
     table = defaultdict(lambda: [0, 0])
@@ -178,7 +181,7 @@ def main(argv=None) -> int:
     for v in verdicts:
         if not v["ok"]:
             print("NOT AS EXPECTED:", v)
-    print("course tree unchanged:", before == _tree_hash(), "| escaped file:", Path("/tmp/cv3d-escaped").exists())
+    print("files written outside the sandbox:", escaped() or "none")
     return 0
 
 

@@ -345,7 +345,7 @@ def _stop_after_timeout(result: ExerciseResult, weights: list[float], drawn: Any
     why = f"not run: stopped after a time-out in case {k}"
     if isinstance(drawn, (list, tuple)):
         for case in rest:
-            result.cases.append(CaseResult(name=case.name, tol=case.tol, unit=case.unit, message=why))
+            result.cases.append(CaseResult(name=case.name, tol=case.tol, unit=case.unit, message=why, key=case.key))
             weights.append(case.weight)
     else:
         result.cases.append(CaseResult(name="remaining cases", message=why))
@@ -373,7 +373,7 @@ def _raise(exc: Exception):
 def _judge_case(ex: Exercise, fn: Callable, case: Case) -> tuple[CaseResult, str] | None:
     """The row for one case and the kind of outcome (ok | exception | timeout | exit); None if the
     learner's code raised NotImplementedError."""
-    row = CaseResult(name=case.name, tol=case.tol, unit=case.unit)
+    row = CaseResult(name=case.name, tol=case.tol, unit=case.unit, key=case.key)
     target = fn if case.call is None else (lambda *args, **kwargs: case.call(fn))
     remote = hasattr(fn, "drain")     # graded mode: the learner's code runs in its own process
     if remote:

@@ -25,6 +25,7 @@ class CaseResult:
     hint: str = ""
     stdout: str = ""
     traceback: str = ""
+    key: str = ""          # the case's stable key (tests select rows by it, never by display name)
 
     def error_text(self) -> str:
         return "—" if self.error is None else f"{self.error:.3g} {self.unit}".strip()

@@ -4,20 +4,12 @@ os._exit, flood, writes outside its folder, reading the secret, walking the stac
 the grader) gets zero on what it attacks and changes nothing: no process left, no file written."""
 from __future__ import annotations
 
-import hashlib
 import os
 from pathlib import Path
 
-from benchmarks.coursework import HOSTILE, build, judge, run_batch
+from benchmarks.coursework import HOSTILE, build, escaped, judge, run_batch
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def _tree() -> str:
-    h = hashlib.sha256()
-    for p in sorted(list((ROOT / "graders").rglob("*.py")) + list((ROOT / "notebooks").glob("*.ipynb"))):
-        h.update(p.read_bytes())
-    return h.hexdigest()
 
 
 def _processes() -> set[str]:
@@ -35,14 +27,15 @@ def test_a_class_of_submissions_scores_as_it_should(tmp_path):
     assert {p["category"] for p in plan.values()} == {"reference", "mutant", "hostile"}
     secret = tmp_path / "secret"
     secret.write_text("test-secret")
-    before, procs_before = _tree(), _processes()
-    run_batch(tmp_path / "subs", tmp_path / "grades", workers=2, secret_file=secret)
+    scratch = tmp_path / "tmp"        # every temp folder of the batch lives here: its own, to check
+    scratch.mkdir()
+    run_batch(tmp_path / "subs", tmp_path / "grades", workers=2, secret_file=secret, tmpdir=scratch)
     wrong = [v for v in judge(plan, tmp_path / "grades") if not v["ok"]]
     assert not wrong, wrong
-    assert _tree() == before
-    assert not Path("/tmp/cv3d-escaped").exists()
-    left = {p for p in _processes() - procs_before if "graders" in p or "sleep" in p}
+    assert not escaped(), escaped()
+    left = {p for p in _processes() if str(tmp_path) in p}
     assert not left, left
+    assert not list(scratch.iterdir()), list(scratch.iterdir())
     for path in (tmp_path / "grades").rglob("results.json"):
         assert "test-secret" not in path.read_text()
     cgroups = Path("/sys/fs/cgroup/pids")
