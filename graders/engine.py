@@ -155,7 +155,7 @@ def numeric_question(id: str, title: str, name: str, kind: str, expected: Any, t
     def cases(rng: np.random.Generator) -> list[Case]:
         return [Case("your answer", (), np.asarray(expected, float), metric, tol, unit, shape=shape)]
 
-    return Exercise(id, title, name, kind, points=points, value=True, cases=cases, hints=list(hints),
+    return Exercise(id=id, title=title, name=name, kind=kind, points=points, value=True, cases=cases, hints=list(hints),
                     explanation=explanation)
 
 
@@ -193,7 +193,7 @@ def choice_question(id: str, title: str, name: str, kind: str, answers: Sequence
     def hint(index: int, text: str) -> Hint:
         return Hint(text, lambda case, out: out[index] != case.expected[index])
 
-    return Exercise(id, title, name, kind, points=points, value=True,
+    return Exercise(id=id, title=title, name=name, kind=kind, points=points, value=True,
                     cases=lambda rng: [Case(f"{len(answers)} scenarios", (), answers, n_wrong, 0, "wrong",
                                             convert=convert)],
                     hints=[hint(i, text) for i, text in (hints or {}).items()], explanation=explanation)

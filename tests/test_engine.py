@@ -17,7 +17,7 @@ def _double_cases(rng):
     return [Case("twenty points", (x,), 2 * x, max_distance, 1e-9, "px", shape=(20, 2))]
 
 
-TOY = Exercise("0.1", "double it", "double", "code", 2, _double_cases,
+TOY = Exercise(id="0.1", title="double it", name="double", kind="code", points=2, cases=_double_cases,
                hints=[like(lambda c: 3 * c.args[0], "tripled instead of doubled?")],
                fallback=lambda x: 2 * x, timeout=1.0)
 
@@ -96,7 +96,7 @@ def test_print_flood_is_capped():
 
 
 def test_value_answer_none_is_not_attempted():
-    ex = Exercise("0.2", "a number", "answer", "concept", 1, value=True,
+    ex = Exercise(id="0.2", title="a number", name="answer", kind="concept", points=1, value=True,
                   cases=lambda rng: [Case("x", (), np.array(3.0), max_abs, 0.1, shape=())])
     assert grade(ex, None).status == "not_attempted"
     assert grade(ex, 3.05).status == "passed"
@@ -160,7 +160,7 @@ def test_cases_may_be_generated_lazily():
             x = rng.normal(size=(n, 2))
             yield Case(f"{n} points", (x,), 2 * x, max_distance, 1e-9, "px", shape=(n, 2))
 
-    lazy = Exercise("0.4", "double lazily", "double", "code", 2, lazy_cases, timeout=1.0)
+    lazy = Exercise(id="0.4", title="double lazily", name="double", kind="code", points=2, cases=lazy_cases, timeout=1.0)
 
     def stub(x):
         raise NotImplementedError
@@ -175,14 +175,14 @@ def test_a_case_generator_that_breaks_is_reported_as_our_error():
         yield Case("fine", (np.ones((2, 2)),), 2 * np.ones((2, 2)), max_distance, 1e-9, shape=(2, 2))
         raise RuntimeError("oops")
 
-    r = grade(Exercise("0.5", "broken", "double", "code", 1, broken, timeout=1.0), good)
+    r = grade(Exercise(id="0.5", title="broken", name="double", kind="code", points=1, cases=broken, timeout=1.0), good)
     assert r.status == "error" and "please report it" in r.message
 
 
 def test_a_mistake_can_be_recognised_by_the_error_it_causes():
     from graders.engine import raised
 
-    ex = Exercise("0.6", "double", "double", "code", 1, _double_cases, timeout=1.0,
+    ex = Exercise(id="0.6", title="double", name="double", kind="code", points=1, cases=_double_cases, timeout=1.0,
                   hints=[raised(r"LinAlgError", "a singular system: drop the failed points first."),
                          raised(r"returned shape", "return one row per point.")])
 
@@ -198,7 +198,7 @@ def test_a_hint_can_quote_what_it_measured():
     def text(case, out):
         return f"off by {np.max(np.abs(out - case.expected)):.1f} px everywhere: a constant offset?"
 
-    ex = Exercise("0.7", "double", "double", "code", 1, _double_cases, timeout=1.0,
+    ex = Exercise(id="0.7", title="double", name="double", kind="code", points=1, cases=_double_cases, timeout=1.0,
                   hints=[Hint(text, lambda case, out: True)])
     assert "off by 5.0 px" in grade(ex, lambda x: 2 * x + 5).cases[0].hint
 
