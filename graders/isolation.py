@@ -31,34 +31,10 @@ import tempfile
 import time
 from typing import Any, Callable
 
-from .learner import send
+from .learner import receive_bytes, send
 from .sandbox import TimeLimitExceeded
 
 MARGIN_S = 5.0          # the judge waits this much longer than the learner's own time limit
-MAX_FRAME = 4 << 30     # bytes: a reply that claims more is not a reply
-
-
-def _read_until(fd: int, n: int, deadline: float) -> bytes:
-    """Exactly n bytes from fd by the deadline (the learner may write a header and then stall)."""
-    chunks, left = [], n
-    while left:
-        ready, _, _ = select.select([fd], [], [], max(deadline - time.monotonic(), 0.0))
-        if not ready:
-            raise TimeoutError
-        chunk = os.read(fd, min(left, 1 << 20))
-        if not chunk:
-            raise EOFError
-        chunks.append(chunk)
-        left -= len(chunk)
-    return b"".join(chunks)
-
-
-def _receive(fd: int, deadline: float) -> bytes:
-    import struct
-    (n,) = struct.unpack("!Q", _read_until(fd, 8, deadline))
-    if n > MAX_FRAME:
-        raise pickle.UnpicklingError(f"a reply of {n} bytes")
-    return _read_until(fd, n, deadline)
 
 
 class RemoteError(Exception):
@@ -340,7 +316,7 @@ class LearnerProcess:
         deadline = time.monotonic() + timeout
         while True:
             try:
-                reply = _loads(_receive(self.res, deadline))
+                reply = _loads(receive_bytes(self.res, deadline))
             except TimeoutError:
                 raise TimeLimitExceeded(f"time limit of {max(timeout - MARGIN_S, 0.05):.3g} s exceeded") from None
             except EOFError:

@@ -20,8 +20,10 @@ import importlib.abc
 import importlib.util
 import os
 import pickle
+import select
 import struct
 import sys
+import time
 import types
 from typing import Any, Callable
 
@@ -40,9 +42,17 @@ def send(fd: int, obj: Any) -> None:
         view = view[n:]
 
 
-def _read_exact(fd: int, n: int) -> bytes:
+MAX_FRAME = 4 << 30     # bytes: a frame that claims more is not a frame
+
+
+def _read_exact(fd: int, n: int, deadline: float | None) -> bytes:
+    """Exactly n bytes from fd, by the deadline (time.monotonic()) if one is given."""
     chunks, left = [], n
     while left:
+        if deadline is not None:
+            ready, _, _ = select.select([fd], [], [], max(deadline - time.monotonic(), 0.0))
+            if not ready:
+                raise TimeoutError
         chunk = os.read(fd, min(left, 1 << 20))
         if not chunk:
             raise EOFError
@@ -51,9 +61,13 @@ def _read_exact(fd: int, n: int) -> bytes:
     return b"".join(chunks)
 
 
-def receive_bytes(fd: int) -> bytes:
-    (n,) = struct.unpack("!Q", _read_exact(fd, 8))
-    return _read_exact(fd, n)
+def receive_bytes(fd: int, deadline: float | None = None) -> bytes:
+    """One frame: an 8-byte length, then that many bytes (the judge reads with a deadline: a learner
+    process may write a header and stall)."""
+    (n,) = struct.unpack("!Q", _read_exact(fd, 8, deadline))
+    if n > MAX_FRAME:
+        raise pickle.UnpicklingError(f"a frame of {n} bytes")
+    return _read_exact(fd, n, deadline)
 
 
 # ------------------------------------------------------------------ watched libraries
