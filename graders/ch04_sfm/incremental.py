@@ -13,9 +13,9 @@ import numpy as np
 
 from ..compare import rotation_angle_deg
 from ..engine import Case, Exercise, Hint, register, shared_run
-from ..geometry import camera_centre, umeyama
+from ..geometry import camera_centre, project, umeyama
 from ..oracles.sfm_standin import cv_incremental_sfm
-from .photos import real_sfm_cases, REAL_SFM_HINTS
+from .photos import _focal_at_prior, real_sfm_cases, REAL_SFM_HINTS
 from .sfm_scenes import _convert_recon, _convert_recon_intrinsics, sfm_scene, uncalibrated_sfm_scene
 from .triangulation import gt_triangulation_angles
 
@@ -105,7 +105,7 @@ def cases_incremental_sfm(rng) -> Iterator[Case]:
              convert=_convert_recon, call=call, key="centres", tags=("drift",)),
         # points: median 0.2 % of the radius; points built from wrong matches or clutter count as 1.0
         Case("median 3D point error / scene radius", (), truth, judge("pts"), 0.002, "",
-             convert=_convert_recon, call=call, key="points"),
+             convert=_convert_recon, call=call, key="points", info={"problem": s["problem"]}),
         # 60 skyline points 600-1000 m away are seen under < 1° from every pair of cameras: their depth is
         # noise. At most 1 % of the returned points may come from rays less than 1° apart (COLMAP triangulates
         # from 1.5° only); without an angle test the skyline is in the model.
@@ -150,8 +150,30 @@ def uncalibrated_sfm_cases(rng) -> list[Case]:
     ]
 
 
+def _tracks_misaligned(c, out) -> bool:
+    """K known: the returned points do not reproject onto their own tracks' keypoints with the returned poses
+    (median over the observations > 20 px; a correct model is at ~0.5 px): points[j] is not tracks[j]'s point."""
+    prob = c.info.get("problem")
+    if prob is None or prob["K"] is None:
+        return False
+    errs = [np.linalg.norm(project(X[None], prob["K"][i], *out["cameras"][i])[0][0] - prob["keypoints"][i][kp])
+            for X, tr in zip(out["points"], out["tracks"]) for i, kp in tr.items() if i in out["cameras"]]
+    return bool(errs) and float(np.median(errs)) > 20
+
+
+def _focal_off(c, out) -> bool:
+    """K unknown: the median focal error is over the tolerance but the focal lengths are not the prior: they were
+    estimated once (self-calibration, PnP) and never refined with the structure."""
+    return c.key == "k-unknown-focal" and c.metric(out, c.expected) > c.tol and not _focal_at_prior(out, c.info["problem"])
+
+
 SFM_HINTS = [
     *REAL_SFM_HINTS,          # the Sacré-Cœur rows (defined with real_sfm_cases)
+    Hint("your points do not reproject onto their own tracks: points[j] must be the 3D point of tracks[j] — keep the "
+         "two lists in the same order.", _tracks_misaligned),
+    Hint("your focal lengths are off (median |f / f_true − 1| over 3 %) though no longer at the prior: a first "
+         "estimate (self-calibration from F, a focal search in PnP) is not enough — refine each camera's f (and k1) "
+         "with the poses and points in bundle adjustment.", _focal_off),
     Hint("far points made it into the model: triangulate a track only when two of its viewing rays are at least "
          "1.5° apart (measure the angle between the rays, not at a noisy triangulated point), and filter again "
          "after bundle adjustment.", lambda c, out: "far-points" in c.tags),
