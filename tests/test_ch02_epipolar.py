@@ -97,6 +97,17 @@ def kornia_weighted(x1, x2, w):
     return KE.find_fundamental(_t(x1), _t(x2), weights=_t(w), method="8POINT")[0].numpy()
 
 
+def kornia_unweighted_normalisation(x1, x2, w):
+    """The weighted 8-point as upstream kornia's `run_8point` builds it: Hartley's transform of all the
+    matches (kornia's `normalize_points` without weights), only Aᵀ diag(w) A weighted, then rank 2."""
+    (n1, T1), (n2, T2) = (tuple(a[0].numpy() for a in KE.normalize_points(_t(x))) for x in (x1, x2))
+    h1, h2 = np.c_[n1, np.ones(len(n1))], np.c_[n2, np.ones(len(n2))]
+    A = (h2[:, :, None] * h1[:, None, :]).reshape(-1, 9)
+    F = np.linalg.eigh(A.T @ (np.asarray(w, float)[:, None] * A))[1][:, 0].reshape(3, 3)
+    U, S, Vt = np.linalg.svd(F)
+    return T2.T @ (U @ np.diag([S[0], S[1], 0.0]) @ Vt) @ T1
+
+
 # exercise id -> [(name, function)]
 LIBRARY = {
     "2.5": [("kornia", kornia_skew)],
@@ -114,7 +125,7 @@ LIBRARY = {
     "2.18": [("OpenCV", ch2.cv_fix_planar_scene)],
     "2.19": [("OpenCV", ch2.cv_fix_matcher)],
     "2.20": [("OpenCV", ch2.cv_fix_cheirality)],
-    "2.25": [("kornia", kornia_weighted)],
+    "2.25": [("kornia", kornia_weighted), ("kornia-unweighted-normalisation", kornia_unweighted_normalisation)],
 }
 LIBRARY_CASES = [(i, name, fn) for i, impls in LIBRARY.items() for name, fn in impls]
 

@@ -466,6 +466,13 @@ def weighted_threshold_unnormalised(x1, x2, w):
     return _eight(x1[keep], x2[keep], normalise=False)
 
 
+def weighted_rows_by_w(x1, x2, w):
+    # Hartley's transform of all the matches (as upstream kornia does), then the rows of A scaled by w
+    # instead of √w: minimises Σ w² r², which suppresses the low-weight matches harder.
+    (n1, T1), (n2, T2) = _norm(x1), _norm(x2)
+    return T2.T @ _rank2(_null(_rows(n1, n2) * w[:, None])) @ T1
+
+
 def weighted_no_rank2(x1, x2, w):
     (n1, T1), (n2, T2) = _norm(x1), _norm(x2)
     return T2.T @ _null(_rows(n1, n2) * np.sqrt(w)[:, None]) @ T1
@@ -533,4 +540,5 @@ MUTANTS = [
     ("2.25", "coordinates scaled by w", weighted_points_scaled, "scaled the coordinates"),
     ("2.25", "threshold at 0.5, unnormalised", weighted_threshold_unnormalised, "without Hartley normalisation"),
     ("2.25", "no rank 2", weighted_no_rank2, "rank 2"),
+    ("2.25", "rows weighted by w, not √w", weighted_rows_by_w, "weighted by w"),
 ]
