@@ -11,7 +11,7 @@ from ..compare import sampson_rms_px
 from ..engine import Case, Exercise, Hint, OutputError, debug_cases, debug_practice, register
 from .eight_point import broken_eight_point, cv_eight_point
 from .pose import cheirality_hints, convert_pose_unit, cv_decompose_essential, cv_recover_pose, pose_error_deg, traps_sprung
-from .scenes import (convert_rank2, depths, design_matrix, matrix33, metric_held_out, ok_scale,
+from .scenes import (convert_rank2, depths, design_matrix, matrix33, metric_held_out, null_vector, ok_scale,
                      to_normalised, transfer_px, two_view, unit)
 
 
@@ -224,7 +224,7 @@ def _scaled_not_centred(c, out) -> bool:
     origin): with the matches in one corner the homogeneous 1 is still far from the centred data."""
     x1, x2, w = c.args[0]["x1"], c.args[0]["x2"], float(max(c.args[0]["image_size"]))
     T = np.diag([1 / w, 1 / w, 1.0])
-    Fn = np.linalg.svd(design_matrix(x1 / w, x2 / w))[2][-1].reshape(3, 3)
+    Fn = null_vector(design_matrix(x1 / w, x2 / w)).reshape(3, 3)
     U, S, Vt = np.linalg.svd(Fn)
     return ok_scale(out, T @ (U @ np.diag([S[0], S[1], 0.0]) @ Vt) @ T, 1e-3)
 

@@ -8,7 +8,7 @@ import numpy as np
 from ..compare import sampson_rms_px
 from ..engine import Case, Exercise, Hint, register
 from ..geometry import hartley
-from .scenes import convert_rank2, design_matrix, metric_held_out, ok_scale, two_view, unit
+from .scenes import convert_rank2, design_matrix, metric_held_out, null_vector, ok_scale, two_view, unit
 
 
 def cv_eight_point(x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
@@ -24,7 +24,7 @@ def cv_eight_point(x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
 def broken_eight_point(x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
     """The colleague's F estimator (2.17): the 8-point algorithm straight on pixel coordinates."""
     A = design_matrix(x1, x2)
-    F = np.linalg.svd(A)[2][-1].reshape(3, 3)
+    F = null_vector(A).reshape(3, 3)
     U, S, Vt = np.linalg.svd(F)
     return U @ np.diag([S[0], S[1], 0.0]) @ Vt
 

@@ -10,7 +10,7 @@ from ..compare import sampson_rms_px
 from ..engine import Case, Exercise, Hint, register
 from ..geometry import hartley, to_h
 from .eight_point import broken_eight_point, cv_eight_point
-from .scenes import convert_rank2, metric_held_out, ok_scale, two_view, unit
+from .scenes import convert_rank2, metric_held_out, null_vector, ok_scale, two_view, unit
 
 
 def _weighted_hartley(x: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -35,7 +35,7 @@ def gt_weighted_eight_point(x1: np.ndarray, x2: np.ndarray, w: np.ndarray, weigh
         T1, T2 = hartley(x1)[1], hartley(x2)[1]
     p1, p2 = to_h(x1) @ T1.T, to_h(x2) @ T2.T
     A = (p2[:, :, None] * p1[:, None, :]).reshape(-1, 9) * (w ** row_power)[:, None]
-    F = np.linalg.svd(A)[2][-1].reshape(3, 3)
+    F = null_vector(A).reshape(3, 3)
     U, S, Vt = np.linalg.svd(F)
     F = T2.T @ (U @ np.diag([S[0], S[1], 0.0]) @ Vt) @ T1
     return unit(F)

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..engine import Case, Exercise, Hint, register
 from ..geometry import hartley, to_h
-from .scenes import graf_grid, graf_matches, matrix33, rms_transfer, transfer_px, two_view
+from .scenes import graf_grid, graf_matches, matrix33, null_vector, rms_transfer, transfer_px, two_view
 
 
 def cv_homography(x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
@@ -23,7 +23,7 @@ def broken_dlt(x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
     p, z = to_h(x1), np.zeros((len(x1), 3))
     u, v = x2[:, :1], x2[:, 1:]
     A = np.r_[np.c_[z, -p, v * p], np.c_[p, z, -u * p]]
-    return np.linalg.svd(A)[2][-1].reshape(3, 3)
+    return null_vector(A).reshape(3, 3)
 
 
 def gt_homography_dlt(x1: np.ndarray, x2: np.ndarray, h33: bool = False) -> np.ndarray:
@@ -38,7 +38,7 @@ def gt_homography_dlt(x1: np.ndarray, x2: np.ndarray, h33: bool = False) -> np.n
     if h33:
         h = np.r_[np.linalg.lstsq(A[:, :8], -A[:, 8], rcond=None)[0], 1.0]
     else:
-        h = np.linalg.svd(A)[2][-1]
+        h = null_vector(A)
     H = np.linalg.solve(T2, h.reshape(3, 3) @ T1)
     return H / H[2, 2]
 

@@ -116,7 +116,7 @@ def line_problem(pts, threshold=2.0):
             return None
         p = pts[m]
         mu = p.mean(0)
-        normal = np.linalg.svd(p - mu)[2][-1]
+        normal = np.linalg.svd(p - mu, full_matrices=False)[2][-1]
         return np.r_[normal, -normal @ mu]
 
     return dict(n=len(pts), sample_size=2, solve=solve, residuals=lambda L: np.abs(np.asarray(L) @ ph.T),

@@ -26,6 +26,12 @@ def unit(M: np.ndarray) -> np.ndarray:
     return np.asarray(M, float) / np.linalg.norm(M)
 
 
+def null_vector(A: np.ndarray) -> np.ndarray:
+    """The unit v minimising |A v|: A's last right singular vector (the reduced SVD when A is tall:
+    the full one also builds an N x N U, 100x slower for a few hundred rows)."""
+    return np.linalg.svd(A, full_matrices=A.shape[0] < A.shape[1])[2][-1]
+
+
 def gt_essential(R: np.ndarray, t: np.ndarray) -> np.ndarray:
     """E = [t]x R for X_2 = R X_1 + t."""
     return skew(np.asarray(t, float).reshape(3)) @ np.asarray(R, float)
