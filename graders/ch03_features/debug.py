@@ -108,9 +108,18 @@ def _correct(res, H, t=3.0):
 
 
 def debug_too_few(rng):
-    """3.13 — too few matches: a large scale change, few keypoints and a strict ratio."""
-    tex = str(rng.choice(["astronaut", "chelsea", "coffee"]))
-    img1, img2, H = homography_pair_from(rng, scene.texture(tex), scale_range=(1.8, 2.2), max_angle_deg=30)
+    """3.13 — too few matches: a large scale change, few keypoints and a strict ratio.
+
+    A pair on which the model fix (2,000 keypoints, ratio 0.8) itself falls short of the requirement with a
+    margin — under 70 correct matches or under 65 % correct — is redrawn: such a pair tests the texture, not
+    the diagnosis (seed 3269595212: a coffee crop where the model fix got 97 correct of 166, 58 %; over 30
+    fresh draws the model fix got 94-320 correct at 75-99 %)."""
+    for _ in range(20):
+        tex = str(rng.choice(["astronaut", "chelsea", "coffee"]))
+        img1, img2, H = homography_pair_from(rng, scene.texture(tex), scale_range=(1.8, 2.2), max_angle_deg=30)
+        ok = _correct(pipeline(img1, img2, **(DEFAULT_SETTINGS | {"n_features": 2000, "ratio": 0.8})), H)
+        if ok.sum() >= 70 and ok.mean() >= 0.65:
+            break
     case = {"img1": img1, "img2": img2, "settings": DEFAULT_SETTINGS | {"n_features": 150, "ratio": 0.5}}
     return case, {"img1": img1, "img2": img2, "H": H, "need": 60, "precision": 0.6}
 
