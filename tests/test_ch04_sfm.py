@@ -89,15 +89,18 @@ def rotation_averaging_lie(R_rel, n):
         Rs[k] = R_rel[(k - 1, k)] @ Rs[k - 1]
     Rs = np.stack(Rs)
     edges = list(R_rel)
+    A = np.zeros((3 * len(edges), 3 * n))                  # the linearised system does not change: factor it once
+    for e, (i, j) in enumerate(edges):
+        A[3 * e:3 * e + 3, 3 * j:3 * j + 3] = np.eye(3)      # left increments: R ← exp(w) R
+        A[3 * e:3 * e + 3, 3 * i:3 * i + 3] = -R_rel[(i, j)]
+    A_pinv = np.linalg.pinv(A[:, 3:])
+    Rij = np.stack([R_rel[e] for e in edges])
+    I, J = np.array([e[0] for e in edges]), np.array([e[1] for e in edges])
     for _ in range(20):
-        A, b = np.zeros((3 * len(edges), 3 * n)), np.zeros(3 * len(edges))
-        for e, (i, j) in enumerate(edges):
-            b[3 * e:3 * e + 3] = Rotation.from_matrix(R_rel[(i, j)] @ Rs[i] @ Rs[j].T).as_rotvec()
-            A[3 * e:3 * e + 3, 3 * j:3 * j + 3] = np.eye(3)                # left increments: R ← exp(w) R
-            A[3 * e:3 * e + 3, 3 * i:3 * i + 3] = -R_rel[(i, j)]
-        w = np.r_[np.zeros(3), np.linalg.lstsq(A[:, 3:], b, rcond=None)[0]]
-        Rs = np.stack([Rotation.from_rotvec(w[3 * k:3 * k + 3]).as_matrix() @ Rs[k] for k in range(n)])
-        if np.abs(w).max() < 1e-10:
+        b = Rotation.from_matrix(Rij @ Rs[I] @ np.swapaxes(Rs[J], 1, 2)).as_rotvec().ravel()
+        w = np.r_[np.zeros(3), A_pinv @ b].reshape(n, 3)
+        Rs = Rotation.from_rotvec(w).as_matrix() @ Rs
+        if np.abs(w).max() < 1e-12:
             break
     return Rs
 
