@@ -384,7 +384,12 @@ def _judge_case(ex: Exercise, fn: Callable, case: Case) -> tuple[CaseResult, str
     if remote:
         stdout, mutated, used = fn.drain()
         outcome.stdout, outcome.mutated = outcome.stdout + stdout, outcome.mutated + mutated
-        banned = [u for u in used if u.split(".")[0] not in ex.libraries]
+        course = [u for u in used if u.startswith("graders")]
+        banned = [u for u in used if not u.startswith("graders") and u.split(".")[0] not in ex.libraries]
+        if course and outcome.kind in ("ok", "exception"):
+            row.message = (f"calls {', '.join(course[:3])}: the course's own stand-ins and oracles are not an "
+                           "answer in graded work (self-study checks allow them)")
+            return row, outcome.kind
         if banned and outcome.kind in ("ok", "exception"):
             row.message = (f"calls {', '.join(banned[:3])}: exercise {ex.id} is from scratch, so graded work "
                            f"may not use {', '.join(sorted({b.split('.')[0] for b in banned}))} "

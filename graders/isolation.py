@@ -59,12 +59,10 @@ _ALLOWED = {
     ("numpy._core.multiarray", "scalar"), ("numpy._core.numeric", "_frombuffer"),
     ("numpy.core.numeric", "_frombuffer"),
 }
-_ALLOWED_PREFIXES = ("numpy.dtypes", "scipy.sparse._")   # dtype classes; csr/csc/coo matrix classes
-
-
 class _Unpickler(pickle.Unpickler):
     def find_class(self, module: str, name: str):
-        if (module, name) in _ALLOWED or module.startswith(_ALLOWED_PREFIXES) and name[:1].isupper():
+        if ((module, name) in _ALLOWED or module.startswith("numpy.dtypes") and name[:1].isupper()
+                or module.startswith("scipy.sparse._") and name.endswith(("_matrix", "_array"))):
             return super().find_class(module, name)
         raise pickle.UnpicklingError(f"{module}.{name}")
 
@@ -73,15 +71,18 @@ def _loads(data: bytes) -> Any:
     return _Unpickler(io.BytesIO(data)).load()
 
 
-def _tensors_back(value: Any) -> Any:
-    """Arrays the learner process sent for torch tensors become tensors again."""
+def _tensors_back(value: Any, parent: "RemoteFunction | None" = None) -> Any:
+    """Arrays the learner process sent for torch tensors become tensors again; a function it returned
+    becomes a handle that calls it there."""
+    if isinstance(value, dict) and set(value) == {"__handle__"} and parent is not None:
+        return parent.returned(value["__handle__"])
     if isinstance(value, dict) and "__tensor__" in value:
         import torch
         return torch.from_numpy(value["__tensor__"].copy())
     if isinstance(value, (list, tuple)):
-        return type(value)(_tensors_back(v) for v in value)
+        return type(value)(_tensors_back(v, parent) for v in value)
     if isinstance(value, dict):
-        return {k: _tensors_back(v) for k, v in value.items()}
+        return {k: _tensors_back(v, parent) for k, v in value.items()}
     return value
 
 
@@ -358,17 +359,27 @@ class RemoteFunction:
     """The learner's function as the judge sees it. After each call, `drain()` hands the engine what the
     learner printed, which inputs it changed and which library functions it called."""
 
-    def __init__(self, learner: LearnerProcess, name: str, exercise: Any):
+    def __init__(self, learner: LearnerProcess, name: str, exercise: Any, handle: int | None = None,
+                 parent: "RemoteFunction | None" = None):
         self.learner, self.__name__, self.exercise = learner, name, exercise
+        self.handle, self.parent = handle, parent
         self.deadline: float | None = None
         self._stdout, self._mutated, self._used = [], [], set()
+
+    def returned(self, handle: int) -> "RemoteFunction":
+        """A function the learner's code returned: calling it runs it in the learner process; what it
+        prints and calls is reported with the function that returned it."""
+        return RemoteFunction(self.learner, f"{self.__name__}'s returned function", self.exercise, handle, self)
 
     def __call__(self, *args, **kwargs):
         timeout = self.exercise.timeout
         if self.deadline is not None:
             timeout = max(self.deadline - time.monotonic(), 0.05)
         table: list[Callable] = []
-        request = {"op": "call", "name": self.__name__, "args": _swap_callables(args, table),
+        owner = self.parent or self
+        if self.parent is not None:
+            self.deadline = self.parent.deadline
+        request = {"op": "call", "name": self.__name__, "handle": self.handle, "args": _swap_callables(args, table),
                    "kwargs": _swap_callables(kwargs, table), "timeout": timeout, "names": self.exercise.arg_names}
         try:
             reply = self.learner._exchange(request, timeout + MARGIN_S, table)
@@ -382,12 +393,12 @@ class RemoteFunction:
         if self.learner.pids.kill_all_but(self.learner.residents):   # processes it started and left running
             reply.setdefault("stdout", "")
             reply["stdout"] += "\n[the grader stopped processes your code started and left running]"
-        self._stdout.append(reply.get("stdout", ""))
-        self._mutated += reply.get("mutated", [])
-        self._used |= set(reply.get("used", []))
+        owner._stdout.append(reply.get("stdout", ""))
+        owner._mutated += reply.get("mutated", [])
+        owner._used |= set(reply.get("used", []))
         kind = reply.get("kind")
         if kind == "ok":
-            value = _tensors_back(reply["value"])
+            value = _tensors_back(reply["value"], owner)
             if reply.get("grads") is not None:
                 value = _with_gradients(reply["value"]["__tensor__"], reply["grads"], args)
             return value

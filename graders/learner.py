@@ -78,6 +78,7 @@ def _record(name: str, fn: Callable) -> Callable:
         return fn(*args, **kwargs)
     watched.__name__ = getattr(fn, "__name__", name)
     watched.__doc__ = getattr(fn, "__doc__", None)
+    watched.__wrapped_real__ = fn
     return watched
 
 
@@ -95,7 +96,7 @@ class _WatchedModule(types.ModuleType):
         full = f"{self.__name__}.{attr}"
         if isinstance(value, types.ModuleType):
             return _WatchedModule(value, full)
-        if callable(value):
+        if callable(value) and not isinstance(value, type):   # classes pass (isinstance, subclassing)
             return _record(full, value)
         return value
 
@@ -103,49 +104,61 @@ class _WatchedModule(types.ModuleType):
         return dir(self.__dict__["_real"])
 
 
+WATCHED_GRADERS = ("graders.ch", "graders.oracles", "graders.geometry", "graders.compare")
+
+
+def _watched_name(fullname: str) -> bool:
+    return ("." not in fullname and fullname in WATCHED) or fullname.startswith(WATCHED_GRADERS)
+
+
 class _Finder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
-    """Serves watched wrappers for cv2/pycolmap/kornia and the graded-mode `graders` stand-in."""
+    """Serves watched wrappers for cv2/pycolmap/kornia and for the graders' chapter packages, oracles
+    and primitives (the course's own answers); data loaders and scene generators load as they are."""
 
     def find_spec(self, fullname, path, target=None):
-        top = fullname.split(".")[0]
-        if top in WATCHED and "." not in fullname or top == "graders":
-            return importlib.util.spec_from_loader(fullname, self)
+        if _watched_name(fullname):
+            return importlib.util.spec_from_loader(fullname, self, is_package=fullname.startswith("graders."))
         return None
 
     def create_module(self, spec):
-        if spec.name.split(".")[0] == "graders":
-            return _graders_stand_in(spec.name)
         sys.meta_path.remove(self)
         try:
             real = importlib.import_module(spec.name)
         finally:
             sys.meta_path.insert(0, self)
-        return _WatchedModule(real, spec.name)
+        if spec.name.startswith("graders.ch"):
+            _watch_fallbacks()
+        for name in [m for m in sys.modules if m.startswith(spec.name + ".")]:   # its submodules, watched too
+            if not isinstance(sys.modules[name], _WatchedModule):
+                sys.modules[name] = _package_like(_WatchedModule(sys.modules[name], name), sys.modules[name])
+        return _package_like(_WatchedModule(real, spec.name), real)
 
     def exec_module(self, module):
         pass
 
 
-def _refuse(name: str) -> Callable:
-    def refused(*args, **kwargs):
-        raise RuntimeError(f"{name} is one of the course's stand-ins: in graded mode your answer must be "
-                           "your own code, not a call to the graders")
-    return refused
+def _package_like(watched: "_WatchedModule", real: types.ModuleType) -> "_WatchedModule":
+    if hasattr(real, "__path__"):
+        watched.__dict__["__path__"] = real.__path__
+    return watched
 
 
-def _graders_stand_in(name: str) -> types.ModuleType:
-    module = types.ModuleType(name)
-    module.__path__ = []                          # a package: `from graders.chNN import x` resolves
-    if name == "graders":
-        module.check = lambda *a, **k: None
-        module.use = lambda exercise_id, attempt: attempt
-        module.answer_key = lambda *a, **k: ""
-    def refuse_attribute(attr: str):
-        if attr.startswith("__"):          # __file__, __spec__, ...: tools like inspect probe every module
-            raise AttributeError(attr)
-        return _refuse(f"{name}.{attr}")
-    module.__getattr__ = refuse_attribute
-    return module
+def _watch_fallbacks() -> None:
+    """Every registered exercise's stand-in records its use, however the learner's code reaches it."""
+    engine = sys.modules.get("graders.engine")
+    for ex in getattr(engine, "_REGISTRY", {}).values():
+        if ex.fallback is not None and not getattr(ex.fallback, "_cv3d_watched", False):
+            ex.fallback = _record(f"graders stand-in of {ex.id}", ex.fallback)
+            ex.fallback._cv3d_watched = True
+
+
+def _graded_mode_graders() -> None:
+    """In the learner's process `check` does nothing and `use` returns the learner's own function:
+    demo helpers still load, but no course stand-in answers for the learner."""
+    import graders
+    graders.check = lambda *a, **k: None
+    graders.use = lambda exercise_id, attempt: attempt
+    graders.answer_key = lambda *a, **k: ""
 
 
 # ------------------------------------------------------------------ requests and callbacks
@@ -158,9 +171,8 @@ class _RequestUnpickler(pickle.Unpickler):
     modules were moved to when `graders` was replaced by its stand-in."""
 
     def find_class(self, module: str, name: str):
-        if module == "graders" or module.startswith("graders."):
-            module = "_cv3d_" + module
-        return super().find_class(module, name)
+        value = super().find_class(module, name)
+        return getattr(value, "__wrapped_real__", value)
 
 
 def _receive() -> Any:
@@ -201,7 +213,8 @@ def _load(source: str, namespace: dict) -> dict:
 
 
 def _call(namespace: dict, request: dict) -> dict:
-    fn = namespace.get(request["name"])
+    handle = request.get("handle")
+    fn = namespace.get(request["name"]) if handle is None else _handles[handle]
     if not callable(fn):
         return {"kind": "exception", "error": f"`{request['name']}` is not a function", "traceback": ""}
     del _used[:]
@@ -248,9 +261,15 @@ def _input_gradients(value: Any, args: tuple) -> list | None:
     return [None if g is None else g.detach().cpu().numpy() for g in grads]
 
 
+_handles: list[Callable] = []     # functions the learner's code returned (a trained descriptor, ...)
+
+
 def _plain(value: Any) -> Any:
     """What crosses to the judge: torch tensors are sent as numpy arrays unless they carry a graph, in
     which case the gradient of a scalar with respect to the tensor inputs travels with its value."""
+    if callable(value) and not isinstance(value, type) and not hasattr(value, "__array__"):
+        _handles.append(value)                  # the judge calls it back through the channel
+        return {"__handle__": len(_handles) - 1}
     torch = sys.modules.get("torch")   # a tensor exists only if the learner's code imported torch
     if torch is not None and isinstance(value, torch.Tensor):
         return {"__tensor__": value.detach().cpu().numpy(), "dtype": str(value.dtype).split(".")[-1],
@@ -350,10 +369,11 @@ def main() -> None:
         os.dup2(devnull, 2)
     os.environ["MPLBACKEND"] = "Agg"
     global _safe_call
-    from graders.sandbox import safe_call   # loaded before the stand-in replaces the package name
+    from graders.sandbox import safe_call
     _safe_call = safe_call
-    for name in [m for m in sys.modules if m == "graders" or m.startswith("graders.")]:
-        sys.modules[f"_cv3d_{name}"] = sys.modules.pop(name)
+    _graded_mode_graders()
+    for name in [m for m in sys.modules if _watched_name(m)]:   # none yet; a fresh import goes through the finder
+        del sys.modules[name]
     sys.meta_path.insert(0, _Finder())
     serve(request_fd, response_fd)
 

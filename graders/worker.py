@@ -63,8 +63,14 @@ class _SelfStudy:
 
 class _Graded:
     def __init__(self, source: str, exercises: list):
+        import tempfile
         from .isolation import LearnerProcess
         self.learner = LearnerProcess(source)
+        # Folders the cases hand to the learner (a COLMAP model to read, a folder to write into) must be
+        # writable there: the judge makes its temporary folders inside the learner's private folder.
+        shared = os.path.join(self.learner.private, "from-the-grader")
+        os.makedirs(shared)
+        tempfile.tempdir = shared
         self.learner.start()
         self.problem = self.learner.problem
         self.present = set(self.learner.names([ex.name for ex in exercises])) if not self.problem else set()
