@@ -102,7 +102,8 @@ def sweep(exercise_ids: list[str], module_of: dict[str, str], seconds: float, ma
     """Tally every exercise: `jobs` processes share each exercise's seed budget."""
     tallies = []
     ctx = mp.get_context("fork")
-    with ctx.Pool(jobs) as pool:
+    pool = ctx.Pool(jobs)
+    try:
         for exercise_id in exercise_ids:
             ex = get(exercise_id)
             n = 1 if ex.value else jobs
@@ -110,6 +111,9 @@ def sweep(exercise_ids: list[str], module_of: dict[str, str], seconds: float, ma
             tally = _merge(parts)
             tallies.append(tally)
             report(_row(tally))
+    finally:   # close + join, not terminate: a SIGTERM sets off pycolmap's glog handler in the workers
+        pool.close()
+        pool.join()
     return tallies
 
 

@@ -12,6 +12,7 @@ from pathlib import Path
 import nbformat
 import pytest
 
+from graders.chapters import READY
 from graders.isolation import sandbox_level
 from test_notebooks import OPENCV_STUBS_CH01, ROOT, _replace_stubs, _solved
 
@@ -25,9 +26,11 @@ def _grade(file: Path, out: Path, *extra: str) -> dict:
     return {t["name"].split()[0]: t for t in json.loads(out.read_text())["tests"]}
 
 
-def test_solved_chapter_gets_full_marks_in_graded_mode(tmp_path):
-    nbformat.write(_solved(CH01), tmp_path / CH01.name)
-    tests = _grade(tmp_path / CH01.name, tmp_path / "r.json")
+@pytest.mark.parametrize("ch", READY, ids=lambda c: c.prefix)
+def test_solved_chapter_gets_full_marks_in_graded_mode(ch, tmp_path):
+    path = ROOT / ch.notebook
+    nbformat.write(_solved(path), tmp_path / path.name)
+    tests = _grade(tmp_path / path.name, tmp_path / "r.json")
     lost = {k: t["output"][:300] for k, t in tests.items() if t["score"] < t["max_score"]}
     assert not lost, lost
 
