@@ -111,7 +111,7 @@ def raised(pattern: str, text: str) -> Hint:
     return Hint(text, raised=pattern)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Exercise:
     """A graded exercise.
 

@@ -265,7 +265,7 @@ def test_sampson_rms_is_scale_and_sign_free():
 
 def test_case_call_runs_inside_the_sandbox():
     calls = []
-    ex = Exercise("0.1", "call hook", "f", "code", 1, cases=lambda rng: [
+    ex = Exercise(id="0.1", title="call hook", name="f", kind="code", points=1, cases=lambda rng: [
         Case("double inside the grader", (), 6.0, lambda a, b: abs(a - b), 1e-9, call=lambda fn: 2 * fn(3.0)),
         Case("plain", (2.0,), 2.0, lambda a, b: abs(a - b), 1e-9)])
     result = grade(ex, lambda x: calls.append(x) or x, seed=0)
