@@ -147,12 +147,19 @@ def debug_clustered(rng):
     Drawn freely, the strongest 200 keypoints of view 1 sometimes reach 60 % of its 4 x 4 cells (the
     poster fills much of the view, or a smooth poster lets the wall in): unchanged settings passed 1
     draw in 12. Draws whose strongest 200 occupy more than 8 of the 16 cells are redrawn, so the
-    correct matches of the unchanged settings (a subset of them) cover at most 50 % < 60 %."""
+    correct matches of the unchanged settings (a subset of them) cover at most 50 % < 60 %. A draw on
+    which the model fix (an 8 x 8 grid) itself falls short with a margin (under 70 % of the cells, 40
+    correct matches or 65 % correct) is redrawn too: it tests the texture, not the diagnosis (seeds
+    3085079908, 3854146572: the model fix covered 56 % of the cells; 2 draws in 200)."""
     for _ in range(100):
         img1, img2, H = homography_pair_from(rng, _poster_scene(rng), max_angle_deg=25)
         kps = cv2.SIFT_create(nfeatures=200).detect(img1, None)
         pts = np.array([k.pt for k in sorted(kps, key=lambda k: -k.response)[:200]]).reshape(-1, 2)
-        if len(np.unique(cell_of(pts, img1.shape[::-1], (4, 4)))) <= 8:
+        if len(np.unique(cell_of(pts, img1.shape[::-1], (4, 4)))) > 8:
+            continue
+        margin = {"img1": img1, "img2": img2, "H": H, "need": 40, "precision": 0.65, "max_features": 200,
+                  "coverage": 0.7}
+        if _debug_metric(DEFAULT_SETTINGS | {"n_features": 200, "ratio": 0.8, "grid": (8, 8)}, margin) == 0:
             break
     case = {"img1": img1, "img2": img2, "settings": DEFAULT_SETTINGS | {"n_features": 200, "ratio": 0.8},
             "max_features": 200}
