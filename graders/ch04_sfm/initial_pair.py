@@ -11,7 +11,8 @@ import numpy as np
 from .. import scene
 from ..compare import rotation_angle_deg
 from ..engine import as_points, as_pose, Case, Exercise, Hint, OutputError, register
-from ..geometry import camera_centre, pixels_to_normalised, project, project_P, skew, so3_exp, to_h
+from ..geometry import camera_centre, pixels_to_normalised, project, project_P
+from ..oracles.two_view import refine_essential
 from ..scene import two_view
 from ..oracles.sfm_standin import triangulate_normalised
 from .triangulation import cv_triangulate, gt_triangulation_angles
@@ -74,35 +75,6 @@ def colmap_two_view(s) -> tuple[np.ndarray, np.ndarray]:
     pose = res["cam2_from_cam1"]
     t = np.asarray(pose.translation)
     return np.asarray(pose.rotation.matrix()), t / np.linalg.norm(t)
-
-
-_W_ESS = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
-
-
-def refine_essential(E0: np.ndarray, x1: np.ndarray, x2: np.ndarray, K1: np.ndarray, K2: np.ndarray) -> np.ndarray:
-    """Minimise the Sampson distance (px) of the matches x1 <-> x2 (pixels) over essential matrices near E0,
-    with scipy's Levenberg-Marquardt on (rotation increment, translation direction): the non-linear refit of
-    E in `cv_two_view_init` (an 8-point/5-point E alone is 2-5x less accurate in rotation)."""
-    from scipy.optimize import least_squares
-    U, _, Vt = np.linalg.svd(E0)
-    U = -U if np.linalg.det(U) < 0 else U
-    Vt = -Vt if np.linalg.det(Vt) < 0 else Vt
-    R0, t0 = U @ _W_ESS @ Vt, U[:, 2]           # one of the decompositions: any gives the same E
-    b1, b2 = np.linalg.svd(t0[None])[2][1:]     # tangent basis of the sphere at t0
-    K1i, K2it = np.linalg.inv(K1), np.linalg.inv(K2).T
-    x1h, x2h = to_h(x1), to_h(x2)
-
-    def E_of(p):
-        t = t0 + p[3] * b1 + p[4] * b2
-        return skew(t / np.linalg.norm(t)) @ so3_exp(p[:3]) @ R0
-
-    def residual(p):
-        F = K2it @ E_of(p) @ K1i
-        Fx1, Ftx2 = x1h @ F.T, x2h @ F
-        return np.sum(x2h * Fx1, 1) / np.sqrt(Fx1[:, 0] ** 2 + Fx1[:, 1] ** 2 + Ftx2[:, 0] ** 2 + Ftx2[:, 1] ** 2)
-
-    E = E_of(least_squares(residual, np.zeros(5), method="lm", max_nfev=50).x)
-    return E / np.linalg.norm(E)
 
 
 def cv_two_view_init(x1, x2, K1, K2, thresh_px: float = 2.0):
