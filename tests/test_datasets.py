@@ -41,7 +41,7 @@ def empty_env(tmp_path, monkeypatch) -> Path:
 def test_manifest_is_complete_and_well_formed():
     m = datasets.load_manifest()
     assert list(m["datasets"]) == ["chessboard", "homography", "bal", "posegraph", "trajectories", "flow",
-                                   "sacre_coeur"]
+                                   "sacre_coeur", "sceaux_castle"]
     for name, e in m["datasets"].items():
         for key in ("folder", "description", "origin", "terms", "reference"):
             assert e[key], (name, key)
