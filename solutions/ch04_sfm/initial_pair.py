@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..ch02_epipolar import ransac_essential, ransac_homography
+from ..ch02_epipolar import ransac_essential, ransac_fundamental, ransac_homography
 from ..geometry import camera_centre, project_to_so3, to_h
 from .triangulation import triangulate_dlt, triangulation_angles
 
@@ -142,3 +142,55 @@ def focal_from_fundamental(F: np.ndarray, K1: np.ndarray, K2: np.ndarray,
     cost = (S[..., 0] - S[..., 1]) / (S[..., 0] + S[..., 1])
     a, b = np.unravel_index(np.argmin(cost), cost.shape)
     return float(f1[a]), float(f2[b]), float(cost[a, b])
+
+
+def _essential_cost(F: np.ndarray, Ka: np.ndarray, Kb: np.ndarray) -> np.ndarray:
+    """Mendonça–Cipolla cost (s1 − s2) / (s1 + s2) of E = Kbᵀ F Ka for stacks Ka, Kb: (n, 3, 3) -> (n,)."""
+    S = np.linalg.svd(np.swapaxes(Kb, 1, 2) @ F @ Ka, compute_uv=False)
+    return (S[:, 0] - S[:, 1]) / (S[:, 0] + S[:, 1])
+
+
+def self_calibrate(K: np.ndarray, keypoints: list, matches: dict, min_matches: int = 30, rounds: int = 4) -> None:
+    """Replace, in K: (n, 3, 3), the prior f = 1.2 max(w, h) of every camera by self-calibrated focal lengths.
+
+    Per pair, F from the matches within 1 px (a 4 px verification lets an 8-point fit drift far enough
+    to move the focal minimum 2-3x on weak pairs) and its Mendonça–Cipolla focal pair; each image starts
+    at the inlier-weighted median (in log f) of its pairs' estimates. One pair alone pins (f1, f2) only
+    along a curve, so the estimates are then refined jointly: each image in turn takes the f on a grid
+    that minimises the inlier-weighted cost over all its pairs with the others held (coordinate
+    descent, `rounds` sweeps). The photos of a landmark come from phones and telephoto lenses alike
+    (true f from 0.6x to 2.5x the prior): an initial pair with a focal length that far off
+    triangulates few points in front of both cameras, and BA cannot repair a reconstruction that
+    never started. Images without an estimate keep the prior. Pairs with < min_matches are skipped."""
+    pairs = []                                           # (i, j, F, weight)
+    logs: dict[int, list[tuple[float, float]]] = {i: [] for i in range(len(K))}
+    for (i, j), mt in matches.items():
+        if len(mt) < min_matches:
+            continue
+        x1, x2 = keypoints[i][mt[:, 0], :2], keypoints[j][mt[:, 1], :2]
+        F, inl = ransac_fundamental(x1, x2, threshold=1.0, rng=0, max_iters=500)
+        if F is None or inl.sum() < min_matches:
+            continue
+        f1, f2, _ = focal_from_fundamental(F, K[i], K[j])
+        pairs.append((i, j, F, float(inl.sum())))
+        logs[i].append((np.log(f1), float(inl.sum())))
+        logs[j].append((np.log(f2), float(inl.sum())))
+    prior = K[:, 0, 0].copy()
+    for i, est in logs.items():
+        if est:
+            v, w = np.array(est).T
+            order = np.argsort(v)
+            cum = np.cumsum(w[order])
+            K[i, 0, 0] = K[i, 1, 1] = np.exp(v[order][np.searchsorted(cum, 0.5 * cum[-1])])
+    grid = np.geomspace(0.33, 3.0, 61)
+    for _ in range(rounds):
+        for i in (i for i in range(len(K)) if logs[i]):
+            cand = np.tile(K[i], (len(grid), 1, 1))
+            cand[:, 0, 0] = cand[:, 1, 1] = prior[i] * grid
+            cost = np.zeros(len(grid))
+            for a, b, F, w in pairs:
+                if i == a:
+                    cost += w * _essential_cost(F, cand, np.tile(K[b], (len(grid), 1, 1)))
+                elif i == b:
+                    cost += w * _essential_cost(F, np.tile(K[a], (len(grid), 1, 1)), cand)
+            K[i, 0, 0] = K[i, 1, 1] = prior[i] * grid[np.argmin(cost)]

@@ -35,10 +35,10 @@ import time
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..ch02_epipolar import eight_point, ransac_essential, ransac_fundamental
+from ..ch02_epipolar import ransac_essential, ransac_fundamental
 from ..ch05_bundle_adjustment import bundle_adjust
 from ..geometry import camera_centre
-from .initial_pair import focal_from_fundamental, rank_initial_pairs, two_view_init
+from .initial_pair import rank_initial_pairs, self_calibrate, two_view_init
 from .pnp import pnp_ransac, refine_pose
 from .tracks import build_tracks
 from .triangulation import triangulate_multiview
@@ -349,58 +349,6 @@ def _verify(keypoints, matches: dict, K_list, seed: int = 0) -> dict:
     return out
 
 
-def _essential_cost(F: np.ndarray, Ka: np.ndarray, Kb: np.ndarray) -> np.ndarray:
-    """Mendonça–Cipolla cost (s1 − s2) / (s1 + s2) of E = Kbᵀ F Ka for stacks Ka, Kb: (n, 3, 3) -> (n,)."""
-    S = np.linalg.svd(np.swapaxes(Kb, 1, 2) @ F @ Ka, compute_uv=False)
-    return (S[:, 0] - S[:, 1]) / (S[:, 0] + S[:, 1])
-
-
-def _self_calibrate(m: _Model, keypoints, matches: dict, rounds: int = 4) -> None:
-    """Replace the prior f = 1.2 max(w, h) of every unknown camera by self-calibrated focal lengths.
-
-    Per pair, F from the matches within 1 px (a 4 px verification lets an 8-point fit drift far enough
-    to move the focal minimum 2-3x on weak pairs) and its Mendonça–Cipolla focal pair; each image starts
-    at the inlier-weighted median (in log f) of its pairs' estimates. One pair alone pins (f1, f2) only
-    along a curve, so the estimates are then refined jointly: each image in turn takes the f on a grid
-    that minimises the inlier-weighted cost over all its pairs with the others held (coordinate
-    descent, `rounds` sweeps). The photos of a landmark come from phones and telephoto lenses alike
-    (true f from 0.6x to 2.5x the prior): an initial pair with a focal length that far off
-    triangulates few points in front of both cameras, and BA cannot repair a reconstruction that
-    never started. Images without an estimate keep the prior."""
-    pairs = []                                           # (i, j, F, weight)
-    logs: dict[int, list[tuple[float, float]]] = {i: [] for i in range(m.n)}
-    for (i, j), mt in matches.items():
-        if len(mt) < 2 * MIN_PAIR_MATCHES:
-            continue
-        x1, x2 = keypoints[i][mt[:, 0], :2], keypoints[j][mt[:, 1], :2]
-        F, inl = ransac_fundamental(x1, x2, threshold=1.0, rng=0, max_iters=500)
-        if F is None or inl.sum() < 2 * MIN_PAIR_MATCHES:
-            continue
-        f1, f2, _ = focal_from_fundamental(F, m.K[i], m.K[j])
-        pairs.append((i, j, F, float(inl.sum())))
-        logs[i].append((np.log(f1), float(inl.sum())))
-        logs[j].append((np.log(f2), float(inl.sum())))
-    prior = m.K[:, 0, 0].copy()
-    for i, est in logs.items():
-        if est:
-            v, w = np.array(est).T
-            order = np.argsort(v)
-            cum = np.cumsum(w[order])
-            m.K[i, 0, 0] = m.K[i, 1, 1] = np.exp(v[order][np.searchsorted(cum, 0.5 * cum[-1])])
-    grid = np.geomspace(0.33, 3.0, 61)
-    for _ in range(rounds):
-        for i in (i for i in range(m.n) if logs[i]):
-            cand = np.tile(m.K[i], (len(grid), 1, 1))
-            cand[:, 0, 0] = cand[:, 1, 1] = prior[i] * grid
-            cost = np.zeros(len(grid))
-            for a, b, F, w in pairs:
-                if i == a:
-                    cost += w * _essential_cost(F, cand, np.tile(m.K[b], (len(grid), 1, 1)))
-                elif i == b:
-                    cost += w * _essential_cost(F, np.tile(m.K[a], (len(grid), 1, 1)), cand)
-            m.K[i, 0, 0] = m.K[i, 1, 1] = prior[i] * grid[np.argmin(cost)]
-
-
 def _try_pair(m: _Model, matches: dict, pair: tuple[int, int], result) -> bool:
     """Set up the model from one two-view result; True if it gave >= 30 good points."""
     (i, j), (R, t, _, inl) = pair, result
@@ -544,7 +492,7 @@ def incremental_sfm(problem: dict, seed: int = 0, local_window: int = 6, global_
         matches = _verify(keypoints, matches, K_list, seed)
     m = _Model(keypoints, build_tracks(matches), K_list, sizes)
     if K_list is None and problem.get("self_calibrate", True):
-        _self_calibrate(m, keypoints, matches)
+        self_calibrate(m.K, keypoints, matches, min_matches=2 * MIN_PAIR_MATCHES)
     log = (lambda *a: print(f"[{time.perf_counter() - start:6.2f} s]", *a)) if verbose else (lambda *a: None)
     if not _initialise(m, keypoints, matches, seed=seed, verbose=verbose):
         log("no initial pair")
