@@ -35,6 +35,7 @@ from .learner import receive_bytes, send
 from .sandbox import TimeLimitExceeded
 
 MARGIN_S = 5.0          # the judge waits this much longer than the learner's own time limit
+CPU_SECONDS = 1800      # CPU time of one learner process (it is restarted after every time-out)
 
 
 class RemoteError(Exception):
@@ -221,6 +222,7 @@ def _limits(memory_gb: float, pids: _PidsLimit, max_file_gb: float) -> Callable[
     def apply() -> None:   # in the child, between fork and exec
         resource.setrlimit(resource.RLIMIT_AS, (int(memory_gb * 2**30),) * 2)
         resource.setrlimit(resource.RLIMIT_FSIZE, (int(max_file_gb * 2**30),) * 2)
+        resource.setrlimit(resource.RLIMIT_CPU, (CPU_SECONDS, CPU_SECONDS))   # a backstop behind the time limits
         pids.enter()
     return apply
 
