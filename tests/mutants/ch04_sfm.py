@@ -503,7 +503,7 @@ def sfm_focal_never_refined(problem):
     def refine_pose(X, x, K, R, t, iters=10, refine_focal=False):
         R, t = ref.refine_pose(X, x, K, R, t, iters=iters)
         return (R, t, K) if refine_focal else (R, t)
-    with _patched(_self_calibrate=lambda *a, **kw: None, FOCAL_FACTORS=np.array([1.0]), refine_pose=refine_pose,
+    with _patched(self_calibrate=lambda *a, **kw: None, FOCAL_FACTORS=np.array([1.0]), refine_pose=refine_pose,
                   _bundle_adjust=lambda m, *a, **kw: ba(m, *a, **dict(kw, refine="none"))):
         return ref.incremental_sfm(problem)
 
