@@ -75,9 +75,10 @@ def _with_stub(ch, name: str | None = None, source: str = "") -> nbformat.Notebo
 
 
 def _mutant_source(module, fn, name: str) -> str:
-    """The mutant catalogue's whole module (its helpers) and a `def` answering as the learner's name."""
-    source = inspect.getsource(module).replace("from __future__ import annotations\n", "")
-    return source + f"\n\ndef {name}(*args, **kwargs):\n    return {fn.__name__}(*args, **kwargs)\n"
+    """A learner cell answering `name` with a catalogued mutant: the catalogue file is run as it stands
+    (its module-level helpers included, which a notebook's definitions-only extraction would drop)."""
+    return (f"MUTANT_CATALOGUE = __import__('runpy').run_path({inspect.getfile(module)!r})\n\n"
+            f"def {name}(*args, **kwargs):\n    return MUTANT_CATALOGUE[{fn.__name__!r}](*args, **kwargs)\n")
 
 
 def build(out: Path, numbers, per_chapter: int, seed: int = 0) -> dict[str, dict]:

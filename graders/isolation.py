@@ -149,6 +149,7 @@ class _PidsLimit:
         self.n, self.path = n, None
         for root in (PIDS_CGROUP, "/sys/fs/cgroup"):
             if os.path.exists(os.path.join(root, "cgroup.procs")) and os.access(root, os.W_OK):
+                _remove_stale(root)
                 path = os.path.join(root, f"cv3d-learner-{os.getpid()}-{id(self)}-{time.monotonic_ns()}")
                 try:
                     os.mkdir(path)
@@ -216,6 +217,23 @@ class _PidsLimit:
             except OSError:
                 time.sleep(0.02)
         self.path = None
+
+
+def _remove_stale(root: str) -> None:
+    """Empty cgroups of learner processes whose grader has ended (a killed grader cannot remove its own)."""
+    for name in os.listdir(root):
+        if not name.startswith("cv3d-learner-"):
+            continue
+        try:
+            owner = int(name.split("-")[2])
+            os.kill(owner, 0)              # the grader that made it is still running: leave it
+        except ProcessLookupError:
+            try:
+                os.rmdir(os.path.join(root, name))
+            except OSError:
+                pass
+        except (ValueError, IndexError, PermissionError):
+            pass
 
 
 def _limits(memory_gb: float, pids: _PidsLimit, max_file_gb: float) -> Callable[[], None]:

@@ -38,5 +38,7 @@ def test_a_class_of_submissions_scores_as_it_should(tmp_path):
     assert not list(scratch.iterdir()), list(scratch.iterdir())
     for path in (tmp_path / "grades").rglob("results.json"):
         assert "test-secret" not in path.read_text()
-    cgroups = Path("/sys/fs/cgroup/pids")
-    assert not [p for p in cgroups.glob("cv3d-learner-*")] if cgroups.exists() else True
+    # no learner's process group holds a process any more (other graders may be running on this machine)
+    busy = [p for p in Path("/sys/fs/cgroup/pids").glob("cv3d-learner-*")
+            if (p / "cgroup.procs").exists() and (p / "cgroup.procs").read_text().strip()]
+    assert not busy, busy
