@@ -67,7 +67,10 @@ CHAPTERS: tuple[Chapter, ...] = (
     Chapter(5, "bundle_adjustment", "Bundle adjustment",
             "the BAL camera, analytic Jacobians, sparse normal equations, Levenberg-Marquardt, Schur complement, "
             "block-Jacobi PCG, Huber/Cauchy IRLS, gauge fixing, a differentiable BA layer"),
-    Chapter(6, "slam", "Visual odometry and SLAM", ready=False),
+    Chapter(6, "slam", "Visual odometry and SLAM",
+            "SE(2)/SE(3) on the manifold, g2o pose graphs, sparse Gauss-Newton/LM pose-graph optimisation with "
+            "robust kernels (graded on intel and parking-garage against GTSAM), ATE/RPE, monocular VO, "
+            "bag-of-words loop closure, keyframes and covisibility, IMU pre-integration"),
     Chapter(7, "calibration", "Calibration", ready=False),
     Chapter(8, "dense", "Dense reconstruction: MVS, NeRF, 3D Gaussian splatting", ready=False),
     Chapter(9, "flow", "Optical flow and tracking", ready=False),

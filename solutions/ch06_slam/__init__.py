@@ -1,0 +1,18 @@
+"""Chapter 6 — visual odometry and SLAM, from scratch: every learner name of the notebook (instructor release).
+
+numpy for the math, scipy.sparse for the sparse normal equations, torch (imported lazily) for the
+frontier experiment. Conventions shared by the chapter (GTSAM's):
+
+- A pose is a matrix T = [[R, t], [0, 1]] mapping the body frame to the world frame (x_w = R x_b + t):
+  (N, 3, 3) for SE(2), (N, 4, 4) for SE(3).
+- Tangent vectors: SE(2) xi = (v_x, v_y, theta); SE(3) xi = (omega, v), rotation first.
+- Perturbations act on the right, T <- T Exp(delta) (GTSAM's retract).
+"""
+from __future__ import annotations
+
+from .questions import *  # noqa: F401,F403 (6.1-6.6, 6.22-6.25)
+from .questions import __all__ as _questions
+
+__all__ = list(_questions)
+
+# front-end (6.12–6.17, 6.20)
