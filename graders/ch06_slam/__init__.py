@@ -16,3 +16,15 @@ from . import questions  # noqa: F401 (register 6.1-6.6, 6.22-6.25)
 __all__: list[str] = []
 
 # front-end (6.12–6.17, 6.20)
+# fe:612
+from . import trajectory_metrics  # noqa: E402,F401 (register 6.12)
+from .trajectory_metrics import evo_trajectory_errors, load_tum_pair, read_tum, synthetic_pair  # noqa: E402
+
+__all__ += ["evo_trajectory_errors", "load_tum_pair", "read_tum", "synthetic_pair"]
+# /fe:612
+# fe:617
+from . import imu  # noqa: E402,F401 (register 6.17)
+from .imu import gtsam_deltas, gtsam_preintegrate, imu_window, true_deltas  # noqa: E402
+
+__all__ += ["gtsam_deltas", "gtsam_preintegrate", "imu_window", "true_deltas"]
+# /fe:617

@@ -16,3 +16,13 @@ from .questions import __all__ as _questions
 __all__ = list(_questions)
 
 # front-end (6.12–6.17, 6.20)
+# fe:612
+from .trajectory_metrics import associate, trajectory_errors  # noqa: E402
+
+__all__ += ["associate", "trajectory_errors"]
+# /fe:612
+# fe:617
+from .imu import preintegrate, right_jacobian  # noqa: E402
+
+__all__ += ["preintegrate", "right_jacobian"]
+# /fe:617

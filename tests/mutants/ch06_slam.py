@@ -9,3 +9,148 @@ from __future__ import annotations
 MUTANTS: list[tuple] = []
 
 # front-end (6.12–6.17, 6.20)
+# fe:mut
+import numpy as np  # noqa: E402 (front-end's mutants)
+def _fe_umeyama(A, B, with_scale):
+    ma, mb = A.mean(0), B.mean(0)
+    U, S, Vt = np.linalg.svd((B - mb).T @ (A - ma) / len(A))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    R = U @ D @ Vt
+    s = np.trace(np.diag(S) @ D) / np.mean(np.sum((A - ma) ** 2, 1)) if with_scale else 1.0
+    return s, R, mb - s * R @ ma
+
+
+def _fe_trajectory_errors(stamps_est, T_est, stamps_gt, T_gt, with_scale=False, delta=1, *, by_index=False,
+                          align=True, force_se3=False, mean=False, world_rpe=False, var_of_target=False):
+    if by_index:
+        n = min(len(T_est), len(T_gt))
+        ie = ig = np.arange(n)
+    else:  # nearest stamp of the ground truth for every estimate pose (the estimate is the shorter here)
+        j = np.clip(np.searchsorted(stamps_gt, stamps_est), 1, len(stamps_gt) - 1)
+        j = np.where(np.abs(stamps_gt[j - 1] - stamps_est) <= np.abs(stamps_gt[j] - stamps_est), j - 1, j)
+        ok = np.abs(stamps_gt[j] - stamps_est) <= 0.01
+        ie, ig = np.flatnonzero(ok), j[ok]
+    P, Q = np.array(T_est, float)[ie], np.asarray(T_gt, float)[ig]
+    s = 1.0
+    if align:
+        s, R, t = _fe_umeyama(P[:, :3, 3], Q[:, :3, 3], with_scale and not force_se3)
+        if var_of_target and with_scale:   # scale from the ground truth's spread instead of the estimate's
+            s = s * np.mean(np.sum((P[:, :3, 3] - P[:, :3, 3].mean(0)) ** 2, 1)) / \
+                np.mean(np.sum((Q[:, :3, 3] - Q[:, :3, 3].mean(0)) ** 2, 1))
+            t = Q[:, :3, 3].mean(0) - s * R @ P[:, :3, 3].mean(0)
+        P[:, :3, :3] = R @ P[:, :3, :3]
+        P[:, :3, 3] = s * P[:, :3, 3] @ R.T + t
+    agg = np.mean if mean else (lambda x: np.sqrt(np.mean(x ** 2)))
+    ate = agg(np.linalg.norm(P[:, :3, 3] - Q[:, :3, 3], axis=1))
+    i = np.arange(0, len(P), delta)
+    a, b = i[:-1], i[1:]
+    rel_Q = np.linalg.inv(Q[a]) @ Q[b]
+    rel_P = np.linalg.inv(P[a]) @ P[b]
+    E = np.linalg.inv(rel_Q) @ rel_P
+    et = np.linalg.norm(E[:, :3, 3], axis=1)
+    if world_rpe:
+        et = np.linalg.norm((P[b, :3, 3] - P[a, :3, 3]) - (Q[b, :3, 3] - Q[a, :3, 3]), axis=1)
+    er = np.degrees(np.arccos(np.clip((np.trace(E[:, :3, :3], axis1=1, axis2=2) - 1) / 2, -1, 1)))
+    return np.array([ate, agg(et), agg(er), s])
+
+
+def ate_index_paired(*a, **k):
+    return _fe_trajectory_errors(*a, **k, by_index=True)
+
+
+def ate_unaligned(*a, **k):
+    return _fe_trajectory_errors(*a, **k, align=False)
+
+
+def ate_scale_never_estimated(*a, **k):
+    return _fe_trajectory_errors(*a, **k, force_se3=True)
+
+
+def ate_mean_not_rms(*a, **k):
+    return _fe_trajectory_errors(*a, **k, mean=True)
+
+
+def rpe_world_displacements(*a, **k):
+    return _fe_trajectory_errors(*a, **k, world_rpe=True)
+
+
+def sim3_scale_from_target_variance(*a, **k):
+    return _fe_trajectory_errors(*a, **k, var_of_target=True)
+
+
+def _fe_exp(w):
+    th = np.linalg.norm(w)
+    K = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
+    if th < 1e-12:
+        return np.eye(3) + K
+    return np.eye(3) + np.sin(th) / th * K + (1 - np.cos(th)) / th ** 2 * K @ K
+
+
+def _fe_hat(v):
+    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+
+
+def _fe_preintegrate(omega_m, acc_m, dt, b_g, b_a, *, gravity=False, bias=True, new_velocity=False, jr=True,
+                     dp_no_rotation_term=False):
+    g = np.array([0.0, 0.0, -9.81])
+    dR, dv, dp = np.eye(3), np.zeros(3), np.zeros(3)
+    Rg, vg, va, pg, pa = (np.zeros((3, 3)) for _ in range(5))
+    for k in range(len(omega_m)):
+        w = np.asarray(omega_m[k], float) - (b_g if bias else 0)
+        a = np.asarray(acc_m[k], float) - (b_a if bias else 0)
+        if gravity:   # "remove gravity" from the specific force, in the keyframe's frame
+            a = a + dR.T @ g
+        RA = dR @ _fe_hat(a)
+        pg = pg + vg * dt - (0 if dp_no_rotation_term else 0.5 * RA @ Rg * dt ** 2)
+        pa = pa + va * dt - 0.5 * dR * dt ** 2
+        vg, va = vg - RA @ Rg * dt, va - dR * dt
+        phi = w * dt
+        th = np.linalg.norm(phi)
+        S = _fe_hat(phi)
+        Jr = np.eye(3) - (1 - np.cos(th)) / th ** 2 * S + (th - np.sin(th)) / th ** 3 * S @ S if jr else np.eye(3)
+        E = _fe_exp(phi)
+        Rg = E.T @ Rg - Jr * dt
+        if new_velocity:
+            dv = dv + dR @ a * dt
+            dp = dp + dv * dt + 0.5 * dR @ a * dt ** 2
+        else:
+            dp = dp + dv * dt + 0.5 * dR @ a * dt ** 2
+            dv = dv + dR @ a * dt
+        dR = dR @ E
+    return dR, dv, dp, np.block([[Rg, np.zeros((3, 3))], [vg, va], [pg, pa]])
+
+
+def imu_gravity_removed_inside(*a):
+    return _fe_preintegrate(*a, gravity=True)
+
+
+def imu_biases_ignored(*a):
+    return _fe_preintegrate(*a, bias=False)
+
+
+def imu_position_with_new_velocity(*a):
+    return _fe_preintegrate(*a, new_velocity=True)
+
+
+def imu_no_right_jacobian(*a):
+    return _fe_preintegrate(*a, jr=False)
+
+
+def imu_dp_dbg_without_rotation_term(*a):
+    return _fe_preintegrate(*a, dp_no_rotation_term=True)
+
+
+MUTANTS += [  # front-end entries
+    ("6.12", "poses paired by index, not by time", ate_index_paired, "paired by index"),
+    ("6.12", "estimate not aligned", ate_unaligned, "unaligned"),
+    ("6.12", "Sim(3) asked, scale never estimated", ate_scale_never_estimated, "SE(3) alignment"),
+    ("6.12", "mean instead of RMSE", ate_mean_not_rms, "root-mean-square"),
+    ("6.12", "RPE as world-frame displacement differences", rpe_world_displacements, "world-frame displacements"),
+    ("6.12", "Sim(3) scale normalised by the ground truth's variance", sim3_scale_from_target_variance, None),
+    ("6.17", "gravity removed inside the pre-integration", imu_gravity_removed_inside, "gravity taken out"),
+    ("6.17", "biases not subtracted", imu_biases_ignored, "raw measurements"),
+    ("6.17", "position updated with the new velocity", imu_position_with_new_velocity, "velocity after"),
+    ("6.17", "rotation-bias Jacobian without J_r", imu_no_right_jacobian, "right Jacobian"),
+    ("6.17", "∂Δp/∂b_g without its rotation term", imu_dp_dbg_without_rotation_term, None),
+]
+# /fe:mut
