@@ -280,3 +280,40 @@ def test_ransac_sample_counter_sees_every_sample():
     problem = ch2.line_problem(pts)
     (model, inliers), samples = ch2.run_ransac(ref.ransac, problem)
     assert inliers.all() and 1 <= samples <= 64
+
+
+# ------------------------------------------------------------ section 5: OpenCV's USAC estimators (ungraded)
+
+def test_usac_comparison_table_is_well_formed():
+    rows = ch2.usac_comparison(ch2.gt_ransac, outliers=(0.1, 0.3), noise=(0.5,), n=200)
+    methods = list(ch2.USAC_METHODS) + ["LO-RANSAC (2.16)"]
+    assert [r["method"] for r in rows] == methods * 2
+    assert all(set(r) == set(ch2.demo.COLUMNS) for r in rows)
+    for r in rows:
+        assert 0.0 <= r["precision"] <= 1.0 and 0.0 <= r["recall"] <= 1.0 and r["ms"] >= 0.0
+        assert np.isfinite(r["rms_px"])
+    text = ch2.usac_table(rows)
+    assert all(m in text for m in methods) and "10% outliers" in text and "30% outliers" in text
+    # 10 % wrong matches, 0.5 px noise, τ = 1 px: every estimator with local optimisation (USAC's and
+    # the chapter's LO-RANSAC) predicts held-out matches within 0.4 px (0.08-0.22 px over 12 draws).
+    lo = [r for r in rows if r["outliers"] == 0.1 and r["method"] not in ("RANSAC", "LMedS")]
+    assert all(r["rms_px"] < 0.4 for r in lo), lo
+
+
+def test_usac_comparison_shows_what_the_notebook_says():
+    # The notebook's scenes (seed 0), OpenCV only (its estimators are deterministic for a given input).
+    rows = ch2.usac_comparison(None)
+    cell = {(r["method"], r["outliers"], r["noise_px"]): r for r in rows}
+    for sigma in (0.5, 1.5):
+        # MAGSAC++ beats plain RANSAC at 30-50 % wrong matches: its held-out error is at most 0.59 x
+        # RANSAC's in all 12 draws tried (0.50 and 0.35 x on the notebook's scenes); 0.7 x bound.
+        for o in (0.3, 0.5):
+            assert cell[("USAC_MAGSAC", o, sigma)]["rms_px"] < 0.7 * cell[("RANSAC", o, sigma)]["rms_px"]
+        # LMedS breaks down beyond 50 % wrong matches: at 70 % its mask keeps about every match
+        # (precision 0.30-0.36, the inlier share, over 24 draws) and its F is 5-100 px off.
+        lmeds = cell[("LMedS", 0.7, sigma)]
+        assert lmeds["precision"] < 0.5 and lmeds["rms_px"] > 3.0
+    # τ = 1 px set for 0.5 px noise while the noise is 1.5 px: MAGSAC++ (marginalised over σ) has the
+    # lowest held-out error at 30 % wrong matches (in 12 of 12 draws tried).
+    at = {m: cell[(m, 0.3, 1.5)]["rms_px"] for m in ch2.USAC_METHODS}
+    assert min(at, key=at.get) == "USAC_MAGSAC", at

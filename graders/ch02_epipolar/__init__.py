@@ -12,6 +12,7 @@ oracle, converter, hints) and registers them:
     ransac       2.16                 LO-RANSAC with MSAC and an adaptive iteration count
     debug        2.17-2.20            the four DEBUG repairs
     frontier     2.25                 the weighted 8-point for learned inlier weights
+    demo                              section 5's ungraded experiment: OpenCV's USAC estimators vs LO-RANSAC
     scenes, robust                    two-view ground truth, the Graffiti pair; the grader's own LO-RANSAC
 
 Oracles: OpenCV (`cv2.findFundamentalMat` FM_8POINT / FM_7POINT / USAC_MAGSAC, `cv2.findEssentialMat`
@@ -34,6 +35,7 @@ from . import basics, debug, eight_point, frontier, homography, minimal, pose, q
 from .basics import cv_sampson, gt_epipolar_lines
 from .debug import (broken_pose_from_E, brute_force_matches, cv_fix_cheirality, cv_fix_garbage_F, cv_fix_matcher,
                     cv_fix_planar_scene, debug_case, debug_cheirality, debug_garbage_F, debug_matcher, debug_planar)
+from .demo import USAC_METHODS, usac_comparison, usac_table
 from .eight_point import broken_eight_point, cv_eight_point
 from .frontier import gt_weighted_eight_point
 from .homography import broken_dlt, cv_homography
@@ -52,8 +54,8 @@ __all__ = [
     "gt_essential", "gt_fundamental", "gt_epipolar_lines", "gt_sampson", "cv_sampson", "cv_eight_point",
     "gt_seven_point", "cv_seven_point", "cv_five_point", "cv_decompose_essential", "cv_recover_pose",
     "colmap_essential", "cv_homography", "gt_ransac", "refine_essential", "gt_weighted_eight_point",
-    # RANSAC problems (2.16)
-    "line_problem", "run_ransac",
+    # RANSAC problems (2.16); the section 5 experiment with OpenCV's USAC estimators
+    "line_problem", "run_ransac", "USAC_METHODS", "usac_comparison", "usac_table",
     # DEBUG material: broken artefacts, the colleague's code, the stand-in fixes
     "debug_case", "debug_garbage_F", "debug_planar", "debug_matcher", "debug_cheirality", "broken_eight_point",
     "broken_dlt", "broken_pose_from_E", "brute_force_matches", "cv_fix_garbage_F", "cv_fix_planar_scene",
