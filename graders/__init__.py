@@ -13,7 +13,15 @@ pycolmap, kornia, or synthetic ground truth generated here.
 """
 from __future__ import annotations
 
+import os as _os
+import sys as _sys
 from typing import Any, Callable
+
+# pycolmap's C++ log (glog, written to file descriptor 2, hundreds of lines per reconstruction) stays quiet unless
+# asked for: GLOG_minloglevel=0 in the environment, or graders.oracles.colmap.colmap_log(True) (ch4.colmap_log).
+_os.environ.setdefault("GLOG_minloglevel", "2")
+if "pycolmap" in _sys.modules:   # loaded before the graders: its flag was read already
+    _sys.modules["pycolmap"].logging.minloglevel = int(_os.environ["GLOG_minloglevel"])
 
 from .engine import Case, Exercise, Hint, chapter, get, grade, like, raised
 from .report import ExerciseResult
