@@ -1,0 +1,13 @@
+"""Chapter 7 — calibration, from scratch: every learner name of the notebook (instructor release).
+
+numpy (and scipy where a fit is nonlinear) only. Conventions (docs/CONVENTIONS.md): board-to-camera
+poses X_c = R X + t, dist = (k1, k2, p1, p2, k3), pixel centres at integer coordinates.
+"""
+from __future__ import annotations
+
+from .stereo import stereo_extrinsics, stereo_rectify
+from .zhang import (board_homography, calibrate_camera, extrinsics_from_homography, intrinsics_from_homographies,
+                    refine_calibration)
+
+__all__ = ["board_homography", "calibrate_camera", "extrinsics_from_homography", "intrinsics_from_homographies",
+           "refine_calibration", "stereo_extrinsics", "stereo_rectify"]

@@ -1,0 +1,275 @@
+"""Chapter 7 mutant catalogue: realistic wrong implementations, one per known mistake.
+
+Each entry is (exercise id, short name, function, hint fragment or None). The grader must take points
+off every one; where a hint exists for the mistake it must fire. The mistakes are the classic slips of
+writing a calibration toolbox (unnormalised DLT, rows for columns of H, one constraint per view, no
+re-orthogonalisation, the sign of H, refining too little) and the chapter's DEBUG material (the
+seed's hand-eye sketch: M's outer-product order, "R_X = -R_X" for a reflection).
+
+Building blocks that are not the point of a mutant come from the reference solution, so each mutant
+differs from a correct implementation in exactly one mistake.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from solutions.ch07_calibration import zhang as ref_zhang
+from solutions.geometry import hartley, project_to_so3
+
+# ----------------------------------------------------------------- 7.5 board_homography
+
+
+def _dlt(a, b):
+    n = len(a)
+    A = np.zeros((2 * n, 9))
+    A[0::2, 0:2], A[0::2, 2] = a, 1.0
+    A[0::2, 6:8], A[0::2, 8] = -b[:, :1] * a, -b[:, 0]
+    A[1::2, 3:5], A[1::2, 5] = a, 1.0
+    A[1::2, 6:8], A[1::2, 8] = -b[:, 1:] * a, -b[:, 1]
+    return np.linalg.svd(A, full_matrices=False)[2][-1].reshape(3, 3)
+
+
+def homography_four_corners(X_xy, uv):
+    """The minimal DLT on the first four corners (one row of the board: nearly collinear) only."""
+    return ref_zhang.board_homography(np.asarray(X_xy)[[0, 8, 45, 53]], np.asarray(uv)[[0, 8, 45, 53]])
+
+
+def homography_first_singular_vector(X_xy, uv):
+    a, Ta = hartley(X_xy)
+    b, Tb = hartley(uv)
+    n = len(a)
+    A = np.zeros((2 * n, 9))
+    A[0::2, 0:2], A[0::2, 2] = a, 1.0
+    A[0::2, 6:8], A[0::2, 8] = -b[:, :1] * a, -b[:, 0]
+    A[1::2, 3:5], A[1::2, 5] = a, 1.0
+    A[1::2, 6:8], A[1::2, 8] = -b[:, 1:] * a, -b[:, 1]
+    H = np.linalg.solve(Tb, np.linalg.svd(A)[2][0].reshape(3, 3) @ Ta)   # the largest, not the smallest
+    return H / H[2, 2]
+
+
+def homography_transposed(X_xy, uv):
+    return ref_zhang.board_homography(X_xy, uv).T
+
+
+def homography_inverse(X_xy, uv):   # board and image swapped in the call
+    return ref_zhang.board_homography(uv, X_xy)
+
+
+def homography_denormalised_wrong(X_xy, uv):
+    a, Ta = hartley(X_xy)
+    b, Tb = hartley(uv)
+    H = Tb @ _dlt(a, b) @ np.linalg.inv(Ta)   # the normalisations undone the wrong way round
+    return H / H[2, 2]
+
+
+# ----------------------------------------------------------------- 7.6 intrinsics_from_homographies
+
+def _zhang_K(rows):
+    B11, B12, B22, B13, B23, B33 = np.linalg.svd(np.array(rows))[2][-1]
+    v0 = (B12 * B13 - B11 * B23) / (B11 * B22 - B12 ** 2)
+    lam = B33 - (B13 ** 2 + v0 * (B12 * B13 - B11 * B23)) / B11
+    alpha = np.sqrt(abs(lam / B11))
+    beta = np.sqrt(abs(lam * B11 / (B11 * B22 - B12 ** 2)))
+    gamma = -B12 * alpha ** 2 * beta / lam
+    u0 = gamma * v0 / beta - B13 * alpha ** 2 / lam
+    return np.array([[alpha, gamma, u0], [0.0, beta, v0], [0.0, 0.0, 1.0]])
+
+
+def intrinsics_rows_of_H(Hs):
+    return ref_zhang.intrinsics_from_homographies(np.transpose(np.asarray(Hs, float), (0, 2, 1)))
+
+
+def intrinsics_orthogonality_only(Hs):
+    return _zhang_K([ref_zhang._v(H / np.linalg.norm(H), 0, 1) for H in np.asarray(Hs, float)])
+
+
+def intrinsics_sum_of_norms(Hs):
+    rows = []
+    for H in np.asarray(Hs, float):
+        H = H / np.linalg.norm(H)
+        rows += [ref_zhang._v(H, 0, 1), ref_zhang._v(H, 0, 0) + ref_zhang._v(H, 1, 1)]
+    return _zhang_K(rows)
+
+
+def intrinsics_one_sided_cross_terms(Hs):
+    def v(H, i, j):
+        hi, hj = H[:, i], H[:, j]
+        return np.array([hi[0] * hj[0], hi[0] * hj[1], hi[1] * hj[1], hi[2] * hj[0], hi[2] * hj[1], hi[2] * hj[2]])
+    rows = []
+    for H in np.asarray(Hs, float):
+        H = H / np.linalg.norm(H)
+        rows += [v(H, 0, 1), v(H, 0, 0) - v(H, 1, 1)]
+    return _zhang_K(rows)
+
+
+# ----------------------------------------------------------------- 7.7 extrinsics_from_homography
+
+def _columns(H, K):
+    M = np.linalg.solve(K, np.asarray(H, float))
+    lam = 1.0 / np.linalg.norm(M[:, 0])
+    if M[2, 2] < 0:
+        lam = -lam
+    return lam * M
+
+
+def extrinsics_not_orthogonalised(H, K):
+    M = _columns(H, K)
+    return np.c_[M[:, 0], M[:, 1], np.cross(M[:, 0], M[:, 1])], M[:, 2]
+
+
+def extrinsics_sign_not_fixed(H, K):
+    M = np.linalg.solve(K, np.asarray(H, float))
+    M = M / np.linalg.norm(M[:, 0])
+    return project_to_so3(np.c_[M[:, 0], M[:, 1], np.cross(M[:, 0], M[:, 1])]), M[:, 2]
+
+
+def extrinsics_r3_reversed(H, K):
+    M = _columns(H, K)
+    U, _, Vt = np.linalg.svd(np.c_[M[:, 0], M[:, 1], np.cross(M[:, 1], M[:, 0])])
+    return U @ Vt, M[:, 2]     # re-orthogonalised, but r2 x r1 makes it a reflection
+
+
+def extrinsics_K_not_inverted(H, K):
+    M = np.asarray(K, float) @ np.asarray(H, float)
+    M = M / np.linalg.norm(M[:, 0]) * np.sign(M[2, 2])
+    return project_to_so3(np.c_[M[:, 0], M[:, 1], np.cross(M[:, 0], M[:, 1])]), M[:, 2]
+
+
+# ----------------------------------------------------------------- 7.8 refine_calibration
+
+def refine_no_distortion(X, uv, K0, dist0, Rs0, ts0):
+    """Only K and the poses: the lens left at the start (a pinhole calibration of a barrel lens)."""
+    saved = ref_zhang._project
+
+    def pinhole(X, k, dist, R, t):
+        p, Ji, Jp = saved(X, k, np.zeros(5), R, t)
+        Ji[:, :, 4:] = 0.0
+        return p, Ji, Jp
+    ref_zhang._project = pinhole
+    try:
+        K, _, Rs, ts = ref_zhang.refine_calibration(X, uv, K0, dist0, Rs0, ts0)
+    finally:
+        ref_zhang._project = saved
+    return K, np.asarray(dist0, float), Rs, ts
+
+
+def refine_no_k3(X, uv, K0, dist0, Rs0, ts0):
+    """Four coefficients (k1, k2, p1, p2): k3 never estimated."""
+    saved = ref_zhang._project
+
+    def four(X, k, dist, R, t):
+        p, Ji, Jp = saved(X, k, dist, R, t)
+        Ji[:, :, 8] = 0.0
+        return p, Ji, Jp
+    ref_zhang._project = four
+    try:
+        return ref_zhang.refine_calibration(X, uv, K0, dist0, Rs0, ts0)
+    finally:
+        ref_zhang._project = saved
+
+
+def refine_poses_fixed(X, uv, K0, dist0, Rs0, ts0):
+    """Intrinsics and lens refined, every view's pose held at its start."""
+    saved = ref_zhang._project
+
+    def fixed(X, k, dist, R, t):
+        p, Ji, Jp = saved(X, k, dist, R, t)
+        return p, Ji, 0.0 * Jp
+    ref_zhang._project = fixed
+    try:
+        K, dist, _, _ = ref_zhang.refine_calibration(X, uv, K0, dist0, Rs0, ts0)
+    finally:
+        ref_zhang._project = saved
+    return K, dist, np.asarray(Rs0, float), np.asarray(ts0, float)
+
+
+def refine_three_iterations(X, uv, K0, dist0, Rs0, ts0):
+    """Stopped after three LM iterations, far from converged."""
+    return ref_zhang.refine_calibration(X, uv, K0, dist0, Rs0, ts0, max_iter=3)
+
+
+MUTANTS = [
+    ("7.5", "four corners only", homography_four_corners, "fit every corner"),
+    ("7.5", "largest singular vector", homography_first_singular_vector, None),
+    ("7.5", "H transposed", homography_transposed, "transposed"),
+    ("7.5", "board and image swapped", homography_inverse, "inverse map"),
+    ("7.5", "normalisation undone the wrong way", homography_denormalised_wrong, None),
+    ("7.6", "rows of H instead of columns", intrinsics_rows_of_H, "rows of H"),
+    ("7.6", "one constraint per view", intrinsics_orthogonality_only, "3 views leave"),
+    ("7.6", "v11 + v22", intrinsics_sum_of_norms, "not a sum"),
+    ("7.6", "one-sided cross terms in v_ij", intrinsics_one_sided_cross_terms, "both orders"),
+    ("7.7", "no re-orthogonalisation", extrinsics_not_orthogonalised, "project it onto SO(3)"),
+    ("7.7", "sign of H not fixed", extrinsics_sign_not_fixed, "behind the camera"),
+    ("7.7", "r3 = r2 x r1", extrinsics_r3_reversed, "r2 × r1"),
+    ("7.7", "K H instead of K^-1 H", extrinsics_K_not_inverted, None),
+    ("7.8", "lens not refined", refine_no_distortion, "distortion is exactly the start"),
+    ("7.8", "k3 never estimated", refine_no_k3, "k3 is exactly 0"),
+    ("7.8", "poses held fixed", refine_poses_fixed, "poses are exactly the start"),
+    ("7.8", "three iterations", refine_three_iterations, None),
+]
+
+
+# ----------------------------------------------------------------- 7.9 stereo_extrinsics
+
+from solutions.ch07_calibration import stereo as ref_stereo  # noqa: E402
+
+
+def stereo_inverse_rig(X, uv1, uv2, K1, d1, K2, d2, Rs1, ts1, Rs2, ts2):
+    """T12 composed the wrong way round: T_c1 T_c2⁻¹ (camera 2 -> camera 1)."""
+    R, t = ref_stereo.stereo_extrinsics(X, uv1, uv2, K1, d1, K2, d2, Rs1, ts1, Rs2, ts2)
+    return R.T, -R.T @ t
+
+
+def stereo_first_view_only(X, uv1, uv2, K1, d1, K2, d2, Rs1, ts1, Rs2, ts2):
+    R = np.asarray(Rs2[0]) @ np.asarray(Rs1[0]).T
+    return R, np.asarray(ts2[0]) - R @ np.asarray(ts1[0])
+
+
+def stereo_averaged_not_refined(X, uv1, uv2, K1, d1, K2, d2, Rs1, ts1, Rs2, ts2):
+    Ri = np.asarray(Rs2) @ np.transpose(np.asarray(Rs1), (0, 2, 1))
+    ti = np.asarray(ts2) - np.einsum("vij,vj->vi", Ri, np.asarray(ts1))
+    return project_to_so3(Ri.mean(0)), ti.mean(0)
+
+
+# ----------------------------------------------------------------- 7.10 stereo_rectify
+
+def rectify_swapped(K1, d1, K2, d2, R, t, image_size):
+    R1, R2, P1, P2 = ref_stereo.stereo_rectify(K1, d1, K2, d2, R, t, image_size)
+    return R2, R1, P1, P2
+
+
+def rectify_whole_rotation_on_camera_2(K1, d1, K2, d2, R, t, image_size):
+    """W from the baseline of camera 2 seen from camera 1; camera 1 turned by W, camera 2 by W R⁻¹."""
+    c = -np.asarray(R).T @ np.asarray(t, float)          # camera 2's centre in camera 1
+    e1 = c / np.linalg.norm(c) * np.sign(-c[0] if c[0] != 0 else 1)
+    e2 = np.cross([0, 0, 1.0], e1)
+    e2 /= np.linalg.norm(e2)
+    W = np.array([e1, e2, np.cross(e1, e2)])
+    R1, R2 = W, W @ np.asarray(R).T
+    _, _, P1, P2 = ref_stereo.stereo_rectify(K1, d1, K2, d2, R, t, image_size)
+    P2 = P1.copy()
+    P2[0, 3] = P1[0, 0] * (R2 @ np.asarray(t, float))[0]
+    return R1, R2, P1, P2
+
+
+def rectify_no_baseline_in_P2(K1, d1, K2, d2, R, t, image_size):
+    R1, R2, P1, _ = ref_stereo.stereo_rectify(K1, d1, K2, d2, R, t, image_size)
+    return R1, R2, P1, P1.copy()
+
+
+def rectify_own_principal_points(K1, d1, K2, d2, R, t, image_size):
+    R1, R2, P1, P2 = ref_stereo.stereo_rectify(K1, d1, K2, d2, R, t, image_size)
+    P1, P2 = P1.copy(), P2.copy()
+    P1[:2, 2], P2[:2, 2] = np.asarray(K1)[:2, 2], np.asarray(K2)[:2, 2]   # each keeps its own (cx, cy)
+    return R1, R2, P1, P2
+
+
+MUTANTS += [
+    ("7.9", "T12 inverted", stereo_inverse_rig, "inverse rig"),
+    ("7.9", "first view's relative pose", stereo_first_view_only, "single view"),
+    ("7.9", "averaged, not refined", stereo_averaged_not_refined, "not the least-squares optimum"),
+    ("7.10", "R1 and R2 swapped", rectify_swapped, "swapped"),
+    ("7.10", "whole rotation on camera 2", rectify_whole_rotation_on_camera_2, "half of R"),
+    ("7.10", "P2 without f T_x", rectify_no_baseline_in_P2, "f · T_x"),
+    ("7.10", "each camera's own principal point", rectify_own_principal_points, "same cy"),
+]
