@@ -22,6 +22,7 @@ FE_MUTANTS = [m for m in MUTANTS if m[0] in FRONT_END]
 # Library-backed implementations: exercise id -> (function, cases it cannot answer and why).
 LIBRARY = {
     "6.12": (ch6.evo_trajectory_errors, {}),
+    "6.14": (ch6.scipy_bow_scores, {}),
     "6.17": (ch6.gtsam_preintegrate, {}),
 }
 

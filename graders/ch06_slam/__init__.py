@@ -6,14 +6,21 @@ synthetic ground truth (pose graphs whose true poses are known, judged after gau
 the objective value, never element by element). Real data: the intel (SE(2)) and parking-garage
 (SE(3)) pose graphs via `graders.datasets`.
 
-Core modules: `questions` (6.1-6.6, 6.22-6.25). Importing the package registers the chapter; the
+Core modules: `posegraphs` (GTSAM glue, synthetic and real graphs, gauge-free metrics), `manifold`
+(6.7, 6.9), `questions` (6.1-6.6, 6.22-6.25). Importing the package registers the chapter; the
 names below are the API of the notebook, the tests and the benchmark.
 """
 from __future__ import annotations
 
-from . import questions  # noqa: F401 (register 6.1-6.6, 6.22-6.25)
+from . import manifold, questions  # noqa: F401 (register 6.7, 6.9; 6.1-6.6, 6.22-6.25)
+from .manifold import gt_between_residuals, gt_exp, gt_lie_ops, gt_log, random_poses
+from .posegraphs import (align_first, ate_rmse, g2o_chi2, graph_args, gt_chi2, gtsam_optimize, load_posegraph,
+                         make_graph, pose_errors, subgraph)
 
-__all__: list[str] = []
+__all__: list[str] = [
+    "align_first", "ate_rmse", "g2o_chi2", "graph_args", "gt_between_residuals", "gt_chi2", "gt_exp", "gt_lie_ops",
+    "gt_log", "gtsam_optimize", "load_posegraph", "make_graph", "pose_errors", "random_poses", "subgraph",
+]
 
 # front-end (6.12–6.17, 6.20)
 # fe:612
@@ -28,3 +35,9 @@ from .imu import gtsam_deltas, gtsam_preintegrate, imu_window, true_deltas  # no
 
 __all__ += ["gtsam_deltas", "gtsam_preintegrate", "imu_window", "true_deltas"]
 # /fe:617
+# fe:614
+from . import place_recognition  # noqa: E402,F401 (register 6.14)
+from .place_recognition import gt_bow_scores, loop_sequence, retrieval_quality, scipy_bow_scores, true_revisits  # noqa: E402,E501
+
+__all__ += ["gt_bow_scores", "loop_sequence", "retrieval_quality", "scipy_bow_scores", "true_revisits"]
+# /fe:614

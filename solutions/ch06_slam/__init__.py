@@ -13,7 +13,13 @@ from __future__ import annotations
 from .questions import *  # noqa: F401,F403 (6.1-6.6, 6.22-6.25)
 from .questions import __all__ as _questions
 
-__all__ = list(_questions)
+from .lie import adjoint, exp, inverse, lie_ops, log, right_jacobian, right_jacobian_inv
+from .pose_graph import between_residuals, chi2, optimize_pose_graph, read_g2o, robust_pose_graph, write_g2o
+
+__all__ = list(_questions) + [
+    "lie_ops", "exp", "log", "inverse", "adjoint", "right_jacobian", "right_jacobian_inv", "read_g2o", "write_g2o",
+    "between_residuals", "chi2", "optimize_pose_graph", "robust_pose_graph",
+]
 
 # front-end (6.12–6.17, 6.20)
 # fe:612
@@ -26,3 +32,8 @@ from .imu import preintegrate, right_jacobian  # noqa: E402
 
 __all__ += ["preintegrate", "right_jacobian"]
 # /fe:617
+# fe:614
+from .place_recognition import bow_scores, bow_vectors, kmeans  # noqa: E402
+
+__all__ += ["bow_scores", "bow_vectors", "kmeans"]
+# /fe:614

@@ -154,3 +154,76 @@ MUTANTS += [  # front-end entries
     ("6.17", "∂Δp/∂b_g without its rotation term", imu_dp_dbg_without_rotation_term, None),
 ]
 # /fe:mut
+# fe:mut614
+def _fe_kmeans(X, k, seed=0, iters=20, lloyd=True):
+    rng = np.random.default_rng(seed)
+    C = X[rng.choice(len(X), k, replace=False)].copy()
+    for _ in range(iters if lloyd else 0):
+        lab = np.argmin(((X[:, None, :] - C[None]) ** 2).sum(2), 1)
+        for j in range(k):
+            if np.any(lab == j):
+                C[j] = X[lab == j].mean(0)
+    return C
+
+
+def _fe_bow(db, queries, vocabulary, top_k, seed=0, *, idf=True, idf_occurrences=False, l2=False, half=True,
+            ascending=False, lloyd=True):
+    V = _fe_kmeans(np.vstack(db), int(vocabulary), seed, lloyd=lloyd) if np.ndim(vocabulary) == 0 \
+        else np.asarray(vocabulary, float)
+
+    def hist(descs):
+        out = np.zeros((len(descs), len(V)))
+        for i, d in enumerate(descs):
+            w = np.argmin(((d[:, None, :] - V[None]) ** 2).sum(2), 1)
+            for word in w:
+                out[i, word] += 1
+        return out
+
+    Hd, Hq = hist(db), hist(queries)
+    n_w = Hd.sum(0) if idf_occurrences else (Hd > 0).sum(0)
+    w_idf = np.log(len(db) / np.maximum(n_w, 1)) * (n_w > 0) if idf else np.ones(len(V))
+
+    def vec(H):
+        v = H / H.sum(1, keepdims=True) * w_idf
+        n = np.linalg.norm(v, axis=1, keepdims=True) if l2 else v.sum(1, keepdims=True)
+        return v / np.where(n > 0, n, 1)
+
+    A, B = vec(Hq), vec(Hd)
+    S = np.array([[1 - (0.5 if half else 1.0) * np.abs(a - b).sum() for b in B] for a in A])
+    order = np.argsort(S, axis=1) if ascending else np.argsort(-S, axis=1)
+    return S, order[:, :top_k]
+
+
+def bow_no_idf(*a, **k):
+    return _fe_bow(*a, **k, idf=False)
+
+
+def bow_idf_from_occurrences(*a, **k):
+    return _fe_bow(*a, **k, idf_occurrences=True)
+
+
+def bow_l2_normalised(*a, **k):
+    return _fe_bow(*a, **k, l2=True)
+
+
+def bow_score_without_half(*a, **k):
+    return _fe_bow(*a, **k, half=False)
+
+
+def bow_top_k_ascending(*a, **k):
+    return _fe_bow(*a, **k, ascending=True)
+
+
+def bow_kmeans_never_iterated(*a, **k):
+    return _fe_bow(*a, **k, lloyd=False)
+
+
+MUTANTS += [  # front-end entries (6.14)
+    ("6.14", "tf only, no idf", bow_no_idf, "ignore idf"),
+    ("6.14", "idf from word occurrences, not images", bow_idf_from_occurrences, "counts occurrences"),
+    ("6.14", "L2-normalised vectors in the L1 score", bow_l2_normalised, "L2 norm"),
+    ("6.14", "L1 score without the 1/2", bow_score_without_half, "lack the ½"),
+    ("6.14", "top k sorted ascending", bow_top_k_ascending, "least"),
+    ("6.14", "vocabulary = random descriptors (k-means never iterated)", bow_kmeans_never_iterated, None),
+]
+# /fe:mut614
