@@ -7,18 +7,20 @@ the objective value, never element by element). Real data: the intel (SE(2)) and
 (SE(3)) pose graphs via `graders.datasets`.
 
 Core modules: `posegraphs` (GTSAM glue, synthetic and real graphs, gauge-free metrics), `manifold`
-(6.7, 6.9), `questions` (6.1-6.6, 6.22-6.25). Importing the package registers the chapter; the
+(6.7, 6.9), `g2o_io` (6.8), `optimizer` (6.10, 6.11), `questions` (6.1-6.6, 6.22-6.25). Importing the package registers the chapter; the
 names below are the API of the notebook, the tests and the benchmark.
 """
 from __future__ import annotations
 
-from . import manifold, questions  # noqa: F401 (register 6.7, 6.9; 6.1-6.6, 6.22-6.25)
+from . import g2o_io, manifold, optimizer, questions  # noqa: F401 (register 6.7-6.11; 6.1-6.6, 6.22-6.25)
+from .optimizer import gt_optimize_pose_graph, gt_robust_pose_graph, plant_false_loops
+from .g2o_io import gt_read_g2o
 from .manifold import gt_between_residuals, gt_exp, gt_lie_ops, gt_log, random_poses
 from .posegraphs import (align_first, ate_rmse, g2o_chi2, graph_args, gt_chi2, gtsam_optimize, load_posegraph,
                          make_graph, pose_errors, subgraph)
 
 __all__: list[str] = [
-    "align_first", "ate_rmse", "g2o_chi2", "graph_args", "gt_between_residuals", "gt_chi2", "gt_exp", "gt_lie_ops",
+    "align_first", "ate_rmse", "gt_read_g2o", "gt_optimize_pose_graph", "gt_robust_pose_graph", "plant_false_loops", "g2o_chi2", "graph_args", "gt_between_residuals", "gt_chi2", "gt_exp", "gt_lie_ops",
     "gt_log", "gtsam_optimize", "load_posegraph", "make_graph", "pose_errors", "random_poses", "subgraph",
 ]
 
@@ -41,3 +43,9 @@ from .place_recognition import gt_bow_scores, loop_sequence, retrieval_quality, 
 
 __all__ += ["gt_bow_scores", "loop_sequence", "retrieval_quality", "scipy_bow_scores", "true_revisits"]
 # /fe:614
+# fe:616
+from . import keyframes  # noqa: E402,F401 (register 6.16)
+from .keyframes import corridor_sequence, fallback_keyframes, gt_covisibility, gt_keyframes  # noqa: E402
+
+__all__ += ["corridor_sequence", "fallback_keyframes", "gt_covisibility", "gt_keyframes"]
+# /fe:616

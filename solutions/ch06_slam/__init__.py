@@ -37,3 +37,8 @@ from .place_recognition import bow_scores, bow_vectors, kmeans  # noqa: E402
 
 __all__ += ["bow_scores", "bow_vectors", "kmeans"]
 # /fe:614
+# fe:616
+from .keyframes import keyframes_and_covisibility  # noqa: E402
+
+__all__ += ["keyframes_and_covisibility"]
+# /fe:616

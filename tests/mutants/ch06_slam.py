@@ -227,3 +227,70 @@ MUTANTS += [  # front-end entries (6.14)
     ("6.14", "vocabulary = random descriptors (k-means never iterated)", bow_kmeans_never_iterated, None),
 ]
 # /fe:mut614
+# fe:mut616
+def _fe_keyframes(obs, fps, mapping_frames, relocalised=(), init=4, min_frames=0, *, paper=False, all_ref=False,
+                  ignore_busy=False, any_shared=False, keep_diagonal=False):
+    kfs = [0, init]
+    seen = {}
+    for k in kfs:
+        for p in obs[k]:
+            seen[p] = seen.get(p, 0) + 1
+    last_reloc = -10 ** 9
+    for f in range(init + 1, len(obs)):
+        if f in relocalised:
+            last_reloc = f
+        last = kfs[-1]
+        if f < last_reloc + fps and len(kfs) > fps:
+            continue
+        need = 2 if (all_ref or len(kfs) <= 2) else 3
+        n_ref = sum(1 for p in obs[last] if seen.get(p, 0) >= need)
+        tracked = sum(1 for p in obs[f] if seen.get(p, 0) >= 2)
+        idle = ignore_busy or f >= last + mapping_frames
+        if paper:
+            ok = f - last >= 20 and idle and tracked < 0.9 * n_ref and tracked > 15
+        else:
+            ok = (f - last >= fps or (f - last >= min_frames and idle)) and tracked < 0.9 * n_ref and tracked > 15 \
+                and idle
+        if ok:
+            kfs.append(f)
+            for p in obs[f]:
+                seen[p] = seen.get(p, 0) + 1
+    K = len(kfs)
+    W = np.zeros((K, K))
+    for i in range(K):
+        for j in range(K):
+            if i != j or keep_diagonal:
+                W[i, j] = len(set(obs[kfs[i]].tolist()) & set(obs[kfs[j]].tolist()))
+    S = W.copy()
+    np.fill_diagonal(S, 0)
+    W[(W < (1 if any_shared else 15))] = 0
+    for i in range(K):
+        if not (W[i] * (np.arange(K) != i)).any() and S[i].max() > 0:
+            j = int(np.argmax(S[i]))
+            W[i, j] = W[j, i] = S[i, j]
+    return np.array(kfs), W
+
+
+def kf_paper_twenty_frames(*a, **k):
+    return _fe_keyframes(*a, **k, paper=True)
+
+
+def kf_reference_counts_every_point(*a, **k):
+    return _fe_keyframes(*a, **k, all_ref=True)
+
+
+def kf_covisibility_any_shared_point(*a, **k):
+    return _fe_keyframes(*a, **k, any_shared=True)
+
+
+def kf_covisibility_self_loops(*a, **k):
+    return _fe_keyframes(*a, **k, keep_diagonal=True)
+
+
+MUTANTS += [  # front-end entries (6.16)
+    ("6.16", "the paper's '20 frames since the last keyframe'", kf_paper_twenty_frames, "ORB-SLAM paper"),
+    ("6.16", "n_ref counts every point of the reference keyframe", kf_reference_counts_every_point, "nRefMatches"),
+    ("6.16", "covisibility edge for any shared point", kf_covisibility_any_shared_point, "sharing any point"),
+    ("6.16", "covisibility with self-loops", kf_covisibility_self_loops, "diagonal"),
+]
+# /fe:mut616
