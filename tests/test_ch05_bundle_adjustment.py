@@ -171,3 +171,34 @@ def test_read_bal_leaves_no_temporary_files():
     for fn in (bundle_adjustment.read_bal, crashes):
         grade(EXERCISES["5.5"], fn, seed=0)
     assert leftovers() == before
+
+
+def test_lm_path_picture_shows_what_the_notebook_says():
+    # Section 1's picture (ch5.demo): y = a exp(b t) from two starts. The notebook's prose rests on these facts.
+    t, y = ch5.exp_fit_data()
+    cost = lambda p: float(ch5.exp_fit_cost(p[0], p[1], t, y))
+    from scipy.optimize import least_squares
+    best = least_squares(lambda p: p[0] * np.exp(p[1] * t) - y, ch5.EXP_TRUE, method="lm").x   # MINPACK's LM
+    F_min = cost(best)
+    start1, start2 = (0.5, -3.6), (3.5, 0.6)
+    # LM (D = diag H, Nielsen) reaches scipy's minimum from both starts, in under 20 steps, each step downhill.
+    for p0 in (start1, start2):
+        path, lams = ch5.lm_path(p0, t, y)
+        assert np.allclose(path[-1], best, atol=1e-6) and len(lams) < 20
+        assert np.all(np.diff([cost(p) for p in path]) < 0)
+    # From start 1 the damping starts large (> 1: gradient-like) and ends small (< 1e-2: Gauss-Newton-like).
+    lams = ch5.lm_path(start1, t, y)[1]
+    assert lams[0] > 1.0 and lams[-1] < 1e-2
+    # Gauss-Newton leaps off the valley from start 1 (its first step raises the cost by > 40 orders of
+    # magnitude: b ≈ 14) and never gets back; from start 2 it converges.
+    gn1 = ch5.gauss_newton_path(start1, t, y)
+    assert gn1[1, 1] > 10 and cost(gn1[1]) > 1e40 and cost(gn1[-1]) > 1000 * F_min
+    assert cost(ch5.gauss_newton_path(start2, t, y)[-1]) < (1 + 1e-9) * F_min
+    # Gradient descent converges from start 1 and stalls on the plateau (b -> -inf) from start 2.
+    assert cost(ch5.gradient_descent_path(start1, t, y, iters=60)[-1]) < 1.01 * F_min
+    gd2 = ch5.gradient_descent_path(start2, t, y, iters=60)
+    assert gd2[-1, 1] < -50 and cost(gd2[-1]) > 1000 * F_min
+    # The one-step curve runs from the Gauss-Newton step (λ = 1e-6: within 0.1 % of it; JᵀJ has a 3e-3
+    # diagonal entry here) to the start (λ = 1e8: a step of |g| / 1e8 ≈ 2e-8).
+    curve = ch5.lm_step_curve(start1, t, y, D="levenberg")
+    assert np.allclose(curve[0], gn1[1], rtol=1e-3) and np.linalg.norm(curve[-1] - start1) < 1e-6

@@ -10,6 +10,7 @@ BAL problem `problem-49-7776-pre` via `graders.datasets`.
 Modules: `problems` (synthetic problems, gauge-free judges), `bal_io` (5.5-5.6), `jacobians` (5.7-5.9),
 `normal_equations` (5.10), `schur` (5.11-5.12), `robust` (5.13), `lm` (5.14), `adjusters` (pycolmap and
 scipy bundle adjusters), `debug` (5.15-5.18), `questions` (5.1-5.4, 5.19-5.22), `frontier` (5.23),
+`demo` (section 1's picture of the Gauss-Newton, gradient-descent and LM paths on a 2-parameter cost),
 `common` (lazy oracles, memoised cases, output checks). Importing the package registers the chapter;
 the names below are the API of the notebook, the tests and the benchmark.
 """
@@ -24,6 +25,8 @@ from .adjusters import bal_to_reconstruction, colmap_bundle_adjust, library_bund
 from .bal_io import gt_read_bal, load_bal_problem, write_bal
 from .common import single_thread
 from .debug import debug_case, debug_truth, naive_gauss_newton
+from .demo import (EXP_TRUE, exp_fit_cost, exp_fit_data, gauss_newton_path, gradient_descent_path, lm_path,
+                   lm_step_curve)
 from .frontier import fd_differentiable_pose
 from .jacobians import fd_jacobians, gt_sparse_jacobian, gt_torch_cost, torch_jacobians
 from .normal_equations import gt_normal_equations
@@ -32,6 +35,8 @@ from .robust import gt_robust_weights
 from .schur import full_normal_equations, gt_schur_solve, reduced_camera_system, scipy_pcg
 
 __all__ = [
+    "EXP_TRUE", "exp_fit_cost", "exp_fit_data", "gauss_newton_path", "gradient_descent_path", "lm_path",
+    "lm_step_curve",
     "F", "bal_cost", "bal_to_reconstruction", "camera_centres", "colmap_bundle_adjust",
     "debug_case", "debug_truth", "fd_differentiable_pose", "fd_jacobians", "full_normal_equations", "gauge_mask",
     "gt_normal_equations", "gt_project", "gt_read_bal", "gt_robust_weights", "gt_schur_solve", "gt_sparse_jacobian",
