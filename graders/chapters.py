@@ -71,7 +71,10 @@ CHAPTERS: tuple[Chapter, ...] = (
             "SE(2)/SE(3) on the manifold, g2o pose graphs, sparse Gauss-Newton/LM pose-graph optimisation with "
             "robust kernels (graded on intel and parking-garage against GTSAM), ATE/RPE, monocular VO, "
             "bag-of-words loop closure, keyframes and covisibility, IMU pre-integration"),
-    Chapter(7, "calibration", "Calibration", ready=False),
+    Chapter(7, "calibration", "Calibration",
+            "Zhang's method on real chessboard views (normalised DLT, closed-form K, extrinsics, LM with analytic "
+            "Jacobians), stereo extrinsics and rectification, hand-eye AX = XB, camera-IMU time offset, an online "
+            "recalibration monitor"),
     Chapter(8, "dense", "Dense reconstruction: MVS, NeRF, 3D Gaussian splatting", ready=False),
     Chapter(9, "flow", "Optical flow and tracking", ready=False),
     Chapter(10, "large_scale", "Large-scale and learned 3D", ready=False),

@@ -5,9 +5,14 @@ poses X_c = R X + t, dist = (k1, k2, p1, p2, k3), pixel centres at integer coord
 """
 from __future__ import annotations
 
+from .motion import hand_eye, time_offset
+from .questions import (board_width_m, debug_causes, desync_mm, hand_eye_identifiable, rms_verdicts,
+                        recalibration_trigger, sync_choice, zhang_counts)
 from .stereo import stereo_extrinsics, stereo_rectify
 from .zhang import (board_homography, calibrate_camera, extrinsics_from_homography, intrinsics_from_homographies,
                     refine_calibration)
 
 __all__ = ["board_homography", "calibrate_camera", "extrinsics_from_homography", "intrinsics_from_homographies",
-           "refine_calibration", "stereo_extrinsics", "stereo_rectify"]
+           "refine_calibration", "stereo_extrinsics", "stereo_rectify", "hand_eye", "time_offset",
+           "board_width_m", "debug_causes", "desync_mm", "hand_eye_identifiable", "rms_verdicts",
+           "recalibration_trigger", "sync_choice", "zhang_counts"]

@@ -56,8 +56,8 @@ def stereo_extrinsics(X, uv1, uv2, K1, d1, K2, d2, Rs1, ts1, Rs2, ts2):
         S[2 * n * v:2 * n * (v + 1), 6 + 6 * v:12 + 6 * v] = 1
         S[2 * n * (V + v):2 * n * (V + v + 1), :6] = 1
         S[2 * n * (V + v):2 * n * (V + v + 1), 6 + 6 * v:12 + 6 * v] = 1
-    x = least_squares(residuals, x0, jac_sparsity=S, method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12,
-                      gtol=1e-12).x
+    x = least_squares(residuals, x0, jac_sparsity=S, method="trf", x_scale="jac", xtol=1e-10, ftol=1e-10,
+                      gtol=1e-10).x
     return rodrigues(x[:3]), x[3:6]
 
 

@@ -273,3 +273,130 @@ MUTANTS += [
     ("7.10", "P2 without f T_x", rectify_no_baseline_in_P2, "f · T_x"),
     ("7.10", "each camera's own principal point", rectify_own_principal_points, "same cy"),
 ]
+
+
+# ----------------------------------------------------------------- 7.11 hand_eye (the seed's sketch)
+
+from solutions.geometry import so3_log  # noqa: E402
+
+
+def _translation(A, B, Rx):
+    C = np.vstack([a[:3, :3] - np.eye(3) for a in A])
+    d = np.concatenate([Rx @ b[:3, 3] - a[:3, 3] for a, b in zip(A, B)])
+    return np.linalg.lstsq(C, d, rcond=None)[0]
+
+
+def _X(R, t):
+    X = np.eye(4)
+    X[:3, :3], X[:3, 3] = R, t
+    return X
+
+
+def hand_eye_seed_outer_order(A, B):
+    """The seed's sketch as written: M += outer(beta, alpha), R_X = U Vᵀ, "R_X = -R_X" if det < 0."""
+    M = sum(np.outer(so3_log(b[:3, :3]), so3_log(a[:3, :3])) for a, b in zip(A, B))
+    U, _, Vt = np.linalg.svd(M)
+    Rx = U @ Vt
+    if np.linalg.det(Rx) < 0:
+        Rx = -Rx
+    return _X(Rx, _translation(A, B, Rx))
+
+
+def hand_eye_minus_R_reflection_fix(A, B):
+    """The outer product in the right order, but the seed's "-R_X" for a reflection. Two exact motions
+    give a rank-2 M whose U Vᵀ is a reflection on about half the draws; the four 2-motion rows
+    (two draws) miss this mistake with probability ~1/4 per seed."""
+    M = sum(np.outer(so3_log(a[:3, :3]), so3_log(b[:3, :3])) for a, b in zip(A, B))
+    U, _, Vt = np.linalg.svd(M)
+    Rx = U @ Vt
+    if np.linalg.det(Rx) < 0:
+        Rx = -Rx
+    return _X(Rx, _translation(A, B, Rx))
+
+
+def hand_eye_t_B_not_rotated(A, B):
+    X = ref_motion.hand_eye(A, B)
+    C = np.vstack([a[:3, :3] - np.eye(3) for a in A])
+    d = np.concatenate([b[:3, 3] - a[:3, 3] for a, b in zip(A, B)])
+    X[:3, 3] = np.linalg.lstsq(C, d, rcond=None)[0]
+    return X
+
+
+def hand_eye_inverted(A, B):
+    return np.linalg.inv(ref_motion.hand_eye(A, B))
+
+
+# ----------------------------------------------------------------- 7.12 time_offset
+
+def offset_sign_flipped(t_imu, w_imu, t_cam, w_cam):
+    return -ref_motion.time_offset(t_imu, w_imu, t_cam, w_cam)
+
+
+def offset_whole_gyro_samples(t_imu, w_imu, t_cam, w_cam):
+    """Correlation on the gyro's own 5 ms grid, the best lag taken as is (no sub-sample step)."""
+    n_imu, n_cam = np.linalg.norm(w_imu, axis=1), np.linalg.norm(w_cam, axis=1)
+    dt = float(np.median(np.diff(t_imu)))
+    lags = np.arange(-20, 21) * dt
+    keep = (t_cam - 0.1 > t_imu[0]) & (t_cam + 0.1 < t_imu[-1])
+    c = n_cam[keep] - n_cam[keep].mean()
+    scores = [np.corrcoef(np.interp(t_cam[keep] + d, t_imu, n_imu), c)[0, 1] for d in lags]
+    return float(lags[int(np.argmax(scores))])
+
+
+def offset_x_axis_only(t_imu, w_imu, t_cam, w_cam):
+    """One axis of ω correlated (as if the camera and IMU frames were aligned)."""
+    return ref_motion.time_offset(t_imu, np.c_[w_imu[:, 0], 0 * w_imu[:, 1:]], t_cam,
+                                  np.c_[w_cam[:, 0], 0 * w_cam[:, 1:]])
+
+
+from solutions.ch07_calibration import motion as ref_motion  # noqa: E402
+
+MUTANTS += [
+    ("7.11", "seed sketch: outer(beta, alpha) and -R_X", hand_eye_seed_outer_order, "outer product the other way"),
+    ("7.11", "seed's -R_X for a reflection", hand_eye_minus_R_reflection_fix, "flip the last singular vector"),
+    ("7.11", "t_B not rotated by R_X", hand_eye_t_B_not_rotated, "t_B rotated by R_X"),
+    ("7.11", "X inverted", hand_eye_inverted, "X⁻¹"),
+    ("7.12", "sign of the offset", offset_sign_flipped, "sign is flipped"),
+    ("7.12", "whole gyro samples", offset_whole_gyro_samples, "sample grid"),
+    ("7.12", "one axis of omega", offset_x_axis_only, "|ω|"),
+]
+
+
+# ----------------------------------------------------------------- 7.16 recalibration_trigger
+
+def trigger_mean(residuals, baseline, window=50, factor=2.0):
+    r = np.asarray(residuals, float)
+    for k in range(window - 1, len(r)):
+        if r[k - window + 1:k + 1].mean() > factor * baseline:
+            return k
+    return -1
+
+
+def trigger_per_frame(residuals, baseline, window=50, factor=2.0):
+    over = np.flatnonzero(np.asarray(residuals, float) > factor * baseline)   # no window at all
+    return int(over[0]) if len(over) else -1
+
+
+def trigger_window_off_by_one(residuals, baseline, window=50, factor=2.0):
+    r = np.asarray(residuals, float)
+    for k in range(window, len(r)):
+        if np.median(r[k - window:k]) > factor * baseline:    # the window ends one frame early
+            return k
+    return -1
+
+
+MUTANTS += [
+    ("7.16", "mean of the window", trigger_mean, "median of the window"),
+    ("7.16", "no window", trigger_per_frame, "median of the window"),
+    ("7.16", "window one frame early", trigger_window_off_by_one, "one frame late or early"),
+]
+
+
+# ----------------------------------------------------------------- 7.13 debug_causes (answers, not functions)
+
+MUTANTS += [
+    ("7.13", "stereo mismatch blamed on the intrinsics",
+     ["wrong intrinsics", "time offset", "mount shift", "rolling shutter"], "intrinsics are"),
+    ("7.13", "rolling-shutter wobble blamed on calibration",
+     ["extrinsics drifted", "time offset", "mount shift", "wrong intrinsics"], "row-sequential"),
+]

@@ -1,0 +1,74 @@
+"""7.16 — FRONTIER: an online calibration monitor on a simulated drifting stereo rig.
+
+Every frame, the rig's points (depth from camera 1) are reprojected into camera 2 through the
+factory extrinsics; the frame's median residual is logged. A mount that starts to drift (camera 2
+turning by a growing angle) raises it; bad frames (a wrong data association) spike it. The monitor
+triggers recalibration when the median of the last `window` frame residuals exceeds `factor` times
+the factory baseline (2x in the lesson), and must ignore the spikes.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from graders.engine import Case, Exercise, Hint, register
+from graders.geometry import project, so3_exp
+from graders import scene
+
+from .boards import SIZE
+
+
+def drifting_rig(rng: np.random.Generator, n_frames: int = 600, n_points: int = 80) -> dict:
+    """residuals (n_frames,) px: each frame's median reprojection residual in camera 2; `drift_start`;
+    `baseline`: the factory RMS (median residual of the first 100 frames)."""
+    K = scene.random_intrinsics(rng, *SIZE)
+    t = np.array([0.1, 0.0, 0.0])
+    drift_start = int(rng.integers(150, 400))
+    rate = np.radians(rng.uniform(0.0005, 0.002))          # rad per frame once the mount creeps
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    bad = rng.random(n_frames) < 0.03                       # 3 % bad frames
+    res = np.empty(n_frames)
+    for k in range(n_frames):
+        X = np.c_[rng.uniform(-1.5, 1.5, (n_points, 2)), rng.uniform(3, 8, n_points)]
+        R_true = so3_exp(axis * rate * max(0, k - drift_start))
+        uv_obs = scene.add_noise(rng, project(X, K, R_true, t)[0], 0.3)
+        if bad[k]:
+            uv_obs[: n_points // 2 + 5] += rng.uniform(-40, 40, (n_points // 2 + 5, 2))
+        res[k] = np.median(np.linalg.norm(uv_obs - project(X, K, np.eye(3), t)[0], axis=1))
+    return {"residuals": res, "baseline": float(np.median(res[:100])), "drift_start": drift_start, "bad": bad}
+
+
+def gt_recalibration_trigger(residuals, baseline, window: int = 50, factor: float = 2.0) -> int:
+    """The first frame k (>= window - 1) whose trailing window [k - window + 1, k] has a median above
+    factor x baseline; -1 if none."""
+    r = np.asarray(residuals, float)
+    for k in range(window - 1, len(r)):
+        if np.median(r[k - window + 1:k + 1]) > factor * baseline:
+            return k
+    return -1
+
+
+def _cases(rng):
+    cases = []
+    for i, (window, factor) in enumerate(((50, 2.0), (30, 1.5), (50, 2.0))):
+        d = drifting_rig(rng)
+        args = (d["residuals"], d["baseline"], window, factor)
+        # Exact: the trigger frame is an integer defined by the rule above.
+        cases.append(Case(f"drifting rig {i + 1} (window {window}, {factor}x baseline)", args,
+                          gt_recalibration_trigger(*args), lambda o, e: abs(float(o) - e), 0.0, "frames", shape=(),
+                          key=f"rig-{i + 1}", info=d))
+    return cases
+
+
+FRONTIER_HINTS = [
+    Hint("your monitor fired before the drift began, on a burst of bad frames: use the median of the window, "
+         "not its mean (one bad frame in 50 moves a mean).",
+         lambda c, out: 0 <= float(out) < c.info["drift_start"]),
+    Hint("one frame late or early: the window ending at frame k is residuals[k - window + 1 : k + 1], and the "
+         "test is strictly greater than factor x baseline.", lambda c, out: abs(float(out) - c.expected) == 1),
+]
+
+register(Exercise(
+    id="7.16", title="An online recalibration monitor", name="recalibration_trigger", kind="frontier", points=2,
+    cases=_cases, hints=FRONTIER_HINTS, fallback=gt_recalibration_trigger, timeout=20.0,
+    arg_names=("residuals", "baseline", "window", "factor")))
