@@ -45,7 +45,7 @@ __all__ += ["gt_bow_scores", "loop_sequence", "retrieval_quality", "scipy_bow_sc
 # /fe:614
 # fe:616
 from . import keyframes  # noqa: E402,F401 (register 6.16)
-from .keyframes import corridor_sequence, fallback_keyframes, gt_covisibility, gt_keyframes  # noqa: E402
+from .keyframes import corridor_sequence, fallback_keyframes, gt_covisibility, gt_keyframes, tracked_counts  # noqa: E402,E501
 
-__all__ += ["corridor_sequence", "fallback_keyframes", "gt_covisibility", "gt_keyframes"]
+__all__ += ["corridor_sequence", "fallback_keyframes", "gt_covisibility", "gt_keyframes", "tracked_counts"]
 # /fe:616

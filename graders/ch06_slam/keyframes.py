@@ -106,6 +106,22 @@ def gt_covisibility(obs, kfs, threshold: int = COVIS_MIN, fallback: bool = True)
     return W
 
 
+def tracked_counts(obs, kfs, init: int = 4) -> np.ndarray:
+    """Tracked map points per frame under the model of `gt_keyframes` (for pictures): frame f tracks its
+    points observed by >= 2 of the keyframes before it (the initialisation pair counts from the start)."""
+    counts = np.zeros(1 + max((int(o.max()) for o in obs if len(o)), default=0), int)
+    for k in (0, init):
+        counts[obs[k]] += 1
+    later = [k for k in kfs if k > init]
+    out, j = [], 0
+    for f, o in enumerate(obs):
+        while j < len(later) and later[j] < f:
+            counts[obs[later[j]]] += 1
+            j += 1
+        out.append(int((counts[o] >= 2).sum()))
+    return np.array(out)
+
+
 # ----------------------------------------------------------------- exercise
 
 def _convert(out, case):
