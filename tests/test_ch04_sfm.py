@@ -16,7 +16,7 @@ import grader_checks as checks
 import solutions.ch04_sfm as REF
 from graders import ch04_sfm as ch4
 from graders import chapter, get, grade
-from graders.ch04_sfm.debug import _metric_registration, _metric_traj
+from graders.ch04_sfm.debug import _metric_traj
 from graders.compare import rotation_angle_deg
 from graders import scene
 from graders.geometry import to_h, umeyama
@@ -259,12 +259,40 @@ def test_debug_symptoms_are_real():
     # Each DEBUG case shows its symptom with the colleague's code/settings, on the case learners get.
     case, truth = ch4.debug_components(np.random.default_rng(0))
     assert len(truth["components"]) >= 2 and len(ch4.broken_components(case)) == 1
-    case, truth = ch4.debug_registration(np.random.default_rng(0))
-    assert _metric_registration(ch4.BROKEN_SETTINGS, dict(truth, case=case)) > 0.5
     case, truth = ch4.debug_drift(np.random.default_rng(0))
     assert _metric_traj(ch4.broken_trajectory(case), truth) > 5 * _metric_traj(ch4.gt_fix_drift(case), truth)
-    case, truth = ch4.debug_initial_pair(np.random.default_rng(0))
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_registration_log_shows_the_symptom(seed):
+    # 4.19: the colleague's run (camera 0's K for every image) registers every real image of camera 0 and none of
+    # camera 1; the log and metrics the learner reads say so, and the failing images have as many matches.
+    case, truth = ch4.debug_registration(np.random.default_rng(seed))
+    run = ch4.broken_registration(case)
+    cam = np.array([im["camera_id"] for im in case["images"]])
+    real = np.array([p is not None for p in truth["poses"]])
+    got = np.array([p is not None for p in run["poses"]])
+    assert real[cam == 1].any() and not got[cam == 1].any() and got[(cam == 0) & real].all()
+    assert case["log"] == run["log"] and case["metrics"]["registered"] == got.sum() < real.sum()
+    n = np.array(case["metrics"]["matches"])
+    assert n[(cam == 1) & real].min() >= 80 and n[got].min() >= 80
+    assert set(case) == {"cameras", "points3D", "images", "log", "metrics"}          # the truth stays hidden
+    # knob-twiddling does not repair it: camera 0's K with a 30 px threshold leaves camera 1's images wrong
+    from mutants.ch04_sfm import registration_knobs_loosened
+    status = ch4.registration_status(registration_knobs_loosened(case), truth)
+    assert all(s != "ok" for s, c, r in zip(status, cam, real) if c == 1 and r)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_initial_pair_log_shows_the_symptom(seed):
+    # 4.21: the colleague's pair is the pure rotation; its log shows ~0° triangulation angles and points hundreds
+    # of baselines away, and a repair that names the cause but keeps that pair fails on the hidden truth.
+    case, truth = ch4.debug_initial_pair(np.random.default_rng(seed))
     assert truth["kinds"][ch4.broken_initial_pair(case)] == "rotation"
+    m = case["metrics"]
+    assert m["median_angle_deg"] < 0.5 and m["median_depth_over_baseline"] > 100, case["log"]
+    assert m["n_inliers_H"] > 0.8 * m["n_inliers_E"]
+    assert set(case) == {"K", "pairs", "log", "metrics"}
 
 
 def test_recon_errors_are_gauge_free():

@@ -8,7 +8,9 @@
                            4.14      incremental SfM: synthetic scenes (K known and unknown), the Sacré-Cœur
     rotation_averaging.py  4.15      chordal L2
     colmap_io.py           4.16-4.17 COLMAP text models
-    debug.py               4.18-4.21 DEBUG: components, registration, scale drift, initial pair
+    debug.py               4.18, 4.20 DEBUG: components, scale drift (and debug_case for all four)
+    repairs.py             4.19, 4.21 DEBUG, diagnosed repairs: failed registrations, a degenerate initial pair
+    standin_ba.py          bundle_adjust: chapter 5's scipy adjuster on a 4.14 reconstruction (a stand-in)
     alignment.py           4.25      FRONTIER: Umeyama on pointmaps
     questions.py           4.1-4.3, 4.22-4.24
 
@@ -23,16 +25,18 @@ from __future__ import annotations
 
 from ..compare import rotation_angle_deg
 from ..geometry import camera_centre, project
-from ..oracles.colmap import colmap_read_text, gt_write_colmap_text
+from ..oracles.colmap import colmap_log, colmap_read_text, gt_write_colmap_text
 from ..oracles.sfm_standin import IncrementalSfM, cv_incremental_sfm, cv_pnp_ransac, union_find_tracks
 from ..scene import two_view
 from . import questions  # noqa: F401  (registers 4.1-4.3, 4.22-4.24)
 from .alignment import cv_umeyama, pointmap_pair
 from .colmap_io import colmap_recon
-from .debug import (BROKEN_SETTINGS, broken_components, broken_initial_pair, broken_trajectory, cv_fix_initial_pair,
-                    cv_pair_stats,
-                    debug_case, debug_components, debug_drift, debug_initial_pair, debug_registration, gt_components,
-                    gt_fix_drift, register_all)
+from .debug import (broken_components, broken_trajectory, debug_case, debug_components, debug_drift, gt_components,
+                    gt_fix_drift)
+from .repairs import (INITIAL_PAIR_CAUSES, REGISTRATION_CAUSES, broken_initial_pair, broken_initial_run,
+                      broken_registration, cv_fix_initial_pair, cv_fix_registration, cv_pair_stats, debug_initial_pair,
+                      debug_registration, registration_status)
+from .standin_ba import bundle_adjust
 from .incremental import focal_error, low_angle_fraction, recon_errors
 from .initial_pair import colmap_two_view, cv_two_view_init, gt_rank_initial_pairs
 from .photos import (SACRE_COEUR_FEATURES, SACRE_COEUR_MAX_SIDE, colmap_sacre_coeur, real_reprojection_px,
@@ -60,8 +64,11 @@ __all__ = [
     "sacre_coeur_problem", "colmap_sacre_coeur", "SACRE_COEUR_MAX_SIDE", "SACRE_COEUR_FEATURES",
     # DEBUG (section 3)
     "debug_case", "debug_components", "debug_registration", "debug_drift", "debug_initial_pair",
-    "broken_components", "broken_initial_pair", "broken_trajectory", "register_all", "BROKEN_SETTINGS",
-    "cv_pair_stats", "cv_fix_initial_pair", "gt_components", "gt_fix_drift",
+    "broken_components", "broken_initial_pair", "broken_initial_run", "broken_registration", "broken_trajectory",
+    "REGISTRATION_CAUSES", "INITIAL_PAIR_CAUSES", "registration_status",
+    "cv_pair_stats", "cv_fix_initial_pair", "cv_fix_registration", "gt_components", "gt_fix_drift",
+    # stand-ins a learner may call in self-study: chapter 5's scipy bundle adjuster; pycolmap's C++ log switch
+    "bundle_adjust", "colmap_log",
     # questions
     "sigma_z",
 ]

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from .initial_pair import rank_initial_pairs, two_view_init
+from .pnp import pnp_ransac
 
 
 def fix_components(case: dict) -> list[list[int]]:
@@ -38,12 +39,24 @@ def fix_components(case: dict) -> list[list[int]]:
 
 
 def fix_registration(case: dict) -> dict:
-    """Exercise 4.19: Many images fail to register → with 1.5 px keypoint noise a 1 px PnP threshold rejects most
-    true 2D-3D matches, and 100 inliers is more than many images have → COLMAP-like settings: a
-    threshold of a few pixels (4 px here: ≥ 2.5 σ), ≥ 30 inliers (still far above what a wrong
-    image reaches by chance), enough iterations for 50 % outliers (k = 35 at p = 0.99; 1,000 is cheap).
+    """Exercise 4.19: Many images fail to register → the log shows every failing real image is from camera 1 (the
+    registered ones from camera 0), with as many 2D-3D matches as the rest but inliers at chance level: the
+    colleague registers every image with camera 0's K → each image with its own camera's K, same PnP settings
+    (4 px against 1 px noise, ≥ 30 inliers and ≥ 25 % of the matches, which keeps the images of another place out).
+
+    case: cameras [{K, width, height}], points3D (P, 3), images [{camera_id, x (n, 2), point_ids (n,)}], log,
+    metrics. Returns {"cause": "intrinsics", "poses": [(R, t) or None per image]}.
     """
-    return {"thresh_px": 4.0, "min_inliers": 30, "iterations": 1000}
+    X_all = np.asarray(case["points3D"], float)
+    poses = []
+    for im in case["images"]:
+        K = np.asarray(case["cameras"][im["camera_id"]]["K"], float)
+        x = np.asarray(im["x"], float)
+        # 1,000 samples: 40 % wrong matches need k = 52 at p = 0.999; an image of another place never stops early
+        R, t, inl = pnp_ransac(X_all[im["point_ids"]], x, K, thresh_px=4.0, seed=0, max_iters=1000)
+        ok = R is not None and inl.sum() >= max(30, 0.25 * len(x))
+        poses.append((R, t) if ok else None)
+    return {"cause": "intrinsics", "poses": poses}
 
 
 def fix_scale_drift(case: dict, smooth: float = 30.0) -> np.ndarray:
@@ -75,21 +88,27 @@ def fix_scale_drift(case: dict, smooth: float = 30.0) -> np.ndarray:
     return C0 + np.r_[np.zeros((1, 3)), np.cumsum(s[:, None] * steps, 0)]
 
 
-def fix_initial_pair(case: dict) -> int:
-    """Exercise 4.21: Initialisation fails → the pair with the most matches is a camera turning on the spot (no
-    parallax; H explains as much as E) → score every candidate COLMAP-style: E and H inlier counts and
-    the median triangulation angle from `two_view_init`, then `rank_initial_pairs`.
+def fix_initial_pair(case: dict) -> dict:
+    """Exercise 4.21: Initialisation on a degenerate pair → the log shows E explaining every match of the chosen
+    pair with a median triangulation angle of ~0° and points thousands of baselines away: the colleague took the
+    pair with most matches, a camera turning on the spot (no parallax) → score every candidate COLMAP-style (E and
+    H inliers, median triangulation angle, from `two_view_init`), rank them (`rank_initial_pairs`), and
+    initialise from the best.
 
-    case: K, pairs [{x1, x2}, ...]. Returns the index of the chosen pair.
+    case: K, pairs [{x1, x2}, ...], log, metrics. Returns {"cause": "no_parallax", "pair": i, "R", "t", "X",
+    "inliers"}: the chosen pair's two-view reconstruction (camera 1 = [I | 0], ‖t‖ = 1).
     """
     K = np.asarray(case["K"], float)
-    stats = []
+    stats, results = [], []
     for p in case["pairs"]:
         st: dict = {}
         try:
-            two_view_init(p["x1"], p["x2"], K, K, stats=st)
+            results.append(two_view_init(p["x1"], p["x2"], K, K, stats=st))
         except Exception:        # a hopeless pair (too few matches for the solvers)
+            results.append(None)
             st = {}
         stats.append({"n_matches": len(p["x1"]), "n_inliers_E": st.get("n_inliers_E", 0),
                       "n_inliers_H": st.get("n_inliers_H", 0), "median_angle_deg": st.get("median_angle_deg", 0.0)})
-    return int(rank_initial_pairs(stats)[0])
+    i = int(rank_initial_pairs(stats)[0])
+    R, t, X, inliers = results[i]
+    return {"cause": "no_parallax", "pair": i, "R": R, "t": t, "X": X, "inliers": inliers}
