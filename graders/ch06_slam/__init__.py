@@ -49,3 +49,9 @@ from .keyframes import corridor_sequence, fallback_keyframes, gt_covisibility, g
 
 __all__ += ["corridor_sequence", "fallback_keyframes", "gt_covisibility", "gt_keyframes", "tracked_counts"]
 # /fe:616
+# fe:615
+from . import loop_closure  # noqa: E402,F401 (register 6.15)
+from .loop_closure import fallback_detect_loops, gt_detect_loops, loop_keyframes  # noqa: E402
+
+__all__ += ["fallback_detect_loops", "gt_detect_loops", "loop_keyframes"]
+# /fe:615

@@ -42,3 +42,8 @@ from .keyframes import keyframes_and_covisibility  # noqa: E402
 
 __all__ += ["keyframes_and_covisibility"]
 # /fe:616
+# fe:615
+from .loop_closure import detect_loops  # noqa: E402
+
+__all__ += ["detect_loops"]
+# /fe:615

@@ -550,3 +550,50 @@ MUTANTS += [  # front-end entries (6.16)
     ("6.16", "covisibility with self-loops", kf_covisibility_self_loops, "diagonal"),
 ]
 # /fe:mut616
+# fe:mut615
+def _fe_loops(S, count_inliers, recent=10, min_inliers=20, consistency=3, *, recent_on=True, consistent_on=True,
+              geometry_on=True, min_score_on=True):
+    N = len(S)
+    history = []
+    loops = []
+    for i in range(N):
+        top = i - recent if recent_on else i
+        if i < 3 or top <= 0:
+            history.append(set())
+            continue
+        floor = min(S[i, i - 1], S[i, i - 2]) if min_score_on else -1.0
+        cand = [j for j in range(top) if S[i, j] >= floor]
+        history.append(set(cand))
+        if consistent_on:
+            cand = [j for j in cand if all(any(abs(j - q) <= 2 for q in history[i - k]) for k in (1, 2))]
+        cand.sort(key=lambda j: -S[i, j])
+        for j in cand:
+            if not geometry_on or count_inliers(i, j) >= min_inliers:
+                loops.append((i, j))
+                break
+    return loops
+
+
+def loops_recent_not_excluded(*a, **k):
+    return _fe_loops(*a, **k, recent_on=False)
+
+
+def loops_no_temporal_consistency(*a, **k):
+    return _fe_loops(*a, **k, consistent_on=False)
+
+
+def loops_no_geometric_verification(*a, **k):
+    return _fe_loops(*a, **k, geometry_on=False)
+
+
+def loops_no_minimum_score(*a, **k):
+    return _fe_loops(*a, **k, consistent_on=False, min_score_on=False)
+
+
+MUTANTS += [  # front-end entries (6.15)
+    ("6.15", "recent keyframes not excluded", loops_recent_not_excluded, "recent keyframes"),
+    ("6.15", "no temporal consistency", loops_no_temporal_consistency, "poster"),
+    ("6.15", "no geometric verification", loops_no_geometric_verification, "geometry fails"),
+    ("6.15", "best score only, no consistency nor minimum score", loops_no_minimum_score, None),
+]
+# /fe:mut615
