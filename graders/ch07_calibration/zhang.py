@@ -81,10 +81,10 @@ def _homography_cases(rng):
         X_xy = rig["X"][:, :2] * unit_scale
         uv, uv_true = rig["uv"][0], rig["uv_true"][0]
         oracle = _transfer_rms(gt_homography(X_xy, uv), X_xy, uv_true)
-        # exact: 1e-6 px (float64 SVD on 54 points reaches 1e-9 px). noisy: the transfer error on the
+        # exact: 1e-4 px (float64 SVD on 54 points reaches 1e-9 px; OpenCV's LM stops at 4e-6 px). noisy: the transfer error on the
         # noise-free corners within 1.3x that of OpenCV's DLT + LM on the same draw, + 0.02 px (an
         # algebraic DLT without the LM polish is 0-20 % worse at 0.3 px noise on 54 corners).
-        tol = 1e-6 if noise == 0 else 0.3 * oracle + 0.02
+        tol = 1e-4 if noise == 0 else 0.3 * oracle + 0.02
         metric = (lambda X_xy, uv_true, oracle: lambda H, _: max(0.0, _transfer_rms(H, X_xy, uv_true) - oracle))(
             X_xy, uv_true, oracle if noise else 0.0)
         name = {"exact": "noise-free view", "noisy": "0.3 px noise, board in metres",
