@@ -75,7 +75,11 @@ CHAPTERS: tuple[Chapter, ...] = (
             "Zhang's method on real chessboard views (normalised DLT, closed-form K, extrinsics, LM with analytic "
             "Jacobians), stereo extrinsics and rectification, hand-eye AX = XB, camera-IMU time offset, an online "
             "recalibration monitor"),
-    Chapter(8, "dense", "Dense reconstruction: MVS, NeRF, 3D Gaussian splatting", ready=False),
+    Chapter(8, "dense", "Dense reconstruction: MVS, NeRF, 3D Gaussian splatting",
+            "disparity and matching costs, block matching with sub-pixel refinement and left-right check, "
+            "semi-global matching (graded on the Middlebury motorcycle pair against OpenCV), plane-sweep MVS, "
+            "depth-map fusion with geometric consistency, NeRF volume rendering and sampling, 3D Gaussian "
+            "projection, tiled compositing and a differentiable splatting fit"),
     Chapter(9, "flow", "Optical flow and tracking", ready=False),
     Chapter(10, "large_scale", "Large-scale and learned 3D", ready=False),
     Chapter(11, "capstone", "Capstone: cascading pipeline failures", ready=False),

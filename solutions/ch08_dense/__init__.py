@@ -1,0 +1,15 @@
+"""Chapter 8 — dense reconstruction, from scratch: every learner name of the notebook (instructor release).
+
+numpy (vectorised cost volumes) and scipy (filters) for the geometry half; torch on CPU for the neural
+half. Conventions (docs/CONVENTIONS.md): rectified pairs, disparity d = x_left - x_right >= 0 in
+pixels, NaN where no disparity is reported; poses world-to-camera X_c = R X + t; depth is the camera
+frame's Z.
+"""
+from __future__ import annotations
+
+from .questions import *  # noqa: F401,F403 (8.1-8.3, 8.24)
+from .questions import __all__ as _questions
+
+__all__ = list(_questions)
+
+# neural (8.4-8.7, 8.12-8.16, 8.18-8.23, 8.25)
