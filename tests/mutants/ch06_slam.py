@@ -597,3 +597,33 @@ MUTANTS += [  # front-end entries (6.15)
     ("6.15", "best score only, no consistency nor minimum score", loops_no_minimum_score, None),
 ]
 # /fe:mut615
+# fe:mut620
+def _fe_track(case, *, velocity=True, radius=None, cause="a"):
+    n = case["n_frames"]
+    T = [np.asarray(case["T0"], float)]
+    for k in range(1, n):
+        V = T[-1] @ np.linalg.inv(T[-2]) if velocity and k >= 2 else np.eye(4)
+        T_pred = V @ T[-1]
+        idx, uv = case["match"](T_pred, k, radius or case["window_px"])
+        T.append(case["refine"](T_pred, idx, uv) if len(idx) >= 15 else T_pred)
+    return cause, np.array(T)
+
+
+def track_unchanged(case):
+    return _fe_track(case, velocity=False)
+
+
+def track_wider_window(case):
+    return _fe_track(case, velocity=False, radius=100.0)
+
+
+def track_right_fix_wrong_cause(case):
+    return _fe_track(case, cause="c")
+
+
+MUTANTS += [  # front-end entries (6.20)
+    ("6.20", "tracker left as it was", track_unchanged, "constant-velocity"),
+    ("6.20", "search window widened to 100 px instead", track_wider_window, "constant-velocity"),
+    ("6.20", "fixed, but the cause named 'motion blur'", track_right_fix_wrong_cause, "previous pose"),
+]
+# /fe:mut620
