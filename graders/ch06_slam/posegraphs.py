@@ -181,10 +181,10 @@ def _true_path(rng, n: int, dim: int) -> np.ndarray:
 
 
 def make_graph(rng, dim: int = 2, n: int = 120, n_loops: int = 12, sigma_t: float = 0.05,
-               sigma_r: float = 0.01, n_false: int = 0) -> dict:
+               sigma_r: float = 0.01, n_false: int = 0, loop_scale: float = 1.0) -> dict:
     """A graph with known truth: odometry between consecutive poses and `n_loops` loop closures between
     poses within 1.5 m of each other on different laps, all with Gaussian noise of the stated sigmas
-    (their information exactly the inverse covariance); `n_false` wrong loop closures between poses far
+    (their information exactly the inverse covariance; loop closures' sigmas x `loop_scale`); `n_false` wrong loop closures between poses far
     apart (a measurement of "same place", strongly trusted). The start "T" chains the odometry."""
     truth = _true_path(rng, n, dim)
     k = 3 if dim == 2 else 6
@@ -195,8 +195,9 @@ def make_graph(rng, dim: int = 2, n: int = 120, n_loops: int = 12, sigma_t: floa
     pick = rng.choice(len(ii), min(n_loops, len(ii)), replace=False) if len(ii) else np.array([], int)
     edges = np.r_[np.c_[np.arange(n - 1), np.arange(1, n)], np.c_[ii[pick], jj[pick]]].astype(int)
     rel = np.linalg.inv(truth[edges[:, 0]]) @ truth[edges[:, 1]]
-    Z = rel @ _exp(rng.normal(0, 1, (len(edges), k)) * sig)
-    info = np.tile(np.diag(1 / sig**2), (len(edges), 1, 1))
+    scale = np.where(np.arange(len(edges)) < n - 1, 1.0, loop_scale)[:, None]
+    Z = rel @ _exp(rng.normal(0, 1, (len(edges), k)) * sig * scale)
+    info = np.diag(1 / sig**2)[None] / scale[:, :, None] ** 2
     is_false = np.zeros(len(edges), bool)
     if n_false:
         far_i, far_j = np.nonzero((D > 4.0) & (np.arange(n)[None] - np.arange(n)[:, None] > 15))

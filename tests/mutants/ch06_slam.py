@@ -264,6 +264,48 @@ MUTANTS += [
 ]
 
 
+# 6.18, 6.19, 6.21: DEBUG fixes
+
+
+def drift_unchanged(case):
+    return "no loop closure", case["T"]                        # the diagnosis right, nothing repaired
+
+
+def drift_blames_bias(case):
+    return "biased odometry", _pg.optimize_pose_graph(case["T"], case["edges"], case["Z"], case["info"])
+
+
+def jumps_accept_all(case):
+    return "false loop closure accepted", _pg.optimize_pose_graph(case["T"], case["edges"], case["Z"], case["info"])
+
+
+def jumps_drop_all_loops(case):
+    keep = ~_np.asarray(case["is_loop"])
+    return "false loop closure accepted", _pg.optimize_pose_graph(case["T"], case["edges"][keep], case["Z"][keep],
+                                                                  case["info"][keep])
+
+
+def inconsistent_plain_l2(case):
+    return ("conflicting constraints, no robust kernel",
+            _pg.optimize_pose_graph(case["T"], case["edges"], case["Z"], case["info"]))
+
+
+def inconsistent_drop_all_loops(case):
+    keep = ~_np.asarray(case["is_loop"])
+    return ("conflicting constraints, no robust kernel",
+            _pg.optimize_pose_graph(case["T"], case["edges"][keep], case["Z"][keep], case["info"][keep]))
+
+
+MUTANTS += [
+    ("6.18", "diagnosed, not repaired", drift_unchanged, "never used"),
+    ("6.18", "blames biased odometry", drift_blames_bias, "zero-mean"),
+    ("6.19", "every candidate accepted", jumps_accept_all, "fewer than 20 inliers"),
+    ("6.19", "every loop closure dropped", jumps_drop_all_loops, "drifts like the odometry"),
+    ("6.21", "plain least squares", inconsistent_plain_l2, "robust kernel"),
+    ("6.21", "every loop closure dropped", inconsistent_drop_all_loops, "drifts like the odometry"),
+]
+
+
 # front-end (6.12–6.17, 6.20)
 # fe:mut
 import numpy as np  # noqa: E402 (front-end's mutants)

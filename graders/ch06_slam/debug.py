@@ -1,0 +1,239 @@
+"""Chapter 6, section 3 (DEBUG): 6.18, 6.19, 6.21 — broken SLAM back ends to diagnose and repair.
+
+Each generator returns (the case shown to the learner, the hidden truth). The learner returns
+(cause, T): the cause, one of CAUSES (graded as a choice), and the repaired trajectory, judged by its
+absolute trajectory error against the true poses (ATE, m RMS after a rigid Umeyama alignment: gauge-free).
+The tolerance is tied to what GTSAM reaches on the same draw with the right graph (x1.5, at least 5 cm),
+and every draw is redrawn until the broken pipeline is at least 2.5x the tolerance off.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from graders.engine import Case, Exercise, Hint, OutputError, debug_practice, register, shared_run
+
+from .posegraphs import _exp, ate_rmse, gtsam_optimize, make_graph
+
+CAUSES = ["no loop closure", "biased odometry", "false loop closure accepted",
+          "conflicting constraints, no robust kernel", "tracking lost"]
+MIN_INLIERS = 20   # ORB-SLAM's geometric verification: a Sim(3)/SE(3) with at least 20 inliers
+# Odometry with 0.02 rad of heading noise per metre drifts 0.3-1.5 m over the run; loop closures 3x more
+# precise than odometry (they come from many matched points) bring the optimum to ~0.1-0.3 m ATE.
+GRAPH = {2: dict(dim=2, n=150, n_loops=25, sigma_r=0.02, loop_scale=0.3),
+         3: dict(dim=3, n=200, n_loops=30, sigma_r=0.02, loop_scale=0.3)}
+BROKEN_FACTOR = 2.5   # a draw is kept when the broken pipeline is at least 2.5x the tolerance off
+
+
+def _case_from_graph(g: dict, is_loop: np.ndarray, inliers: np.ndarray, settings: dict) -> dict:
+    """What the learner gets: the start (the odometry chain), every edge, which edges are loop closures, each
+    loop candidate's number of RANSAC inliers (-1 for odometry) and the pipeline's settings."""
+    return {"T": g["T"], "edges": g["edges"], "Z": g["Z"], "info": g["info"], "is_loop": is_loop,
+            "inliers": inliers, "settings": settings}
+
+
+def _kinds(g: dict) -> np.ndarray:
+    """True for loop closures: every edge after the N - 1 odometry edges."""
+    return np.arange(len(g["edges"])) >= len(g["T"]) - 1
+
+
+def _truth(g: dict, keep: np.ndarray, cause: str, broken: np.ndarray) -> dict:
+    T_ok = gtsam_optimize(g["T"], g["edges"][keep], g["Z"][keep], g["info"][keep])
+    ate_ok = ate_rmse(T_ok, g["truth"])
+    return {"truth": g["truth"], "cause": cause, "ate_fixed": ate_ok, "ate_broken": ate_rmse(broken, g["truth"]),
+            "tol": max(0.05, 1.5 * ate_ok), "T_fixed": T_ok}
+
+
+def debug_drift(rng, dim: int | None = None) -> tuple[dict, dict]:
+    """6.18 — the trajectory drifts: loop closures were detected but the back end never used them."""
+    dim = dim or int(rng.choice([2, 3]))
+    for _ in range(20):
+        g = make_graph(rng, **GRAPH[dim])
+        kind = _kinds(g)
+        inliers = np.where(kind, rng.integers(40, 200, len(kind)), -1)
+        case = _case_from_graph(g, kind, inliers, {"loop_closure": False, "kernel": None})
+        truth = _truth(g, np.ones(len(kind), bool), "no loop closure", g["T"])
+        if truth["ate_broken"] >= BROKEN_FACTOR * truth["tol"]:
+            return case, truth
+    raise RuntimeError("no drifting draw in 20 tries")
+
+
+def debug_jumps(rng, dim: int | None = None) -> tuple[dict, dict]:
+    """6.19 — sudden jumps: place recognition proposed 3 wrong loop closures (perceptual aliasing: the same
+    shelf elsewhere) and the pipeline accepted every candidate without geometric verification."""
+    dim = dim or int(rng.choice([2, 3]))
+    for _ in range(20):
+        g = make_graph(rng, n_false=3, **GRAPH[dim])
+        kind = _kinds(g)
+        inliers = np.where(kind, rng.integers(40, 200, len(kind)), -1)
+        inliers[g["is_false"]] = rng.integers(6, MIN_INLIERS - 4, int(g["is_false"].sum()))
+        case = _case_from_graph(g, kind, inliers, {"loop_closure": True, "geometric_verification": False,
+                                                   "kernel": None})
+        broken = gtsam_optimize(g["T"], g["edges"], g["Z"], g["info"])
+        truth = _truth(g, ~g["is_false"], "false loop closure accepted", broken)
+        if truth["ate_broken"] >= BROKEN_FACTOR * truth["tol"] and \
+                ate_rmse(g["T"], g["truth"]) >= BROKEN_FACTOR * truth["tol"]:
+            return case, truth
+    raise RuntimeError("no draw with visible jumps in 20 tries")
+
+
+def debug_inconsistent(rng, dim: int | None = None) -> tuple[dict, dict]:
+    """6.21 — the map is inconsistent after loop closure: three (SE(3): four) loop constraints conflict with the
+    rest (a repeated structure matched with a consistent but wrong relative pose, 2-4 m and ~12 deg off, many
+    inliers and an overconfident covariance, 10x the information), and the back end is plain least squares."""
+    dim = dim or int(rng.choice([2, 3]))
+    k = 3 if dim == 2 else 6
+    tr, ro = (slice(0, 2), slice(2, 3)) if dim == 2 else (slice(3, 6), slice(0, 3))
+    for attempt in range(40):
+        g = make_graph(rng, **GRAPH[dim])
+        n_odo, n_bad = len(g["T"]) - 1, 3 if dim == 2 else 4
+        dup = rng.choice(np.arange(n_odo, len(g["edges"])), n_bad, replace=False)
+        off = np.zeros((n_bad, k))
+        off[:, tr] = rng.normal(0, 1, (n_bad, tr.stop - tr.start))
+        off[:, tr] *= rng.uniform(2.0, 3.0, (n_bad, 1)) * (1.0 if dim == 2 else 1.3) \
+            * (1 + 0.05 * attempt)          # a draw where they hardly matter is redrawn with a larger conflict / np.linalg.norm(off[:, tr], axis=1, keepdims=True)
+        off[:, ro] = rng.normal(0, np.radians(12), (n_bad, ro.stop - ro.start))
+        g2 = dict(g, edges=np.r_[g["edges"], g["edges"][dup]], Z=np.r_[g["Z"], g["Z"][dup] @ _exp(off)],
+                  info=np.r_[g["info"], 10 * g["info"][dup]])
+        bad = np.r_[np.zeros(len(g["edges"]), bool), np.ones(n_bad, bool)]
+        kind = _kinds(g2)
+        inliers = np.where(kind, rng.integers(40, 200, len(kind)), -1)
+        case = _case_from_graph(g2, kind, inliers, {"loop_closure": True, "geometric_verification": True,
+                                                    "kernel": None})
+        broken = gtsam_optimize(g2["T"], g2["edges"], g2["Z"], g2["info"])
+        truth = _truth(g2, ~bad, "conflicting constraints, no robust kernel", broken)
+        truth["broken"] = broken
+        if truth["ate_broken"] >= BROKEN_FACTOR * truth["tol"] and \
+                ate_rmse(g["T"], g["truth"]) >= BROKEN_FACTOR * truth["tol"]:
+            return case, truth
+    raise RuntimeError("no inconsistent draw in 40 tries")
+
+
+# ----------------------------------------------------------------- judging
+
+def _convert_cause(out, case):
+    if not isinstance(out, (tuple, list)) or len(out) != 2:
+        raise OutputError("expected (cause, T): a cause from CAUSES and the repaired poses")
+    cause = str(out[0]).strip().lower()
+    if cause not in CAUSES:
+        raise OutputError(f"cause {out[0]!r} is not one of {CAUSES}")
+    return cause
+
+
+def _convert_fix(out, case):
+    _convert_cause(out, case)
+    T0 = case.args[0]["T"]
+    try:
+        T = np.asarray(out[1], float)
+    except (TypeError, ValueError):
+        raise OutputError("T: expected a numeric (N, d+1, d+1) array") from None
+    if T.shape != T0.shape or not np.isfinite(T).all():
+        raise OutputError(f"T: expected a finite array of shape {T0.shape}, got {T.shape}")
+    return T
+
+
+def _metric_cause(cause, truth) -> float:
+    return float(cause != truth["cause"])
+
+
+def _metric_fix(T, truth) -> float:
+    return ate_rmse(T, truth["truth"])
+
+
+def _cases(generator, label: str):
+    def cases(rng):
+        for i, dim in enumerate((2, 3)):
+            case, truth = generator(rng, dim)
+            run = shared_run(lambda fn, c=case: fn(c))
+            yield Case(f"SE({dim}) {label}: the cause", (case,), truth, _metric_cause, 0, "wrong",
+                       convert=_convert_cause, call=run, key=f"se{dim}-cause", tags=("cause",))
+            # tol: 1.5x the ATE GTSAM reaches with the right graph on this draw (at least 5 cm).
+            yield Case(f"SE({dim}) {label}: ATE of the repaired trajectory", (case,), truth, _metric_fix,
+                       truth["tol"], "m RMS", convert=_convert_fix, call=run, key=f"se{dim}-fix", tags=("fix",))
+    return cases
+
+
+def _unchanged(case, T) -> bool:
+    return "fix" in case.tags and bool(np.abs(np.asarray(T) - case.args[0]["T"]).max() < 1e-9)
+
+
+def _near(case, T, key: str) -> bool:
+    """T is (nearly) the broken pipeline's output: closer to it than a third of its own error."""
+    return "fix" in case.tags and key in case.expected and \
+        ate_rmse(T, case.expected[key]) <= ate_rmse(case.expected[key], case.expected["truth"]) / 3
+
+
+DRIFT_HINTS = [
+    Hint("the trajectory is the odometry chain you were given: the loop closures in the case (is_loop) "
+         "were never used. Optimise the whole pose graph, odometry and loops.", _unchanged),
+    Hint("the case's settings say loop_closure=False, and the odometry noise is zero-mean: the drift is the random "
+         "walk of chained odometry, which only loop closures bound.",
+         lambda c, cause: "cause" in c.tags and cause == "biased odometry"),
+]
+
+JUMP_HINTS = [
+    Hint("your trajectory is still the one with every candidate accepted: the three loop closures with few RANSAC "
+         "inliers (< 20) are wrong. Verify geometrically (drop candidates with fewer than 20 inliers) and optimise "
+         "again.", lambda c, T: _near(c, T, "T_broken")),
+    Hint("your trajectory drifts like the odometry alone: drop only the unverified loop closures, keep the good ones.",
+         lambda c, T: "fix" in c.tags and ate_rmse(T, c.expected["truth"]) >= 0.7 * c.expected.get("ate_odometry", 1e9)),
+]
+
+INCONSISTENT_HINTS = [
+    Hint("your map is still the plain least-squares one: two loop constraints contradict the rest, and every loop "
+         "has plenty of inliers, so only the back end can tell. Use a robust kernel (Cauchy, c ~ 3 in whitened "
+         "units) and re-optimise.", lambda c, T: _near(c, T, "broken")),
+    Hint("your trajectory drifts like the odometry alone: removing every loop closure throws the good ones away too.",
+         lambda c, T: "fix" in c.tags and ate_rmse(T, c.expected["truth"]) >= 0.7 * c.expected.get("ate_odometry", 1e9)),
+]
+
+
+def _with_extras(generator):
+    """The generator plus what the hints compare with: the odometry's ATE and the broken pipeline's output."""
+    def gen(rng, dim=None):
+        case, truth = generator(rng, dim)
+        truth["ate_odometry"] = ate_rmse(case["T"], truth["truth"])
+        if "broken" not in truth and case["settings"].get("geometric_verification") is False:
+            truth["T_broken"] = gtsam_optimize(case["T"], case["edges"], case["Z"], case["info"])
+        return case, truth
+    return gen
+
+
+# ----------------------------------------------------------------- stand-ins (GTSAM-backed)
+
+def gtsam_fix_drift(case: dict):
+    return "no loop closure", gtsam_optimize(case["T"], case["edges"], case["Z"], case["info"])
+
+
+def gtsam_fix_jumps(case: dict):
+    keep = ~case["is_loop"] | (case["inliers"] >= MIN_INLIERS)
+    return "false loop closure accepted", gtsam_optimize(case["T"], case["edges"][keep], case["Z"][keep],
+                                                         case["info"][keep])
+
+
+def gtsam_fix_inconsistent(case: dict):
+    return ("conflicting constraints, no robust kernel",
+            gtsam_optimize(case["T"], case["edges"], case["Z"], case["info"], robust=("cauchy", 3.0)))
+
+
+GENERATORS = {"6.18": _with_extras(debug_drift), "6.19": _with_extras(debug_jumps),
+              "6.21": _with_extras(debug_inconsistent)}
+debug_case = debug_practice(GENERATORS)   # debug_case(exercise_id, seed=0): a broken back end to practise on
+
+
+def debug_truth(exercise_id: str, seed: int = 0) -> dict:
+    """The truth of `debug_case(exercise_id, seed)`, for the model-answer pictures after a fix."""
+    _, truth = GENERATORS[exercise_id](np.random.default_rng(seed))
+    return truth
+
+
+register(
+    Exercise(id="6.18", title="The trajectory drifts", name="fix_drift", kind="debug", points=2,
+             cases=_cases(GENERATORS["6.18"], "drifting trajectory"), hints=DRIFT_HINTS, fallback=gtsam_fix_drift,
+             timeout=60.0),
+    Exercise(id="6.19", title="Sudden jumps in the trajectory", name="fix_jumps", kind="debug", points=2,
+             cases=_cases(GENERATORS["6.19"], "jumping trajectory"), hints=JUMP_HINTS, fallback=gtsam_fix_jumps,
+             timeout=60.0),
+    Exercise(id="6.21", title="Map inconsistent after loop closure", name="fix_inconsistent_map", kind="debug",
+             points=2, cases=_cases(GENERATORS["6.21"], "inconsistent map"), hints=INCONSISTENT_HINTS,
+             fallback=gtsam_fix_inconsistent, timeout=60.0),
+)
