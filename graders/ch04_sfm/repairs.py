@@ -35,7 +35,7 @@ REGISTRATION_CAUSES = {
 
 
 def broken_registration(case: dict, thresh_px: float = 4.0, min_inliers: int = 30) -> dict:
-    """The colleague's registration step (4.19), as it ran: each image by cv2.solvePnPRansac (P3P samples, 1,000
+    """The colleague's registration step (4.19), as it ran: each image by cv2.solvePnPRansac (P3P samples, 500
     iterations, `thresh_px`), accepted with at least `min_inliers` inliers.
     Returns {"poses": [(R, t) or None per image], "log": [str], "metrics": {...}}."""
     K = np.asarray(case["cameras"][0]["K"], float)          # the intrinsics, read once for the whole data set
@@ -43,7 +43,7 @@ def broken_registration(case: dict, thresh_px: float = 4.0, min_inliers: int = 3
     for i, im in enumerate(case["images"]):
         X, x = case["points3D"][im["point_ids"]], im["x"]
         cv2.setRNGSeed(i)
-        ok, rvec, tvec, idx = cv2.solvePnPRansac(X, x, K, None, iterationsCount=1000, reprojectionError=thresh_px,
+        ok, rvec, tvec, idx = cv2.solvePnPRansac(X, x, K, None, iterationsCount=500, reprojectionError=thresh_px,
                                                  confidence=0.999, flags=cv2.SOLVEPNP_AP3P)
         k = 0 if not ok or idx is None else len(idx)
         poses.append(cv_pose(rvec, tvec) if k >= min_inliers else None)
@@ -198,7 +198,7 @@ REGISTRATION_HINTS = [
     Hint(lambda c, out: {
         "threshold": "4 px against 1 px keypoint noise keeps ~100 % of the correct matches (a 2D Gaussian's distance "
                      "exceeds 4σ with probability e^-8), and the images of camera 0 pass with it.",
-        "iterations": "1,000 iterations are far more than 40 % wrong matches need (k = 52 for p = 0.999), and the "
+        "iterations": "500 iterations are ten times what 40 % wrong matches need (k = 52 for p = 0.999), and the "
                       "images of camera 0 register with them.",
         "min_inliers": "with 60 % correct matches every image could reach 48-90 inliers, and camera 0's do; the failing "
                        "ones stay far below (4-25).",
@@ -221,14 +221,14 @@ REGISTRATION_HINTS = [
 
 
 def cv_fix_registration(case: dict) -> dict:
-    """OpenCV stand-in for 4.19: each image with its own camera's K (cv2.solvePnPRansac, 4 px, 1,000 iterations,
+    """OpenCV stand-in for 4.19: each image with its own camera's K (cv2.solvePnPRansac, 4 px, 500 iterations,
     ≥ 30 inliers), refined by cv2.solvePnPRefineLM on the inliers."""
     poses = []
     for i, im in enumerate(case["images"]):
         K = np.asarray(case["cameras"][im["camera_id"]]["K"], float)
         X, x = case["points3D"][im["point_ids"]], im["x"]
         cv2.setRNGSeed(i)
-        ok, rvec, tvec, idx = cv2.solvePnPRansac(X, x, K, None, iterationsCount=1000, reprojectionError=4.0,
+        ok, rvec, tvec, idx = cv2.solvePnPRansac(X, x, K, None, iterationsCount=500, reprojectionError=4.0,
                                                  confidence=0.999, flags=cv2.SOLVEPNP_AP3P)
         if not ok or idx is None or len(idx) < 30:
             poses.append(None)

@@ -623,12 +623,12 @@ def components_largest_only(case):
 
 
 def _register(case, K_of, thresh_px=4.0, min_inliers=30):
-    """Every image by cv2.solvePnPRansac (AP3P samples, 1,000 iterations) with the K that `K_of(image)` gives."""
+    """Every image by cv2.solvePnPRansac (AP3P samples, 500 iterations) with the K that `K_of(image)` gives."""
     poses = []
     for i, im in enumerate(case["images"]):
         X, x = case["points3D"][im["point_ids"]], im["x"]
         cv2.setRNGSeed(i)
-        ok, rvec, tvec, idx = cv2.solvePnPRansac(X, x, K_of(im), None, iterationsCount=1000,
+        ok, rvec, tvec, idx = cv2.solvePnPRansac(X, x, K_of(im), None, iterationsCount=500,
                                                  reprojectionError=thresh_px, confidence=0.999, flags=cv2.SOLVEPNP_AP3P)
         poses.append((cv2.Rodrigues(rvec)[0], tvec.ravel()) if ok and idx is not None and len(idx) >= min_inliers
                      else None)
