@@ -18,12 +18,13 @@ from .optimizer import gt_optimize_pose_graph, gt_robust_pose_graph, plant_false
 from .g2o_io import gt_read_g2o
 from .manifold import gt_between_residuals, gt_exp, gt_lie_ops, gt_log, random_poses
 from .posegraphs import (align_first, ate_rmse, g2o_chi2, graph_args, gt_chi2, gtsam_optimize, load_posegraph,
-                         make_graph, pose_errors, subgraph)
+                         make_graph, subgraph)
+from .posegraphs import pose_errors as gauge_pose_errors
 
 __all__: list[str] = [
     "CAUSES", "debug_case", "debug_truth", "gtsam_fix_drift", "gtsam_fix_inconsistent", "gtsam_fix_jumps",
     "align_first", "ate_rmse", "gt_read_g2o", "gt_optimize_pose_graph", "gt_robust_pose_graph", "plant_false_loops", "g2o_chi2", "graph_args", "gt_between_residuals", "gt_chi2", "gt_exp", "gt_lie_ops",
-    "gt_log", "gtsam_optimize", "load_posegraph", "make_graph", "pose_errors", "random_poses", "subgraph",
+    "gt_log", "gtsam_optimize", "load_posegraph", "make_graph", "gauge_pose_errors", "random_poses", "subgraph",
 ]
 
 # front-end (6.12–6.17, 6.20)
