@@ -110,7 +110,7 @@ def _cases(rng):
     for i in range(2):
         d = hand_eye_motions(rng, n=12)
         Xo = gt_hand_eye(d["A"], d["B"])
-        eR, et = rotation_angle_deg(Xo[:3, :3], d["X"][:3, :3]), 1e3 * np.linalg.norm(Xo[:3, 3] - d["X"][:3, 3])
+        eR, et = rotation_angle_deg(Xo[:3, :3], d["X"][:3, :3]), 1e3 * float(np.linalg.norm(Xo[:3, 3] - d["X"][:3, 3]))
         # Noisy (0.1°, 0.5 mm per motion, 12 motions): within 2x the stand-in's error on the same draw
         # + 0.05° / + 1 mm (a rotation-first method without refinement, or another weighting of the
         # joint cost, stays within that; the wrong composition orders are degrees / centimetres off).
