@@ -3,9 +3,157 @@
 Each entry of MUTANTS is (exercise id, short name, function, hint fragment or None). The grader must
 take points off every one of them; where a hint exists for the mistake it must fire. Geometry's entries
 (8.8-8.11, 8.17) come first; neural appends its own in the marked section.
+
+The stereo mutants share one small matcher written here (never the grader's oracle or the reference),
+each with one mistake switched on.
 """
 from __future__ import annotations
 
-MUTANTS: list[tuple] = []
+import numpy as np
+from scipy import ndimage
+
+
+# ----------------------------------------------------------------- 8.8 block matching
+
+def _sad(I_l, I_r, d_max, r, sign=1):
+    H, W = I_l.shape
+    C = np.full((H, W, d_max + 1), np.inf)
+    for d in range(d_max + 1):
+        if sign > 0:           # right partner at x - d
+            diff = np.abs(I_l[:, d:] - I_r[:, :W - d])
+            C[:, d:, d] = ndimage.uniform_filter(diff, 2 * r + 1, mode="reflect")
+        else:                  # mistake: partner at x + d
+            diff = np.abs(I_l[:, :W - d] - I_r[:, d:])
+            C[:, :W - d, d] = ndimage.uniform_filter(diff, 2 * r + 1, mode="reflect")
+    return C
+
+
+def _matcher(I_l, I_r, d_max, r=3, max_lr_diff=1.0, *, sign=1, lr="ok", subpixel="ok"):
+    C = _sad(np.asarray(I_l, float), np.asarray(I_r, float), int(d_max), int(r), sign)
+    H, W, n = C.shape
+    d = C.argmin(2)
+    D = d.astype(float)
+    if subpixel != "none":
+        cm = np.take_along_axis(C, np.clip(d - 1, 0, n - 1)[..., None], 2)[..., 0]
+        c0 = np.take_along_axis(C, d[..., None], 2)[..., 0]
+        cp = np.take_along_axis(C, np.clip(d + 1, 0, n - 1)[..., None], 2)[..., 0]
+        with np.errstate(all="ignore"):
+            den = cm - 2 * c0 + cp
+            off = (cm - cp) / (2 * den) if subpixel == "ok" else (cp - cm) / (2 * den)
+        inner = (d > 0) & (d < n - 1) & np.isfinite(off)
+        D = np.where(inner, d + np.clip(off, -0.5, 0.5), d)
+    if lr == "none":
+        return D
+    C_r = np.full_like(C, np.inf)
+    for k in range(n):
+        C_r[:, :W - k, k] = C[:, k:, k]
+    d_r = C_r.argmin(2)
+    x = np.arange(W)[None, :]
+    x_r = x + d if lr == "plus" else x - d
+    partner = np.take_along_axis(d_r, np.clip(x_r, 0, W - 1), 1)
+    tol = max_lr_diff if lr != "strict" else 0
+    keep = (x_r >= 0) & (x_r < W) & ((np.abs(d - partner) <= tol) if lr != "strict" else (d == partner))
+    return np.where(keep, D, np.nan)
+
+
+def bm_no_lr_check(I_l, I_r, d_max, r=3, max_lr_diff=1.0):
+    return _matcher(I_l, I_r, d_max, r, max_lr_diff, lr="none")
+
+
+def bm_lr_wrong_side(I_l, I_r, d_max, r=3, max_lr_diff=1.0):
+    return _matcher(I_l, I_r, d_max, r, max_lr_diff, lr="plus")
+
+
+def bm_lr_exact_only(I_l, I_r, d_max, r=3, max_lr_diff=1.0):
+    return _matcher(I_l, I_r, d_max, r, max_lr_diff, lr="strict")
+
+
+def bm_no_subpixel(I_l, I_r, d_max, r=3, max_lr_diff=1.0):
+    return _matcher(I_l, I_r, d_max, r, max_lr_diff, subpixel="none")
+
+
+def bm_parabola_sign(I_l, I_r, d_max, r=3, max_lr_diff=1.0):
+    return _matcher(I_l, I_r, d_max, r, max_lr_diff, subpixel="flipped")
+
+
+def bm_shift_plus(I_l, I_r, d_max, r=3, max_lr_diff=1.0):
+    return _matcher(I_l, I_r, d_max, r, max_lr_diff, sign=-1, lr="none")
+
+
+# ----------------------------------------------------------------- 8.9 sgm
+
+def _sgm(C, P1, P2, dirs, *, roll=False, mean=False):
+    C = np.asarray(C, float)
+    H, W, n = C.shape
+    S = np.zeros_like(C)
+    for dy, dx in dirs:
+        L = np.zeros_like(C)
+        ys = range(H) if dy >= 0 else range(H - 1, -1, -1)
+        xs = list(range(W)) if dx >= 0 else list(range(W - 1, -1, -1))
+        if dy == 0:
+            for i, x in enumerate(xs):
+                if i == 0:
+                    L[:, x] = C[:, x]
+                    continue
+                prev = L[:, (x - dx) % W]
+                m = prev.min(-1, keepdims=True)
+                up = np.concatenate([np.full((H, 1), np.inf), prev[:, :-1]], 1)
+                dn = np.concatenate([prev[:, 1:], np.full((H, 1), np.inf)], 1)
+                L[:, x] = C[:, x] + np.minimum.reduce([prev, up + P1, dn + P1, np.broadcast_to(m + P2, prev.shape)]) - m
+        else:
+            for i, y in enumerate(ys):
+                for x in xs:
+                    px, py = x - dx, y - dy
+                    if roll:          # np.roll(prev_row, dx): the first column's predecessor is the last one
+                        px %= W
+                    if not (0 <= py < H and 0 <= px < W):
+                        L[y, x] = C[y, x]
+                        continue
+                    prev = L[py, px]
+                    m = prev.min()
+                    up = np.r_[np.inf, prev[:-1]]
+                    dn = np.r_[prev[1:], np.inf]
+                    L[y, x] = C[y, x] + np.minimum.reduce([prev, up + P1, dn + P1, np.full(n, m + P2)]) - m
+        S += L
+    return S / len(dirs) if mean else S
+
+
+_FOUR = ((0, 1), (0, -1), (1, 0), (-1, 0))
+_EIGHT = _FOUR + ((1, 1), (1, -1), (-1, 1), (-1, -1))
+
+
+def sgm_swapped_penalties(C, P1, P2, paths=8):
+    return _sgm(C, P2, P1, _EIGHT if paths == 8 else _FOUR)
+
+
+def sgm_always_four_paths(C, P1, P2, paths=8):
+    return _sgm(C, P1, P2, _FOUR)
+
+
+def sgm_no_p2(C, P1, P2, paths=8):
+    return _sgm(C, P1, np.inf, _EIGHT if paths == 8 else _FOUR)
+
+
+def sgm_mean_of_paths(C, P1, P2, paths=8):
+    return _sgm(C, P1, P2, _EIGHT if paths == 8 else _FOUR, mean=True)
+
+
+def sgm_rolls_at_border(C, P1, P2, paths=8):
+    return _sgm(C, P1, P2, _EIGHT if paths == 8 else _FOUR, roll=True)
+
+
+MUTANTS: list[tuple] = [
+    ("8.8", "no left-right check", bm_no_lr_check, "more pixels survive"),
+    ("8.8", "left-right check at x + d", bm_lr_wrong_side, None),
+    ("8.8", "left-right check demands equality", bm_lr_exact_only, "fewer pixels survive"),
+    ("8.8", "no sub-pixel refinement", bm_no_subpixel, "every disparity is an integer"),
+    ("8.8", "parabola vertex sign flipped", bm_parabola_sign, "the sub-pixel offsets make it worse"),
+    ("8.8", "right image shifted the wrong way", bm_shift_plus, "x − d"),
+    ("8.9", "P1 and P2 swapped", sgm_swapped_penalties, "P1 and P2 are swapped"),
+    ("8.9", "always 4 paths", sgm_always_four_paths, "4-path sum"),
+    ("8.9", "no P2 term", sgm_no_p2, "P2 term is missing"),
+    ("8.9", "mean of the paths", sgm_mean_of_paths, "averaged"),
+    ("8.9", "np.roll wraps the border", sgm_rolls_at_border, None),
+]
 
 # neural (8.4-8.7, 8.12-8.16, 8.18-8.23, 8.25)
