@@ -16,11 +16,12 @@ from .questions import __all__ as _questions
 from .lie import adjoint, exp, inverse, lie_ops, log, right_jacobian, right_jacobian_inv
 from .pose_graph import between_residuals, chi2, optimize_pose_graph, read_g2o, robust_pose_graph, write_g2o
 from .debug import fix_drift, fix_inconsistent_map, fix_jumps
+from .frontier import differentiable_pose_graph
 
 __all__ = list(_questions) + [
     "lie_ops", "exp", "log", "inverse", "adjoint", "right_jacobian", "right_jacobian_inv", "read_g2o", "write_g2o",
     "between_residuals", "chi2", "optimize_pose_graph", "robust_pose_graph", "fix_drift", "fix_jumps",
-    "fix_inconsistent_map",
+    "fix_inconsistent_map", "differentiable_pose_graph",
 ]
 
 # front-end (6.12–6.17, 6.20)
@@ -54,3 +55,8 @@ from .tracking import fix_tracking  # noqa: E402
 
 __all__ += ["fix_tracking"]
 # /fe:620
+# fe:613
+from .visual_odometry import monocular_vo  # noqa: E402
+
+__all__ += ["monocular_vo"]
+# /fe:613

@@ -306,6 +306,46 @@ MUTANTS += [
 ]
 
 
+# 6.26 differentiable_pose_graph
+
+
+def _diff_variant(x0, edges, z, info, n_steps, cut=False, one_step=False, sign=1.0):
+    import torch
+    from solutions.ch06_slam import frontier as _fr
+    edges = _np.asarray(edges)
+    zt = torch.tensor(_np.asarray(z, float), requires_grad=True)
+    W = torch.block_diag(*torch.as_tensor(_np.asarray(info, float)))
+    T = _fr._mat(torch.as_tensor(_np.asarray(x0, float)), torch)
+    Zinv = _fr._inv(_fr._mat(zt, torch), torch)
+    for _ in range(1 if one_step else n_steps):
+        if cut:
+            T = T.detach()                                     # "keep the memory down": only the last step remains
+        T = _fr._gauss_newton_step(T, Zinv, edges, W, torch)
+    last = torch.stack([T[-1, 0, 2], T[-1, 1, 2], torch.atan2(T[-1, 1, 0], T[-1, 0, 0])])
+    G = torch.stack([torch.autograd.grad(last[k], zt, retain_graph=True)[0] for k in range(3)])
+    x = torch.stack([T[:, 0, 2], T[:, 1, 2], torch.atan2(T[:, 1, 0], T[:, 0, 0])], 1)
+    return x.detach().numpy(), sign * G.numpy()
+
+
+def diff_detached_each_step(x0, edges, z, info, n_steps=10):
+    return _diff_variant(x0, edges, z, info, n_steps, cut=True)
+
+
+def diff_one_step(x0, edges, z, info, n_steps=10):
+    return _diff_variant(x0, edges, z, info, n_steps, one_step=True)
+
+
+def diff_sign_flipped(x0, edges, z, info, n_steps=10):
+    return _diff_variant(x0, edges, z, info, n_steps, sign=-1.0)
+
+
+MUTANTS += [
+    ("6.26", "graph cut at every step", diff_detached_each_step, "graph was cut"),
+    ("6.26", "a single Gauss-Newton step", diff_one_step, "all n_steps"),
+    ("6.26", "derivative sign flipped", diff_sign_flipped, "wrong sign"),
+]
+
+
 # front-end (6.12–6.17, 6.20)
 # fe:mut
 import numpy as np  # noqa: E402 (front-end's mutants)
@@ -669,3 +709,62 @@ MUTANTS += [  # front-end entries (6.20)
     ("6.20", "fixed, but the cause named 'motion blur'", track_right_fix_wrong_cause, "previous pose"),
 ]
 # /fe:mut620
+# fe:mut613
+def _fe_common(fa, fb):
+    ids, ia, ib = np.intersect1d(fa["ids"], fb["ids"], return_indices=True)
+    return ids, fa["uv"][ia], fb["uv"][ib]
+
+
+def vo_chained_essential(frames, K, solvers):
+    """Each frame's pose from E with the previous one, chained: ‖t‖ = 1 at every step."""
+    T = [np.eye(4)]
+    for k in range(1, len(frames)):
+        _, a, b = _fe_common(frames[k - 1], frames[k])
+        E, inl = solvers["essential"](a, b, K)
+        R, t, _ = solvers["pose_from_essential"](E, a[inl], b[inl], K)
+        rel = np.eye(4)
+        rel[:3, :3], rel[:3, 3] = R, t
+        T.append(rel @ T[-1])
+    return np.array(T)
+
+
+def _fe_vo(frames, K, solvers, *, extend_map=True, invert=False, init=8, gap=8):
+    n = len(frames)
+    T = np.tile(np.eye(4), (n, 1, 1))
+    ids, a, b = _fe_common(frames[0], frames[init])
+    E, inl = solvers["essential"](a, b, K)
+    R, t, _ = solvers["pose_from_essential"](E, a[inl], b[inl], K)
+    T[init, :3, :3], T[init, :3, 3] = R, t
+    X = solvers["triangulate"](T[0], T[init], a[inl], b[inl], K)
+    world = dict(zip(ids[inl].tolist(), X))
+    for k in [*range(1, init), *range(init + 1, n)]:
+        fr = frames[k]
+        sel = [j for j, i in enumerate(fr["ids"]) if int(i) in world]
+        Xm = np.array([world[int(fr["ids"][j])] for j in sel])
+        T[k], _ = solvers["pnp"](Xm, fr["uv"][sel], K)
+        if extend_map and k > init:
+            ids2, a2, b2 = _fe_common(frames[k - gap], fr)
+            new = np.array([int(i) not in world for i in ids2])
+            if new.any():
+                X2 = solvers["triangulate"](T[k - gap], T[k], a2[new], b2[new], K)
+                P = X2 @ T[k][:3, :3].T + T[k][:3, 3]
+                for i, Xi, z in zip(ids2[new], X2, P[:, 2]):
+                    if z > 0:
+                        world[int(i)] = Xi
+    return np.linalg.inv(T) if invert else T
+
+
+def vo_map_never_extended(frames, K, solvers):
+    return _fe_vo(frames, K, solvers, extend_map=False)
+
+
+def vo_poses_inverted(frames, K, solvers):
+    return _fe_vo(frames, K, solvers, invert=True)
+
+
+MUTANTS += [  # front-end entries (6.13)
+    ("6.13", "poses chained from E frame to frame (unit translations)", vo_chained_essential, None),
+    ("6.13", "map never extended beyond the initial pair", vo_map_never_extended, None),
+    ("6.13", "camera-to-world poses returned", vo_poses_inverted, "inverted"),
+]
+# /fe:mut613
