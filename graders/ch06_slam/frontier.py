@@ -1,0 +1,140 @@
+"""Chapter 6, section 5 (FRONTIER): 6.26, a differentiable pose-graph layer — d(refined last pose)/d(measurements).
+
+Oracle: GTSAM's LM optimum of the small SE(2) graph, and its derivative by central finite differences of the
+converged solver (every perturbed graph re-solved from the optimum). Graphs: 12 poses on a circle with
+odometry, the loop back to the start and one chord, drawn fresh per seed.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from graders.engine import Case, Exercise, Hint, OutputError, register, shared_run
+
+from .posegraphs import _exp, gtsam_optimize
+
+H_FD = 1e-4   # central differences: truncation ~h^2 = 1e-8, GTSAM's stopping noise / h ~ 1e-7 (measured <= 2e-5 rel.)
+
+
+def _xyt(T: np.ndarray) -> np.ndarray:
+    return np.c_[T[:, 0, 2], T[:, 1, 2], np.arctan2(T[:, 1, 0], T[:, 0, 0])]
+
+
+def _mat(x: np.ndarray) -> np.ndarray:
+    T = np.tile(np.eye(3), (len(x), 1, 1))
+    c, s = np.cos(x[:, 2]), np.sin(x[:, 2])
+    T[:, 0, 0], T[:, 0, 1], T[:, 1, 0], T[:, 1, 1] = c, -s, s, c
+    T[:, :2, 2] = x[:, :2]
+    return T
+
+
+def ring_graph(rng, n: int = 12) -> dict:
+    """n poses on a circle (radius 2.5-4 m), odometry, the loop n-1 -> 0 and one chord; noise 10 cm / 2.9 deg
+    (residuals large enough that the curvature terms a cut graph drops change the derivative by >= 1e-3)."""
+    rad = rng.uniform(2.5, 4.0)
+    th = np.linspace(0, 2 * np.pi, n, endpoint=False) + rng.uniform(0, 2 * np.pi)
+    truth = _mat(np.c_[rad * np.cos(th), rad * np.sin(th), th + np.pi / 2])
+    a = int(rng.integers(2, n // 2))
+    edges = np.r_[np.c_[np.arange(n - 1), np.arange(1, n)], [[n - 1, 0], [a, a + n // 2]]]
+    sig = np.r_[0.10, 0.10, 0.05]
+    Z = np.linalg.inv(truth[edges[:, 0]]) @ truth[edges[:, 1]] @ _exp(rng.normal(size=(len(edges), 3)) * sig)
+    info = np.tile(np.diag(1 / sig**2), (len(edges), 1, 1))
+    start = [truth[0]]
+    for m in range(n - 1):
+        start.append(start[-1] @ Z[m])
+    return {"x0": _xyt(np.array(start)), "edges": edges, "z": _xyt(Z), "info": info}
+
+
+def fd_pose_graph_gradient(x0, edges, z, info) -> tuple[np.ndarray, np.ndarray]:
+    """GTSAM's optimum (N, 3) and d(last pose)/dz (3, M, 3) by central differences of the converged solver."""
+    T_opt = gtsam_optimize(_mat(x0), edges, _mat(z), info)
+
+    def last(zz):
+        P = gtsam_optimize(T_opt, edges, _mat(zz), info)[-1]
+        return np.r_[P[0, 2], P[1, 2], np.arctan2(P[1, 0], P[0, 0])]
+
+    G = np.zeros((3,) + z.shape)
+    for m in range(len(z)):
+        for k in range(3):
+            e = np.zeros_like(z)
+            e[m, k] = H_FD
+            G[:, m, k] = (last(z + e) - last(z - e)) / (2 * H_FD)
+    return _xyt(T_opt), G
+
+
+def fd_differentiable_pose_graph(x0, edges, z, info, n_steps: int = 10):
+    """Stand-in for 6.26: GTSAM's converged poses, finite-difference derivative."""
+    return fd_pose_graph_gradient(np.asarray(x0, float), np.asarray(edges), np.asarray(z, float), info)
+
+
+def _convert(out, case):
+    n, m = len(case.args[0]), len(case.args[2])
+    if not isinstance(out, (tuple, list)) or len(out) != 2:
+        raise OutputError("expected (x, dx_dz)")
+    arrs = []
+    for name, a, shape in (("x", out[0], (n, 3)), ("dx_dz", out[1], (3, m, 3))):
+        try:
+            a = np.asarray(a, float)
+        except (TypeError, ValueError):
+            raise OutputError(f"{name}: expected a numeric array (a torch tensor: .detach().numpy())") from None
+        if a.shape != shape or not np.isfinite(a).all():
+            raise OutputError(f"{name}: expected a finite array of shape {shape}, got {a.shape}"
+                              + (" with NaN (sin(t)/t differentiated at t = 0?)" if a.shape == shape else ""))
+        arrs.append(a)
+    return tuple(arrs)
+
+
+def _pose_error(out, exp) -> float:
+    d = out[0] - exp[0]
+    d[:, 2] = np.angle(np.exp(1j * d[:, 2]))
+    return float(np.abs(d).max())
+
+
+def _grad_error(out, exp) -> float:
+    return float(np.abs(out[1] - exp[1]).max() / np.abs(exp[1]).max())
+
+
+def _poses_right(case, out) -> bool:
+    return _pose_error(out, case.expected) <= 1e-6
+
+
+HINTS = [
+    Hint("the poses are not GTSAM's optimum: did all n_steps Gauss-Newton steps run, with the first pose held "
+         "fixed (drop its 3 columns)?", lambda c, out: "poses" in c.tags and not _poses_right(c, out)),
+    Hint("the derivative has the wrong sign: differentiate the refined pose itself, torch.autograd.grad(x[-1, k], z).",
+         lambda c, out: "derivative" in c.tags and _poses_right(c, out) and _grad_error((out[0], -out[1]), c.expected)
+         <= c.tol),
+    Hint("the derivative is not the converged solver's: the graph was cut somewhere (.detach(), .numpy(), "
+         "torch.tensor(...) of a tensor inside the loop, J computed without create_graph), so only part of the "
+         "unrolled solve — or only the Gauss-Newton model (J^T W J)^-1 J^T W — is differentiated.",
+         lambda c, out: "derivative" in c.tags and _poses_right(c, out) and _grad_error(out, c.expected) > c.tol),
+]
+
+
+# Poses: 8 Gauss-Newton steps from the odometry start converge to ~1e-12; GTSAM stops at 1e-12 relative error:
+# 1e-6 (m and rad; measured <= 2e-8). Derivative: the reference agrees with central differences to <= 2e-5
+# relative (the differences' own noise); 5e-4 separates the converged solver's derivative from the Gauss-Newton
+# model of a cut graph (2.7e-3 to 2e-2 measured on these rings) and from too few steps.
+def cases_differentiable(rng):
+    for i in range(2):
+        g = ring_graph(rng)
+        args = (g["x0"], g["edges"], g["z"], g["info"])
+        exp = fd_pose_graph_gradient(*args)
+        run = shared_run(lambda fn, a=args: fn(*a, n_steps=8))
+        yield Case(f"ring {i + 1}: refined poses vs GTSAM", args, exp, _pose_error, 1e-6, "max abs",
+                   convert=_convert, call=run, key=f"ring-{i + 1}-poses", tags=("poses",))
+        yield Case(f"ring {i + 1}: d(last pose)/d(measurements) vs finite differences", args, exp, _grad_error, 5e-4,
+                   "rel.", convert=_convert, call=run, key=f"ring-{i + 1}-derivative", tags=("derivative",))
+
+
+register(Exercise(
+    id="6.26",
+    title="A differentiable pose-graph layer",
+    name="differentiable_pose_graph",
+    kind="frontier",
+    points=3,
+    cases=cases_differentiable,
+    hints=HINTS,
+    fallback=fd_differentiable_pose_graph,
+    timeout=60.0,
+    arg_names=("x0", "edges", "z", "info"),
+))
