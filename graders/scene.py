@@ -348,6 +348,23 @@ def render_plane(texture_img: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.nd
     return image, H
 
 
+def plane_depth(K: np.ndarray, R: np.ndarray, t: np.ndarray, plane_size_m: tuple[float, float],
+                width: int = 640, height: int = 480) -> np.ndarray:
+    """Exact depth (camera-frame Z) of the rectangle [0, w] x [0, h] of the world plane z = 0 seen by the
+    camera (K, R, t), at every pixel centre: (height, width), inf where the ray misses the rectangle or
+    meets the plane behind the camera. The depth map of `render_plane`'s image (same camera, same plane)."""
+    R, t = np.asarray(R, float), np.asarray(t, float)
+    n_c = R[:, 2]                                   # the plane's normal in the camera frame
+    xs, ys = np.meshgrid(np.arange(width, dtype=float), np.arange(height, dtype=float))
+    rays = np.stack([xs, ys, np.ones_like(xs)], -1) @ np.linalg.inv(np.asarray(K, float)).T   # (h, w, 3), z = 1
+    with np.errstate(divide="ignore", invalid="ignore"):
+        Z = (n_c @ t) / (rays @ n_c)                 # n_cᵀ (Z ray) = n_cᵀ t on the plane
+    X_w = (Z[..., None] * rays - t) @ R              # back to the world: R^T (X_c - t)
+    w, h = plane_size_m
+    inside = (Z > 0) & (X_w[..., 0] >= 0) & (X_w[..., 0] <= w) & (X_w[..., 1] >= 0) & (X_w[..., 1] <= h)
+    return np.where(inside, Z, np.inf)
+
+
 def random_homography_pair(rng: np.random.Generator, texture_img: np.ndarray, max_angle_deg: float = 40.0,
                            width: int = 640, height: int = 480, max_roll_deg: float = 20.0,
                            scale_range: tuple[float, float] = (0.8, 1.25)) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
