@@ -91,20 +91,28 @@ def synthetic_stereo(rng: np.random.Generator, n_views: int = 8, noise: float = 
     w = rng.normal(size=3)
     R = so3_exp(w / np.linalg.norm(w) * np.radians(rng.uniform(1.0, 5.0)))
     t = np.r_[rng.choice([-1, 1]) * rng.uniform(0.06, 0.12), rng.normal(0, 0.004, 2)]
-    Rs1, ts1 = [], []
-    while len(Rs1) < n_views:
-        Rb, tb = boards.random_board_pose(rng, K1, d1, X)
-        u2 = boards.project_board(X, K2, d2, R @ Rb, R @ tb + t)
-        if (u2.min(0) > 10).all() and u2[:, 0].max() < boards.SIZE[0] - 11 and u2[:, 1].max() < boards.SIZE[1] - 11:
-            Rs1.append(Rb)
-            ts1.append(tb)
+    poses = boards_seen_by_both(rng, K1, d1, K2, d2, R, t, n_views, X)
+    Rs1, ts1 = [p[0] for p in poses], [p[1] for p in poses]
     uv1 = np.array([boards.project_board(X, K1, d1, Rb, tb) for Rb, tb in zip(Rs1, ts1)])
     uv2 = np.array([boards.project_board(X, K2, d2, R @ Rb, R @ tb + t) for Rb, tb in zip(Rs1, ts1)])
     uv1, uv2 = rng.normal(0, noise, uv1.shape) + uv1, rng.normal(0, noise, uv2.shape) + uv2
+    true_poses = (np.array(Rs1), np.array(ts1))
     Rs1, ts1 = boards.cv_board_poses(X, uv1, K1, d1)   # each camera's own noisy PnP poses
     Rs2, ts2 = boards.cv_board_poses(X, uv2, K2, d2)
     return {"X": X, "uv1": uv1, "uv2": uv2, "K1": K1, "d1": d1, "K2": K2, "d2": d2, "Rs1": Rs1, "ts1": ts1,
-            "Rs2": Rs2, "ts2": ts2, "R": R, "t": t}
+            "Rs2": Rs2, "ts2": ts2, "R": R, "t": t, "poses_true": true_poses}
+
+
+def boards_seen_by_both(rng, K1, d1, K2, d2, R, t, n_views, X=None):
+    """n_views true board poses (camera 1's frame) whose corners all land inside both images."""
+    X = boards.board() if X is None else X
+    poses = []
+    while len(poses) < n_views:
+        Rb, tb = boards.random_board_pose(rng, K1, d1, X)
+        u2 = boards.project_board(X, K2, d2, R @ Rb, R @ tb + t)
+        if (u2.min(0) > 10).all() and u2[:, 0].max() < boards.SIZE[0] - 11 and u2[:, 1].max() < boards.SIZE[1] - 11:
+            poses.append((Rb, tb))
+    return poses
 
 
 # ----------------------------------------------------------------- 7.9 stereo_extrinsics

@@ -5,6 +5,8 @@ poses X_c = R X + t, dist = (k1, k2, p1, p2, k3), pixel centres at integer coord
 """
 from __future__ import annotations
 
+from .corners import refine_corners
+from .debug import fix_stereo_drift, fix_time_offset
 from .motion import hand_eye, time_offset
 from .questions import (board_width_m, debug_causes, desync_mm, hand_eye_identifiable, rms_verdicts,
                         recalibration_trigger, sync_choice, zhang_counts)
@@ -15,4 +17,5 @@ from .zhang import (board_homography, calibrate_camera, extrinsics_from_homograp
 __all__ = ["board_homography", "calibrate_camera", "extrinsics_from_homography", "intrinsics_from_homographies",
            "refine_calibration", "stereo_extrinsics", "stereo_rectify", "hand_eye", "time_offset",
            "board_width_m", "debug_causes", "desync_mm", "hand_eye_identifiable", "rms_verdicts",
-           "recalibration_trigger", "sync_choice", "zhang_counts"]
+           "recalibration_trigger", "sync_choice", "zhang_counts", "refine_corners",
+           "fix_stereo_drift", "fix_time_offset"]

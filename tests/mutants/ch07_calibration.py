@@ -400,3 +400,92 @@ MUTANTS += [
     ("7.13", "rolling-shutter wobble blamed on calibration",
      ["extrinsics drifted", "time offset", "mount shift", "wrong intrinsics"], "row-sequential"),
 ]
+
+
+# ----------------------------------------------------------------- 7.17 refine_corners
+
+from scipy.ndimage import map_coordinates  # noqa: E402
+
+from solutions.ch07_calibration import corners as ref_corners  # noqa: E402
+
+
+def _subpix(img, corners, half_win, *, swap=False, isotropic=False, mask=True, iters=40):
+    img = np.asarray(img, float)
+    r = np.arange(-half_win - 1, half_win + 2, dtype=float)
+    gy, gx = np.meshgrid(r, r, indexing="ij")
+    w1 = np.exp(-(np.arange(-half_win, half_win + 1) / half_win) ** 2) if mask else np.ones(2 * half_win + 1)
+    w = np.outer(w1, w1)
+    dy, dx = gy[1:-1, 1:-1], gx[1:-1, 1:-1]
+    out = np.array(corners, float).reshape(-1, 2)
+    for n, q in enumerate(out):
+        for _ in range(iters):
+            p = map_coordinates(img, [q[1] + gy, q[0] + gx], order=1, mode="nearest")
+            Ix, Iy = 0.5 * (p[1:-1, 2:] - p[1:-1, :-2]), 0.5 * (p[2:, 1:-1] - p[:-2, 1:-1])
+            if swap:
+                Ix, Iy = Iy, Ix
+            if isotropic:    # |g|² I: the gradient-energy centroid
+                e = w * (Ix * Ix + Iy * Iy)
+                step = np.array([(e * dx).sum(), (e * dy).sum()]) / e.sum()
+            else:
+                a, b, c = (w * Ix * Ix).sum(), (w * Ix * Iy).sum(), (w * Iy * Iy).sum()
+                bx, by = (w * (Ix * Ix * dx + Ix * Iy * dy)).sum(), (w * (Ix * Iy * dx + Iy * Iy * dy)).sum()
+                step = np.array([c * bx - b * by, a * by - b * bx]) / (a * c - b * b)
+            q = q + step
+            if np.hypot(*step) < 1e-3:
+                break
+        out[n] = q
+    return out
+
+
+def corners_gradients_swapped(img, corners, half_win=5):
+    return _subpix(img, corners, half_win, swap=True)
+
+
+def corners_gradient_centroid(img, corners, half_win=5):
+    return _subpix(img, corners, half_win, isotropic=True)
+
+
+def corners_one_step(img, corners, half_win=5):
+    return _subpix(img, corners, half_win, iters=1)
+
+
+def corners_no_mask(img, corners, half_win=5):
+    return _subpix(img, corners, half_win, mask=False)
+
+
+MUTANTS += [
+    ("7.17", "gradient components swapped", corners_gradients_swapped, "gradient components"),
+    ("7.17", "|g|^2 I (gradient centroid)", corners_gradient_centroid, None),
+    ("7.17", "one step, no iteration", corners_one_step, None),
+    ("7.17", "no Gaussian mask", corners_no_mask, None),
+]
+
+
+# ----------------------------------------------------------------- 7.18-7.19 DEBUG fixes
+
+from solutions.ch07_calibration import debug as ref_debug  # noqa: E402
+
+
+def stereo_fix_keeps_old_rig(case):
+    return np.asarray(case["R"], float), np.asarray(case["t"], float)
+
+
+def stereo_fix_inverted(case):
+    R, t = ref_debug.fix_stereo_drift(case)
+    return R.T, -R.T @ t
+
+
+def time_fix_unchanged(case):
+    return np.asarray(case["t_cam"], float).copy()
+
+
+def time_fix_wrong_way(case):
+    return 2 * np.asarray(case["t_cam"], float) - ref_debug.fix_time_offset(case)
+
+
+MUTANTS += [
+    ("7.18", "old rig kept (recalibrated the intrinsics instead)", stereo_fix_keeps_old_rig, "old rig"),
+    ("7.18", "rig inverted", stereo_fix_inverted, "inverted"),
+    ("7.19", "timestamps unchanged", time_fix_unchanged, "unchanged"),
+    ("7.19", "shifted the wrong way", time_fix_wrong_way, "wrong way"),
+]
