@@ -49,9 +49,26 @@ def cv_sad_block_matching(I_l, I_r, d_max, r=3, max_lr_diff=1.0):
     return np.where(keep, d_l + np.clip(np.nan_to_num(off), -0.5, 0.5), np.nan)
 
 
+def cv_plane_sweep(I_ref, K_ref, images, Ks, Rs, ts, depths, r=2):
+    """8.10 with OpenCV: cv2.remap (bilinear) through each plane's homography, cv2.blur for the window."""
+    import cv2
+    import numpy as np
+    H, W = I_ref.shape
+    xs, ys = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
+    p = np.stack([xs, ys, np.ones_like(xs)], -1)
+    C = np.zeros((len(depths), H, W))
+    for img, K, R, t in zip(images, Ks, Rs, ts):
+        for i, d in enumerate(depths):
+            q = p @ (K @ (R + np.outer(t, [0, 0, 1.0]) / d) @ np.linalg.inv(K_ref)).T
+            warped = cv2.remap(np.float32(img), np.float32(q[..., 0] / q[..., 2]), np.float32(q[..., 1] / q[..., 2]),
+                               cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+            C[i] += cv2.blur(np.abs(np.float32(I_ref) - warped), (2 * r + 1, 2 * r + 1))
+    return np.asarray(depths)[C.argmin(0)]
+
+
 # Library-backed implementations: exercise id -> (function, cases it cannot answer and why).
 # 8.9 has none: OpenCV's StereoSGBM aggregates internally and never returns the aggregated volume S.
-LIBRARY: dict = {"8.8": (cv_sad_block_matching, {})}
+LIBRARY: dict = {"8.8": (cv_sad_block_matching, {}), "8.10": (cv_plane_sweep, {})}
 
 # cv2.StereoBM is a different matcher (x-Sobel pre-filter, texture and uniqueness thresholds, speckle
 # filter): it is not the specification, so the cases measured against the specification's rates may fail.

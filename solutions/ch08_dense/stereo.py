@@ -32,10 +32,15 @@ def sad_volume(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int) -> np.ndarr
     return C
 
 
+def _worst(C: np.ndarray):
+    """A cost no candidate can beat: inf for float volumes, the largest value for integer ones."""
+    return np.inf if C.dtype.kind == "f" else np.iinfo(C.dtype).max
+
+
 def _right_volume(C: np.ndarray) -> np.ndarray:
     """The right view's costs from the left volume: C_r[y, x_r, d] = C[y, x_r + d, d]."""
     H, W, n = C.shape
-    C_r = np.full_like(C, np.inf)
+    C_r = np.full_like(C, _worst(C))
     for d in range(n):
         C_r[:, :W - d, d] = C[:, d:, d]
     return C_r
@@ -50,7 +55,7 @@ def _wta_subpixel_lr(C: np.ndarray, max_lr_diff: float) -> np.ndarray:
     keep = (x_r >= 0) & (np.abs(d_l - partner) <= max_lr_diff)
     # Parabola through (d-1, d, d+1): vertex offset (C- - C+) / (2 (C- - 2 C0 + C+)), inner winners only.
     i = np.clip(d_l, 1, n - 2)[..., None]
-    cm, c0, cp = (np.take_along_axis(C, i + o, axis=2)[..., 0] for o in (-1, 0, 1))
+    cm, c0, cp = (np.take_along_axis(C, i + o, axis=2)[..., 0].astype(float) for o in (-1, 0, 1))
     with np.errstate(invalid="ignore", divide="ignore"):
         curv = cm - 2.0 * c0 + cp
         delta = np.where((d_l > 0) & (d_l < n - 1) & (curv > 0), (cm - cp) / (2.0 * curv), 0.0)
@@ -69,76 +74,94 @@ def block_matching(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3, max
     return _wta_subpixel_lr(C, max_lr_diff)
 
 
-def _aggregate_path(C: np.ndarray, P1: float, P2: float, dy: int, dx: int) -> np.ndarray:
-    """L_r(p, d) = C(p, d) + min(L(p-r, d), L(p-r, d±1) + P1, min_k L(p-r, k) + P2) - min_k L(p-r, k).
+def _sweep(C: np.ndarray, P1: float, P2: float, dirs: list[tuple[int, int]], S: np.ndarray) -> None:
+    """Adds sum_r L_r to S for paths that all travel along axis 0 of C: (N, M, D), forwards (dy = +1)
+    or backwards (dy = -1), with dx in {-1, 0, 1} along axis 1. All paths advance in one loop, stacked
+    (k, M, D), so numpy's per-call overhead is paid once per step, not once per path.
 
-    Walks along the axis of travel (columns if dy = 0, else rows), vectorised over the other axis
-    and over d. For a diagonal, the predecessor row is shifted by dx; pixels whose predecessor
-    leaves the image start their path (L = C)."""
-    if dy == 0:                       # a horizontal path is a vertical one on the transposed volume
-        return _aggregate_path(C.transpose(1, 0, 2), P1, P2, dx, 0).transpose(1, 0, 2)
-    H, W, n = C.shape
-    L = C.copy()
-    order = range(1, H) if dy > 0 else range(H - 2, -1, -1)
-    for y in order:
-        prev = L[y - dy]                                     # (W, n)
-        if dx:
-            shifted = np.full_like(prev, np.nan)
-            if dx > 0:
-                shifted[1:] = prev[:-1]
-            else:
-                shifted[:-1] = prev[1:]
-            prev = shifted
-        has = ~np.isnan(prev[:, 0])
-        p = prev[has]
-        best = p.min(axis=1, keepdims=True)
-        step = np.minimum(np.pad(p[:, :-1], ((0, 0), (1, 0)), constant_values=np.inf),
-                          np.pad(p[:, 1:], ((0, 0), (0, 1)), constant_values=np.inf))
-        L[y, has] = C[y, has] + np.minimum(np.minimum(p, step + P1), best + P2) - best
-    return L
+    L_r(p, d) = C(p, d) + min(L(p-r, d), L(p-r, d±1) + P1, min_k L(p-r, k) + P2) - min_k L(p-r, k);
+    a pixel whose predecessor p - r leaves the volume starts its path: L_r = C (a zero predecessor
+    gives exactly that)."""
+    N, M, D = C.shape
+    k = len(dirs)
+    prev = np.zeros((k, M, D), C.dtype)
+    pred = np.zeros_like(prev)
+    for i in range(N):
+        rows = [i if dy > 0 else N - 1 - i for dy, _ in dirs]
+        cost = C[rows]                                       # (k, M, D): each path's current row
+        if i == 0:
+            cur = cost.copy()
+        else:
+            pred[:] = 0.0
+            for j, (_, dx) in enumerate(dirs):              # predecessor column x - dx
+                if dx == 0:
+                    pred[j] = prev[j]
+                elif dx > 0:
+                    pred[j, 1:] = prev[j, :-1]
+                else:
+                    pred[j, :-1] = prev[j, 1:]
+            best = pred.min(axis=2, keepdims=True)
+            step = np.minimum(pred, best + P2)
+            np.minimum(step[..., 1:], pred[..., :-1] + P1, out=step[..., 1:])
+            np.minimum(step[..., :-1], pred[..., 1:] + P1, out=step[..., :-1])
+            cur = cost + step - best
+        for j, r in enumerate(rows):
+            S[r] += cur[j]
+        prev = cur
 
 
 def sgm(C: np.ndarray, P1: float, P2: float, paths: int = 8) -> np.ndarray:
     """Exercise 8.9: semi-global aggregation of a cost volume C: (H, W, D) over 4 paths (left, right,
     up, down) or 8 (and the diagonals). Returns S: (H, W, D) = sum over paths of L_r (each path
-    starts with L_r = C at the border it enters from)."""
-    C = np.asarray(C, float)
-    dirs = [(0, 1), (0, -1), (1, 0), (-1, 0)]
-    if int(paths) == 8:
-        dirs += [(1, 1), (1, -1), (-1, 1), (-1, -1)]
+    starts with L_r = C at the border it enters from). Keeps C's dtype: float64 unless given float32, or
+    int16 (small integer costs such as census, whose 8-path sums stay below 2^15)."""
+    C = np.asarray(C)
+    C = C if C.dtype in (np.float32, np.float64, np.int16) else C.astype(float)
     S = np.zeros_like(C)
-    for dy, dx in dirs:
-        S += _aggregate_path(C, float(P1), float(P2), dy, dx)
+    vertical = [(1, 0), (-1, 0)] + ([(1, 1), (1, -1), (-1, 1), (-1, -1)] if int(paths) == 8 else [])
+    _sweep(C, P1, P2, vertical, S)                          # rows: down, up and the diagonals
+    St = S.transpose(1, 0, 2)                               # a view: columns are swept as rows
+    _sweep(np.ascontiguousarray(C.transpose(1, 0, 2)), P1, P2, [(1, 0), (-1, 0)], St)
     return S
 
 
 def census_volume(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3) -> np.ndarray:
     """Census cost: Hamming distance between (2r+1)^2 - 1 bit signatures (is a neighbour darker than the
-    centre?); robust to gain and bias between the cameras. inf where x - d < 0. Returns (H, W, d_max+1)."""
-    def bits(I):
+    centre?), packed in uint64 (r <= 3); robust to gain and bias between the cameras.
+    Returns C: (H, W, d_max + 1) int16, the worst cost (all bits differ) where x - d < 0."""
+    def signature(I):
         P = np.pad(I, r, mode="edge")
         H, W = I.shape
-        return np.stack([P[r + i:r + i + H, r + j:r + j + W] < I
-                         for i in range(-r, r + 1) for j in range(-r, r + 1) if i or j], axis=-1)
-    b_l, b_r = bits(I_l), bits(I_r)
+        code = np.zeros((H, W), np.uint64)
+        bit = 0
+        for i in range(-r, r + 1):
+            for j in range(-r, r + 1):
+                if i or j:
+                    darker = P[r + i:r + i + H, r + j:r + j + W] < I
+                    code[darker] |= np.uint64(1) << np.uint64(bit)
+                    bit += 1
+        return code
+    s_l, s_r = signature(I_l), signature(I_r)
     H, W = I_l.shape
-    C = np.full((H, W, d_max + 1), np.inf, dtype=np.float32)
-    for d in range(d_max + 1):
-        C[:, d:, d] = (b_l[:, d:] != b_r[:, :W - d]).sum(axis=-1)
+    C = np.empty((H, W, d_max + 1), dtype=np.int16)
+    for y0 in range(0, H, 32):      # blocks of rows: d-first writes, then one cache-sized transpose
+        a, b = s_l[y0:y0 + 32], s_r[y0:y0 + 32]
+        blk = np.full((d_max + 1,) + a.shape, (2 * r + 1) ** 2 - 1, dtype=np.int16)
+        for d in range(d_max + 1):
+            blk[d, :, d:] = np.bitwise_count(a[:, d:] ^ b[:, :W - d])
+        C[y0:y0 + 32] = blk.transpose(1, 2, 0)
     return C
 
 
 def sgm_stereo(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3, P1: float = 6.0, P2: float = 48.0,
-               paths: int = 8, max_lr_diff: float = 1.0, median: int = 3) -> np.ndarray:
-    """The full matcher of the benchmark: census costs (box-summed over a 3×3 window), SGM, WTA + sub-pixel +
-    left-right check, then a median filter on the kept disparities. Returns D: (H, W), NaN = none."""
+               paths: int = 4, max_lr_diff: float = 1.0, median: int = 3) -> np.ndarray:
+    """The full matcher of the benchmark: 7×7 census costs, SGM (int16), WTA + sub-pixel + left-right
+    check, then a 3×3 median filter of the kept disparities. Returns D: (H, W), NaN = none."""
     from scipy import ndimage
-    C = census_volume(np.asarray(I_l, float), np.asarray(I_r, float), int(d_max), r).astype(float)
-    finite = np.isfinite(C)
-    C = np.where(finite, C, 4.0 * r * (r + 1))                 # no partner: the worst census cost
-    C = _box_sum(C, 1)
-    S = sgm(C, P1 * 9, P2 * 9, paths)
-    S[~finite] = np.inf
+    C = census_volume(np.asarray(I_l, float), np.asarray(I_r, float), int(d_max), r)
+    S = sgm(C, np.int16(P1), np.int16(P2), paths)      # int16: sums <= 8 (48 + P2) < 2^15
+    for d in range(1, d_max + 1):
+        S[:, :d, d] = _worst(S)                                # x < d: no partner in the right view
     D = _wta_subpixel_lr(S, max_lr_diff)
     if median:
         D = np.where(np.isnan(D), D, ndimage.median_filter(np.nan_to_num(D, nan=0.0), size=median))

@@ -156,4 +156,55 @@ MUTANTS: list[tuple] = [
     ("8.9", "np.roll wraps the border", sgm_rolls_at_border, None),
 ]
 
+
+# ----------------------------------------------------------------- 8.10 plane sweep
+
+def _sweep(I_ref, K_ref, images, Ks, Rs, ts, depths, r, *, sign=1.0, same_K=False, window=True, best=np.argmin,
+           inverse=False):
+    H, W = I_ref.shape
+    ys, xs = np.mgrid[0:H, 0:W].astype(float)
+    p = np.stack([xs, ys, np.ones_like(xs)], -1)
+    C = np.zeros((len(depths), H, W))
+    for img, K, R, t in zip(images, Ks, Rs, ts):
+        K = K_ref if same_K else K
+        for i, d in enumerate(depths):
+            Hk = K @ (R + sign * np.outer(t, [0, 0, 1.0]) / d) @ np.linalg.inv(K_ref)
+            if inverse:
+                Hk = np.linalg.inv(Hk)
+            q = p @ Hk.T
+            warped = ndimage.map_coordinates(np.asarray(img, float), [q[..., 1] / q[..., 2], q[..., 0] / q[..., 2]],
+                                             order=1, mode="constant", cval=0.0)
+            ad = np.abs(I_ref - warped)
+            C[i] += ndimage.uniform_filter(ad, 2 * r + 1, mode="nearest") if window else ad
+    return np.asarray(depths)[best(C, axis=0)]
+
+
+def sweep_minus_sign(I_ref, K_ref, images, Ks, Rs, ts, depths, r=2):
+    return _sweep(I_ref, K_ref, images, Ks, Rs, ts, depths, r, sign=-1.0)
+
+
+def sweep_reference_K_everywhere(I_ref, K_ref, images, Ks, Rs, ts, depths, r=2):
+    return _sweep(I_ref, K_ref, images, Ks, Rs, ts, depths, r, same_K=True)
+
+
+def sweep_per_pixel_cost(I_ref, K_ref, images, Ks, Rs, ts, depths, r=2):
+    return _sweep(I_ref, K_ref, images, Ks, Rs, ts, depths, r, window=False)
+
+
+def sweep_argmax(I_ref, K_ref, images, Ks, Rs, ts, depths, r=2):
+    return _sweep(I_ref, K_ref, images, Ks, Rs, ts, depths, r, best=np.argmax)
+
+
+def sweep_inverse_homography(I_ref, K_ref, images, Ks, Rs, ts, depths, r=2):
+    return _sweep(I_ref, K_ref, images, Ks, Rs, ts, depths, r, inverse=True)
+
+
+MUTANTS += [
+    ("8.10", "R - t nᵀ/d for the plane nᵀX = d", sweep_minus_sign, "the plane moves the wrong way"),
+    ("8.10", "reference K for every camera", sweep_reference_K_everywhere, "uses the reference's K"),
+    ("8.10", "per-pixel cost, no window", sweep_per_pixel_cost, "costs are per pixel"),
+    ("8.10", "argmax of the cost", sweep_argmax, "LOWEST cost"),
+    ("8.10", "neighbour sampled at H⁻¹ p", sweep_inverse_homography, "most depths are wrong"),
+]
+
 # neural (8.4-8.7, 8.12-8.16, 8.18-8.23, 8.25)
