@@ -30,7 +30,7 @@ def _l1_scores(H: np.ndarray) -> np.ndarray:
 
 def loop_keyframes(rng, n_places: int = 30, per_place: int = 20, keep: float = 0.75) -> dict:
     """Keyframes 0..2P-1 at places t mod P (two laps). Returns S (N, N), the inlier counts (N, N) behind
-    `count_inliers`, place (N,), and which pairs are true loop closures (same place +-1, other lap)."""
+    `count_inliers`, place (N,), and which pairs are true loop closures (same place +-1, > 10 keyframes apart)."""
     P = n_places
     N = 2 * P
     place = np.arange(N) % P
@@ -75,8 +75,10 @@ def loop_keyframes(rng, n_places: int = 30, per_place: int = 20, keep: float = 0
     inl = inl + inl.T
     dp = np.abs(place[:, None] - place[None, :])
     dp = np.minimum(dp, P - dp)
-    lap = np.arange(N) // P
-    true = (dp <= 1) & (lap[:, None] != lap[None, :])
+    # A true loop closure: the same place (+-1) seen again after the camera went away — more than 10 keyframes
+    # apart. (The end of the first lap closes on its start too: places P-1 and 0 are neighbours.)
+    gap = np.abs(np.arange(N)[:, None] - np.arange(N)[None, :])
+    true = (dp <= 1) & (gap > 10)
     return {"S": S, "inliers": inl, "place": place, "true": true, "corridor": corridor, "poster": (int(c), int(d))}
 
 

@@ -24,7 +24,7 @@ F, W, H = 500.0, 640, 480
 K = np.array([[F, 0, W / 2], [0, F, H / 2], [0, 0, 1.0]])
 
 
-def vo_sequence(rng, n_frames: int = 40, n_points: int = 1200, wrong: float = 0.05) -> dict:
+def vo_sequence(rng, n_frames: int = 40, n_points: int = 1600, wrong: float = 0.05) -> dict:
     """A camera moving forward (0.06-0.25 m/frame) and sideways with a gentle yaw through a corridor of points.
     Returns frames (list of dict(ids (m,), uv (m, 2))) and the true poses T_cw (n, 4, 4)."""
     X = np.c_[rng.uniform(-5, 5, n_points), rng.uniform(-2.5, 2.5, n_points), rng.uniform(-1, 16, n_points)]
@@ -60,6 +60,7 @@ def vo_sequence(rng, n_frames: int = 40, n_points: int = 1200, wrong: float = 0.
 
 def essential_ransac(x1, x2, K_):
     """E from pixel correspondences with RANSAC (cv2.findEssentialMat, 5-point, 1 px): (E (3, 3), inliers (m,))."""
+    cv2.setRNGSeed(0)   # deterministic: a replayed seed gets the same answer
     E, mask = cv2.findEssentialMat(np.asarray(x1, float), np.asarray(x2, float), np.asarray(K_, float),
                                    method=cv2.RANSAC, prob=0.999, threshold=1.0)
     if E is None:
@@ -145,11 +146,11 @@ def standin_vo(frames, K_, solvers, init: int = 6, gap: int = 5, min_parallax: f
         have = np.array([int(i) in world for i in fr["ids"]], bool)
         Xm = np.array([world[int(i)] for i in fr["ids"][have]]).reshape(-1, 3)
         T[k], _ = solvers["pnp"](Xm, fr["uv"][have], K_)
-        if k > init:
-            ids, x1, x2 = common(k - gap, k)
+        for back in (gap, gap // 2) if k > init else ():   # fast motion: tracks too short for `gap`
+            ids, x1, x2 = common(k - back, k)
             new = np.array([int(i) not in world for i in ids], bool)
             if new.any():
-                extend(k - gap, k, ids[new], x1[new], x2[new])
+                extend(k - back, k, ids[new], x1[new], x2[new])
     return T
 
 
@@ -189,12 +190,12 @@ def scale_drift(T, T_true) -> float:
     return float(abs(np.log(s2 / s1)))
 
 
-# ATE: the reference reaches 0.1-0.64 % of the path (0.3 px noise, 40 frames; 40 runs, 90th percentile 0.39 %);
+# ATE: the reference reaches 0.1-0.67 % of the path (0.3 px noise, 40 frames; 100 runs, 90th percentile 0.39 %);
 # 1.5 % leaves room for other sound loops (another initial pair, triangulation gap, map policy). Chaining
 # unit-norm E translations is off by >= 2.3 %, camera-to-world poses by >= 2.9 %; a VO that never extends its
 # map loses every map point after ~15 frames (PnP fails).
 TOL_ATE = 0.015
-# Scale drift: monocular VO without BA drifts; the reference's |log| ratio reached 0.06 at worst over 40 runs
+# Scale drift: monocular VO without BA drifts; the reference's |log| ratio reached 0.08 at worst over 100 runs
 # (90th percentile 0.03); 0.3 flags a scale that is re-invented along the way.
 TOL_DRIFT = 0.3
 

@@ -38,7 +38,8 @@ def monocular_vo(frames: list, K: np.ndarray, solvers: dict, init: int = 8, gap:
        triangulate the inliers: the map.
     2. Every other frame: PnP (RANSAC) against the map points it sees -> its pose; the map's scale carries over.
     3. Extend the map: triangulate the tracks the map lacks between frame k and frame k - gap (enough
-       baseline), keeping points that reproject well with >= 1.5 degrees of parallax.
+       baseline), then k - gap/2 (tracks too short when the camera moves fast), keeping points that reproject
+       well with >= 1.5 degrees of parallax.
     Re-estimating each pose from E would reset the scale at every frame (‖t‖ = 1): that is the drift to avoid."""
     n = len(frames)
     T = np.tile(np.eye(4), (n, 1, 1))
@@ -62,6 +63,6 @@ def monocular_vo(frames: list, K: np.ndarray, solvers: dict, init: int = 8, gap:
         fr = frames[k]
         _, i_map, i_kp = np.intersect1d(map_ids, fr["ids"], return_indices=True)
         T[k], _ = solvers["pnp"](map_X[i_map], fr["uv"][i_kp], K)
-        if k > init:
-            extend(k - gap, k, *_common(frames[k - gap], fr))
+        for back in (gap, gap // 2) if k > init else ():   # fast motion: tracks too short for `gap`
+            extend(k - back, k, *_common(frames[k - back], fr))
     return T
