@@ -417,10 +417,14 @@ def test_self_consistent_but_wrong_models_fail_the_photos(name, mutant):
 def test_focal_never_refined_fails_the_real_photos():
     _need_sacre_coeur()
     from mutants.ch04_sfm import sfm_focal_never_refined
+    # every focal length at the prior: rotation rows fail on both sets (Sacré-Cœur worst pair 10.4°, Sceaux Castle
+    # median 2.0°, worst 4.6°; the registration gates now turn some of its wrong poses away, so the Sacré-Cœur
+    # median, 2.6°, can pass), and every photo row it fails names the focal refinement
     result = grade(EXERCISES["4.14"], sfm_focal_never_refined, seed=0)
     rows = _rows_tagged(result, EXERCISES["4.14"], 0, "rotations")
-    assert rows and not any(r.passed for r in rows), checks.show(result)
-    assert all("focal refinement" in r.hint for r in rows), checks.show(result)
+    assert rows and sum(not r.passed for r in rows) >= len(rows) - 1, checks.show(result)
+    failed = [r for r in _rows_tagged(result, EXERCISES["4.14"], 0, "photos") if not r.passed]
+    assert all("focal refinement" in r.hint for r in failed), checks.show(result)
 
 
 # ----------------------------------------------------------------- stand-ins for the notebook: BA, pycolmap's log

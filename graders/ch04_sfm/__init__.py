@@ -5,7 +5,7 @@
     tracks.py              4.11      tracks by union-find
     initial_pair.py        4.12-4.13 two-view initialisation, ranking initial pairs
     sfm_scenes.py, incremental.py, photos.py
-                           4.14      incremental SfM: synthetic scenes (K known and unknown), the Sacré-Cœur
+                           4.14      incremental SfM: synthetic scenes (K known and unknown), real photos
     rotation_averaging.py  4.15      chordal L2
     colmap_io.py           4.16-4.17 COLMAP text models
     debug.py               4.18, 4.20 DEBUG: components, scale drift (and debug_case for all four)
@@ -39,8 +39,9 @@ from .repairs import (INITIAL_PAIR_CAUSES, REGISTRATION_CAUSES, broken_initial_p
 from .standin_ba import bundle_adjust
 from .incremental import focal_error, low_angle_fraction, recon_errors
 from .initial_pair import colmap_two_view, cv_two_view_init, gt_rank_initial_pairs
-from .photos import (SACRE_COEUR_FEATURES, SACRE_COEUR_MAX_SIDE, colmap_sacre_coeur, real_reprojection_px,
-                     recon_reprojection_px, relative_rotation_errors, sacre_coeur_problem)
+from .photos import (PHOTO_SETS, SACRE_COEUR_FEATURES, SACRE_COEUR_MAX_SIDE, colmap_photos, colmap_sacre_coeur,
+                     photo_problem, real_focal_error, real_reprojection_px, recon_reprojection_px,
+                     relative_rotation_errors, sacre_coeur_problem)
 from .pnp import colmap_pnp, cv_epnp, cv_p3p, cv_sqpnp, gt_pnp_dlt, held_out_px, pnp_scene, pose_error
 from .questions import sigma_z
 from .rotation_averaging import align_rotations, gt_rotation_averaging, rotation_graph
@@ -62,6 +63,7 @@ __all__ = [
     "real_reprojection_px", "recon_reprojection_px", "relative_rotation_errors",
     # the Sacré-Cœur photos
     "sacre_coeur_problem", "colmap_sacre_coeur", "SACRE_COEUR_MAX_SIDE", "SACRE_COEUR_FEATURES",
+    "photo_problem", "colmap_photos", "PHOTO_SETS", "real_focal_error",   # every real set (Sceaux Castle: K known)
     # DEBUG (section 3)
     "debug_case", "debug_components", "debug_registration", "debug_drift", "debug_initial_pair",
     "broken_components", "broken_initial_pair", "broken_initial_run", "broken_registration", "broken_trajectory",

@@ -115,7 +115,7 @@ def cases_incremental_sfm(rng) -> Iterator[Case]:
     ]
     yield from known_K
     yield from uncalibrated_sfm_cases(rng)   # K unknown
-    yield from real_sfm_cases()              # the Sacré-Cœur photos (with the dataset): built only if reached
+    yield from real_sfm_cases()              # the real photo sets (with the datasets): built only if reached
 
 
 def focal_error(rec: dict, truth: dict) -> float:
@@ -168,7 +168,7 @@ def _focal_off(c, out) -> bool:
 
 
 SFM_HINTS = [
-    *REAL_SFM_HINTS,          # the Sacré-Cœur rows (defined with real_sfm_cases)
+    *REAL_SFM_HINTS,          # the real-photo rows (defined with real_sfm_cases)
     Hint("your points do not reproject onto their own tracks: points[j] must be the 3D point of tracks[j] — keep the "
          "two lists in the same order.", _tracks_misaligned),
     Hint("your focal lengths are off (median |f / f_true − 1| over 3 %) though no longer at the prior: a first "

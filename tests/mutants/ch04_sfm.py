@@ -508,6 +508,37 @@ def sfm_focal_never_refined(problem):
         return ref.incremental_sfm(problem)
 
 
+def sfm_two_models_joined(problem):
+    # Self-consistent but wrong: the learner's loop stalls, so a second model is started on the images it
+    # could not reach and both are returned as one (each model in its own world frame). Here: the images are
+    # split in two halves by index, each half reconstructed from its own matches, the two outputs concatenated.
+    # Every point reprojects onto its keypoints; the rotations between the halves are meaningless.
+    n = len(problem["keypoints"])
+    out = {"cameras": {}, "points": np.zeros((0, 3)), "tracks": []}
+    for half in (set(range(n // 2)), set(range(n // 2, n))):
+        sub = dict(problem, matches={p: m for p, m in problem["matches"].items() if set(p) <= half})
+        rec = ref.incremental_sfm(sub)
+        out["cameras"].update(rec["cameras"])
+        out["points"] = np.r_[out["points"], rec["points"]]
+        out["tracks"] += rec["tracks"]
+    return out
+
+
+def sfm_initial_pair_most_matches(problem):
+    # Wrong initial pair: the pair with the most verified matches, whatever its triangulation angle or H/E
+    # ratio (on landmark photos: two shots from one spot, a rotation with no baseline to triangulate from).
+    def initialise(m, keypoints, matches, *a, seed=0, verbose=False, **kw):
+        for p in sorted(matches, key=lambda p: -len(matches[p])):
+            mt = matches[p]
+            res = ref.two_view_init(keypoints[p[0]][mt[:, 0], :2], keypoints[p[1]][mt[:, 1], :2], m.K[p[0]],
+                                    m.K[p[1]], thresh_px=4.0, min_angle_deg=0.0, seed=seed)
+            if ref_pipeline._try_pair(m, matches, p, res):
+                return True
+        return False
+    with _patched(_initialise=initialise):
+        return ref.incremental_sfm(problem)
+
+
 # ----------------------------------------------------------------- 4.15 rotation averaging
 
 def rotavg_spanning_tree(R_rel, n):
@@ -802,6 +833,8 @@ MUTANTS = [
     ("4.14", "no triangulation-angle filter", sfm_no_angle_filter, "1.5°"),
     ("4.14", "points and tracks out of order", sfm_points_out_of_order, "same order"),
     ("4.14", "focal length never refined (kept at 1.2 × max side)", sfm_focal_never_refined, "focal refinement"),
+    ("4.14", "two models joined in one frame", sfm_two_models_joined, "self-consistent but wrong"),
+    ("4.14", "initial pair with the most matches", sfm_initial_pair_most_matches, "self-consistent but wrong"),
     ("4.15", "chained along a spanning tree", rotavg_spanning_tree, "along a tree"),
     ("4.15", "R_ij transposed", rotavg_transposed, "R_ij = R_j R_iᵀ"),
     ("4.15", "no projection onto SO(3)", rotavg_no_projection, "not a rotation"),
