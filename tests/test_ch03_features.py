@@ -97,7 +97,23 @@ def _cv_sift_keypoints(precise):
 LIBRARY_CASES = [("3.5", "goodFeaturesToTrack, quality 0.01", cv_gftt_usual),
                  ("3.9", "OpenCV SIFT, precise upscale", _cv_sift_keypoints(True)),
                  ("3.7", "OpenCV ORB", cv_orb_descriptors), ("3.8", "OpenCV batchDistance", cv_hamming_batch),
-                 ("3.12", "plain ANMS", features.distribute_anms), ("3.12", "quadtree", features.distribute_quadtree)]
+                 ("3.12", "plain ANMS", features.distribute_anms), ("3.12", "quadtree", features.distribute_quadtree),
+                 ("3.14", "OpenCV USAC_MAGSAC", lambda case: cv_magsac_repetitive(case)),
+                 ("3.16", "ANMS in both views", lambda case: anms_clustered(case))]
+
+
+def cv_magsac_repetitive(case):
+    """3.14 by cv2.BFMatcher (every nearest neighbour) and cv2.findHomography(USAC_MAGSAC, 3 px)."""
+    m = np.array([(d.queryIdx, d.trainIdx) for d in cv2.BFMatcher(cv2.NORM_L2).match(case["desc1"], case["desc2"])])
+    _, inl = cv2.findHomography(case["kp1"][m[:, 0]], case["kp2"][m[:, 1]], cv2.USAC_MAGSAC, 3.0)
+    return {"cause": "c", "matches": m[inl.ravel().astype(bool)]}
+
+
+def anms_clustered(case):
+    """3.16 by adaptive non-maximal suppression (Brown et al. 2005) instead of a grid, in both views."""
+    size = case["image_size"]
+    return {"cause": "a", "keep1": features.distribute_anms(case["kp1"], case["resp1"], size, 200),
+            "keep2": features.distribute_anms(case["kp2"], case["resp2"], size, 200)}
 # case keys -> why the library cannot answer that case (those cases must fail)
 CANNOT = {"3.7": {"bits": "the bit-by-bit case specifies the course's pattern and box smoothing; "
                           "cv2.ORB has its own learned pattern and Gaussian smoothing"}}
@@ -173,3 +189,42 @@ def test_notebook_states_the_numbers_the_grader_uses():
         assert f"`{pattern}`" in q["3.21"], pattern
     for d1, d2, rho in ch3.RATIO_CASES_322:
         assert f"| {d1:.2f} | {d2:.2f} | {rho:g} |" in q["3.22"], (d1, d2, rho)
+
+
+# ----------------------------------------------------------------- DEBUG: diagnosis and repair apart
+# The broken artefact's own output (what trying knobs on it returns) with the right cause, and the right
+# repair with a wrong cause: each earns exactly the half it deserves.
+BROKEN_OUTPUT = {
+    "3.13": lambda c: {"cause": "b", "matches": ch3.broken_too_few(c)},
+    "3.14": lambda c: {"cause": "c", "matches": ch3.broken_repetitive(c)},
+    # every detection kept: the broken run's cost (its 8,000 x 8,000 matching is not rerun here)
+    "3.15": lambda c: {"cause": "d", "keep1": np.arange(len(c["kp1"])), "keep2": np.arange(len(c["kp2"])),
+                       "matches": np.zeros((0, 2), int)},
+    "3.16": lambda c: dict(zip(("keep1", "keep2"), ch3.broken_clustered(c)), cause="a"),
+}
+WRONG_CAUSE = {"3.13": "a", "3.14": "d", "3.15": "b", "3.16": "c"}
+
+
+@pytest.mark.parametrize("exercise_id", list(BROKEN_OUTPUT))
+def test_debug_broken_output_with_the_right_cause_gets_half(exercise_id):
+    ex = EXERCISES[exercise_id]
+    result = grade(ex, BROKEN_OUTPUT[exercise_id], seed=SEEDS[0])
+    rows = {r.key: r for r in result.cases}
+    assert rows["diagnosis"].passed and result.score == ex.points / 2, checks.show(result)
+
+
+@pytest.mark.parametrize("exercise_id", list(WRONG_CAUSE))
+def test_debug_right_repair_with_a_wrong_cause_gets_half(exercise_id):
+    ex = EXERCISES[exercise_id]
+    fix = reference(ex)
+    result = grade(ex, lambda c: dict(fix(c), cause=WRONG_CAUSE[exercise_id]), seed=SEEDS[0])
+    rows = {r.key: r for r in result.cases}
+    assert not rows["diagnosis"].passed and result.score == ex.points / 2, checks.show(result)
+    assert "is not it" in rows["diagnosis"].hint, checks.show(result)
+
+
+def test_debug_causes_are_stated_in_each_case():
+    for exercise_id in BROKEN_OUTPUT:
+        case = ch3.debug_case(exercise_id, seed=0)
+        assert case["causes"] == ch3.CAUSES[exercise_id] and case["log"]
+        assert "H" not in case, "the true homography is the grader's"

@@ -1,296 +1,442 @@
-"""3.13-3.16 DEBUG: one matching pipeline on OpenCV parts, four broken set-ups, their symptoms and hints.
+"""3.13-3.16 DEBUG: four broken matching set-ups to diagnose (graded) and repair (measured).
 
-The learner returns pipeline settings; the grader reruns `pipeline` with them on hidden pairs and checks
-the requirements the exercise states, judging matches by the hidden true homography (within 3 px).
+Each case is a broken artefact: an image pair's detections (keypoints, responses, descriptors), the
+colleague's code that ran on them (`BROKEN[id]`, source printed in the notebook), the log of that run,
+and the list of plausible causes. The learner returns {"cause": letter, ...the repaired output...}.
+The diagnosis is one graded row (half the points); the repair is run by the learner's own code on two
+fresh hidden pairs and judged by what it measures against the hidden true homography (correct: within
+3 px): correct-match count and precision, operation count (3.15), grid coverage (3.16). No settings
+dict, no black box: a fix that only passes names a cause and returns what it computed.
 """
 from __future__ import annotations
+
+import copy
 
 import cv2
 import numpy as np
 
-from .. import scene
-from ..engine import Exercise, Hint, OutputError, debug_cases, debug_practice, register
-from .common import homography_pair_from, transfer
+from ..engine import Case, Exercise, Hint, OutputError, debug_practice, register, shared_run
+from . import debug_data as dd
 from .distribution import cell_of, gt_distribute
 
-# ============================================================ DEBUG: one pipeline, four symptoms ====
+# ============================================================ diagnoses ====
+# (letter -> cause) per exercise; the right letter differs between exercises. Each wrong cause has a
+# hint that says what in the log or the data rules it out.
 
-DEFAULT_SETTINGS = {"n_features": 500, "ratio": 0.75, "mutual": False, "ransac_px": None, "grid": None,
-                    "matcher": "brute"}
-
-
-def pipeline(img1: np.ndarray, img2: np.ndarray, **settings) -> dict:
-    """The chapter's matching pipeline on OpenCV parts, configured by `settings` (DEFAULT_SETTINGS):
-
-    n_features  keypoints per image (the strongest SIFT keypoints, or with `grid` the grid's picks)
-    ratio       Lowe's ratio (None: off); mutual: mutual nearest neighbours
-    ransac_px   RANSAC homography threshold for geometric verification (None: off)
-    grid        (columns, rows): detect 5x more, then distribute n_features over the grid
-    matcher     'brute' (cv2.BFMatcher) or 'flann' (cv2.FlannBasedMatcher, approximate)
-    Returns {"x1", "x2": (K, 2) matched points, "n1", "n2": keypoint counts, "flops": brute-force
-    multiply-adds n1 n2 128 (0 for flann)}.
-    """
-    s = DEFAULT_SETTINGS | dict(settings)
-    unknown = set(s) - set(DEFAULT_SETTINGS)
-    if unknown:
-        raise ValueError(f"unknown settings {sorted(unknown)}; known: {sorted(DEFAULT_SETTINGS)}")
-    n = int(s["n_features"])
-    kd = []
-    for img in (img1, img2):
-        kps, desc = cv2.SIFT_create(nfeatures=0 if s["grid"] else n).detectAndCompute(np.asarray(img, np.uint8), None)
-        if desc is None:
-            kps, desc = [], np.zeros((0, 128), np.float32)
-        if s["grid"]:
-            pts = np.array([k.pt for k in kps]).reshape(-1, 2)
-            sel = gt_distribute(pts, np.array([k.response for k in kps]), img.shape[::-1], n, tuple(s["grid"]))
-            kps, desc = [kps[i] for i in sel], desc[sel]
-        else:
-            order = np.argsort([-k.response for k in kps], kind="stable")[:n]
-            kps, desc = [kps[i] for i in order], desc[order]
-        kd.append((np.array([k.pt for k in kps]).reshape(-1, 2), desc))
-    (p1, d1), (p2, d2) = kd
-    if s["matcher"] == "flann":
-        matcher = cv2.FlannBasedMatcher({"algorithm": 1, "trees": 4}, {"checks": 64})
-    else:
-        matcher = cv2.BFMatcher(cv2.NORM_L2, crossCheck=False)
-    pairs = []
-    if len(d1) >= 2 and len(d2) >= 2:
-        for m in matcher.knnMatch(d1, d2, k=2):
-            if len(m) == 2 and (s["ratio"] is None or m[0].distance < s["ratio"] * m[1].distance):
-                pairs.append((m[0].queryIdx, m[0].trainIdx))
-    pairs = np.array(pairs, int).reshape(-1, 2)
-    if s["mutual"] and len(pairs):
-        back = {m.queryIdx: m.trainIdx for m in cv2.BFMatcher(cv2.NORM_L2).match(d2, d1)}
-        pairs = pairs[[back.get(j) == i for i, j in pairs]]
-    x1, x2 = p1[pairs[:, 0]], p2[pairs[:, 1]]
-    if s["ransac_px"] and len(x1) >= 4:
-        _, inl = cv2.findHomography(x1, x2, cv2.RANSAC, float(s["ransac_px"]), maxIters=2000, confidence=0.999)
-        keep = inl.ravel().astype(bool) if inl is not None else np.zeros(len(x1), bool)
-        x1, x2 = x1[keep], x2[keep]
-    return {"x1": x1, "x2": x2, "n1": len(p1), "n2": len(p2),
-            "flops": 0 if s["matcher"] == "flann" else len(p1) * len(p2) * 128}
+CAUSES = {
+    "3.13": {"a": "SIFT descriptors are not scale-invariant: a 2x zoom changes them beyond recognition",
+             "b": "the 150 strongest keypoints of each view rarely include both ends of a true pair (view 2 sees "
+                  "only the middle of view 1, magnified), and a ratio of 0.6 rejects most true matches left",
+             "c": "brute-force matching misses the true nearest neighbours; an approximate matcher (FLANN) finds more",
+             "d": "wrong matches crowd out the right ones: geometric verification (RANSAC) is missing"},
+    "3.14": {"a": "the ratio 0.95 is too permissive: a strict ratio (0.6-0.7) alone removes the wrong matches",
+             "b": "the descriptors are not rotation-invariant, so turned bays are confused",
+             "c": "identical bays: a keypoint's nearest and second-nearest neighbours are the same part in different "
+                  "bays, so appearance cannot decide; only geometry (one homography for the whole shelf) can",
+             "d": "too few keypoints are detected on the shelving"},
+    "3.15": {"a": "the ratio test needs two neighbours per keypoint, doubling the work",
+             "b": "the descriptors are float32; uint8 descriptors would be several times faster",
+             "c": "the mutual check matches both ways",
+             "d": "brute force costs N1 x N2 x 128 multiply-adds, and every weak detection is kept: 8,000 per view, "
+                  "most of which have no partner"},
+    "3.16": {"a": "keypoints are kept by response alone, and the poster out-responds the whole wall, so the "
+                  "budget's 200 strongest all sit on the poster",
+             "b": "the wall has no texture: nothing can be detected there",
+             "c": "the ratio test removes the wall's matches",
+             "d": "the budget of 200 keypoints is too small for a 640 x 480 image"},
+}
+ANSWER = {"3.13": "b", "3.14": "c", "3.15": "d", "3.16": "a"}
+WHY_NOT = {
+    "3.13": {"a": "SIFT is built for scale: its DoG detector picks each keypoint's scale and the descriptor window "
+                  "grows with it; the log shows the few matches it finds are right. Count how many of view 1's 150 "
+                  "keypoints even land in the part view 2 sees.",
+             "c": "brute force is exact: it finds the true nearest neighbour of every keypoint it is given. "
+                  "An approximate matcher can only find fewer.",
+             "d": "the log shows the few matches are nearly all correct: the problem is how few there are. RANSAC "
+                  "removes matches; it cannot add any."},
+    "3.14": {"b": "the views differ by a few degrees of turn, and the unique features match fine; each wrong match "
+                  "lands on the same part of another bay (look at the picture).",
+             "a": "look at d1/d2 of the correct matches in the log: on identical bays it is 0.8-1.0, so a strict "
+                  "ratio throws the right ones out with the wrong ones and leaves the few unique features.",
+             "d": "the log counts hundreds of keypoints, as many as the bays' parts: detection is fine."},
+    "3.15": {"a": "finding the second neighbour costs a comparison per candidate, not a second pass; the N1 x N2 "
+                  "distances are the cost, whatever happens to them after.",
+             "b": "the data type changes the constant, not the N1 x N2 count of comparisons that the log shows "
+                  "(64 M distances).",
+             "c": "this pipeline does not run a mutual check (read its code)."},
+    "3.16": {"b": "the log counts 1,000 detections on the wall, found again as reliably as the poster's; they are "
+                  "weaker, not absent.",
+             "c": "the ratio test never sees the wall's keypoints: none is among the 200 kept (see the picture).",
+             "d": "200 keypoints are plenty for a homography or a pose; the problem is where they are."},
+}
 
 
-def shelving(rng, size=(640, 480)) -> np.ndarray:
-    """Warehouse shelving: a grid of identical bays (uprights, beams, boxes with the same label). A float32
-    image in [0, 1], (height, width) = size[::-1]."""
-    W, H = size
-    img = np.full((H, W), 0.55)
-    bay_w, bay_h = int(rng.integers(70, 90)), int(rng.integers(60, 75))
-    labels = [(rng.random((10, 16)) > 0.5) * 0.5 + 0.25 for _ in range(3)]  # three products in stock
-    for y0 in range(0, H - bay_h + 1, bay_h):
-        img[y0:y0 + 6] = 0.15  # beam
-        for x0 in range(0, W - bay_w + 1, bay_w):
-            img[:, x0:x0 + 5] = 0.2  # upright
-            bx, by = x0 + 12, y0 + 18
-            img[by:by + 36, bx:bx + 48] = 0.8  # box
-            img[by + 10:by + 20, bx + 16:bx + 32] = labels[int(rng.integers(3))]
-            img[by + 24:by + 30, bx + 4:bx + 44] = 0.8 - 0.4 * (rng.random((6, 40)) > 0.7)  # barcode
-    img += rng.normal(0, 0.01, img.shape)
-    return cv2.GaussianBlur(np.clip(img, 0, 1).astype(np.float32), (0, 0), 0.8)
+def _causes_text(exercise_id: str) -> str:
+    return "\n".join(f"  {k}) {v}" for k, v in CAUSES[exercise_id].items())
 
 
-def _poster_scene(rng, size=(640, 480)) -> np.ndarray:
-    """A busy poster on a quiet wall: strong texture in one corner, weak texture elsewhere."""
-    W, H = size
-    wall = cv2.resize(scene.texture("gravel"), size) * 0.3 + 0.35
-    poster = scene.texture(str(rng.choice(["text", "brick", "coins"])), (W // 3, H // 3))
-    x0, y0 = int(rng.integers(10, W // 3)), int(rng.integers(10, H // 3))
-    wall[y0:y0 + H // 3, x0:x0 + W // 3] = poster
-    return np.clip(wall, 0, 1).astype(np.float32)
+# ============================================================ the broken runs and their logs ====
+
+def _ransac_inliers(x1, x2, px=3.0) -> int:
+    if len(x1) < 4:
+        return 0
+    _, inl = cv2.findHomography(x1, x2, cv2.RANSAC, px, maxIters=2000, confidence=0.999)
+    return 0 if inl is None else int(inl.sum())
 
 
-
-def _correct(res, H, t=3.0):
-    if not len(res["x1"]):
-        return np.zeros(0, bool)
-    return np.linalg.norm(transfer(H, res["x1"]) - res["x2"], axis=1) <= t
-
-
-def debug_too_few(rng):
-    """3.13 — too few matches: a large scale change, few keypoints and a strict ratio.
-
-    A pair on which the model fix (2,000 keypoints, ratio 0.8) itself falls short of the requirement with a
-    margin — under 70 correct matches or under 65 % correct — is redrawn: such a pair tests the texture, not
-    the diagnosis (seed 3269595212: a coffee crop where the model fix got 97 correct of 166, 58 %; over 30
-    fresh draws the model fix got 94-320 correct at 75-99 %)."""
-    for _ in range(20):
-        tex = str(rng.choice(["astronaut", "chelsea", "coffee"]))
-        img1, img2, H = homography_pair_from(rng, scene.texture(tex), scale_range=(1.8, 2.2), max_angle_deg=30)
-        ok = _correct(pipeline(img1, img2, **(DEFAULT_SETTINGS | {"n_features": 2000, "ratio": 0.8})), H)
-        if ok.sum() >= 70 and ok.mean() >= 0.65:
-            break
-    case = {"img1": img1, "img2": img2, "settings": DEFAULT_SETTINGS | {"n_features": 150, "ratio": 0.5}}
-    return case, {"img1": img1, "img2": img2, "H": H, "need": 60, "precision": 0.6}
+def _log_matches(case: dict, truth: dict, m: np.ndarray, head: str) -> str:
+    ok = dd.correct(truth, m)
+    inl = _ransac_inliers(case["kp1"][m[:, 0]], case["kp2"][m[:, 1]]) if len(m) else 0
+    return (f"{head}\nmatches: {len(m)}; RANSAC homography (3 px): {inl} inliers\n"
+            f"checked against the surveyed homography: {ok.sum()} correct, {ok.mean() if len(ok) else 0:.0%} "
+            f"precision")
 
 
-def debug_repetitive(rng):
-    """3.14 — many wrong matches: warehouse shelving repeats the same bay across the image."""
-    img1, img2, H = homography_pair_from(rng, shelving(rng), max_angle_deg=30, max_roll_deg=10)
-    case = {"img1": img1, "img2": img2, "settings": DEFAULT_SETTINGS | {"n_features": 1000, "ratio": 0.95}}
-    return case, {"img1": img1, "img2": img2, "H": H, "need": 20, "precision": 0.9}
+def debug_too_few(rng) -> tuple[dict, dict]:
+    """3.13 — too few matches: a 2x zoom, the 150 strongest keypoints per view, ratio 0.6."""
+    case, truth = dd.split(dd.zoom_pair(rng))
+    m = dd.broken_too_few(case)
+    case["log"] = _log_matches(case, truth, m, f"detections: {len(case['kp1'])} and {len(case['kp2'])}; "
+                                                "kept: the 150 strongest of each; ratio 0.6")
+    case["causes"] = dict(CAUSES["3.13"])
+    return case, dict(truth, cause=ANSWER["3.13"], need=150, precision=0.8)
 
 
-def debug_too_slow(rng):
-    """3.15 — matching too slow: every keypoint of two 1024 x 768 views of grass or gravel (3,000-8,000
-    keypoints each), brute force."""
-    tex = str(rng.choice(["grass", "gravel"]))
-    img1, img2, H = homography_pair_from(rng, scene.texture(tex), size=(1024, 768), max_angle_deg=30)
-    case = {"img1": img1, "img2": img2, "settings": DEFAULT_SETTINGS | {"n_features": 20000, "ratio": 0.8},
-            "budget_flops": 2000 * 2000 * 128}
-    return case, {"img1": img1, "img2": img2, "H": H, "need": 100, "precision": 0.8, "budget": 2000 * 2000 * 128}
+def debug_repetitive(rng) -> tuple[dict, dict]:
+    """3.14 — wrong matches on repetitive texture: shelving bays, every keypoint, ratio 0.95."""
+    case, truth = dd.split(dd.shelving_pair(rng))
+    m = dd.broken_repetitive(case)
+    ok = dd.correct(truth, m)
+    r = _ratios(case, m)[ok]
+    case["log"] = (_log_matches(case, truth, m, f"detections: {len(case['kp1'])} and {len(case['kp2'])}; all "
+                                                 "kept; ratio 0.95")
+                   + f"\nd1/d2 of the correct matches: median {np.median(r) if len(r) else np.nan:.2f}, "
+                     f"{np.mean(r < 0.7) if len(r) else 0:.0%} below 0.7")
+    case["causes"] = dict(CAUSES["3.14"])
+    return case, dict(truth, cause=ANSWER["3.14"], need=25, precision=0.95)
 
 
-def debug_clustered(rng):
-    """3.16 — features clustered: one busy poster takes every keypoint of a 200-keypoint budget.
-
-    Drawn freely, the strongest 200 keypoints of view 1 sometimes reach 60 % of its 4 x 4 cells (the
-    poster fills much of the view, or a smooth poster lets the wall in): unchanged settings passed 1
-    draw in 12. Draws whose strongest 200 occupy more than 8 of the 16 cells are redrawn, so the
-    correct matches of the unchanged settings (a subset of them) cover at most 50 % < 60 %. A draw on
-    which the model fix (an 8 x 8 grid) itself falls short with a margin (under 70 % of the cells, 40
-    correct matches or 65 % correct) is redrawn too: it tests the texture, not the diagnosis (seeds
-    3085079908, 3854146572: the model fix covered 56 % of the cells; 2 draws in 200)."""
-    for _ in range(100):
-        img1, img2, H = homography_pair_from(rng, _poster_scene(rng), max_angle_deg=25)
-        kps = cv2.SIFT_create(nfeatures=200).detect(img1, None)
-        pts = np.array([k.pt for k in sorted(kps, key=lambda k: -k.response)[:200]]).reshape(-1, 2)
-        if len(np.unique(cell_of(pts, img1.shape[::-1], (4, 4)))) > 8:
-            continue
-        margin = {"img1": img1, "img2": img2, "H": H, "need": 40, "precision": 0.65, "max_features": 200,
-                  "coverage": 0.7}
-        if _debug_metric(DEFAULT_SETTINGS | {"n_features": 200, "ratio": 0.8, "grid": (8, 8)}, margin) == 0:
-            break
-    case = {"img1": img1, "img2": img2, "settings": DEFAULT_SETTINGS | {"n_features": 200, "ratio": 0.8},
-            "max_features": 200}
-    return case, {"img1": img1, "img2": img2, "H": H, "need": 30, "precision": 0.6, "max_features": 200, "coverage": 0.6}
+def debug_too_slow(rng) -> tuple[dict, dict]:
+    """3.15 — matching too slow: 8,000 detections per view, brute force."""
+    case, truth = dd.split(dd.dense_pair(rng))
+    n1, n2 = len(case["kp1"]), len(case["kp2"])
+    case["log"] = (f"detections: {n1} and {n2}; all kept; brute force, ratio 0.8\n"
+                   f"distances: {n1 * n2 / 1e6:.0f} M = {n1 * n2 * dd.DIM / 1e9:.1f} G multiply-adds per pair; "
+                   f"about 10 s per pair on the lab machine, 1,000 pairs per night to match\n"
+                   f"RANSAC (pose) then needs a few hundred correct matches")
+    case["causes"] = dict(CAUSES["3.15"])
+    return case, dict(truth, cause=ANSWER["3.15"], need=800, precision=0.8, cost=n1 * n2, max_cost_ratio=0.1)
 
 
-def _settings(out, case):
-    if not isinstance(out, dict):
-        raise OutputError(f"expected a dict of pipeline settings, got {type(out).__name__}")
-    unknown = set(out) - set(DEFAULT_SETTINGS)
-    if unknown:
-        raise OutputError(f"unknown settings {sorted(unknown)}; known: {sorted(DEFAULT_SETTINGS)}")
-    return DEFAULT_SETTINGS | out
+def debug_clustered(rng) -> tuple[dict, dict]:
+    """3.16 — features clustered: the 200 strongest keypoints per view all on one poster."""
+    case, truth = dd.split(dd.poster_pair(rng))
+    k1, k2 = dd.broken_clustered(case)
+    m = _judge_matches(case, k1, k2)
+    case["log"] = (_log_matches(case, truth, m, f"detections: {len(case['kp1'])} and {len(case['kp2'])} (view 1: "
+                                                 f"2000 on the poster, 1000 on the wall); kept: the 200 strongest")
+                   + f"\n4 x 4 grid cells of view 1 with a correct match: {_coverage(truth, m):.0%}")
+    case["causes"] = dict(CAUSES["3.16"])
+    return case, dict(truth, cause=ANSWER["3.16"], need=40, precision=0.8, coverage=0.75, budget=200)
 
 
-def _debug_metric(settings, truth):
-    """0 when the pipeline with these settings meets every requirement; else the largest shortfall
-    as a fraction of its requirement (1 = completely missed). Which requirements failed is left in
-    truth["failed"] for the hints (a subset of "features", "count", "precision", "budget", "coverage")."""
-    failed = truth["failed"] = set()
-    if "max_features" in truth and settings["n_features"] > truth["max_features"]:
-        failed.add("features")
-        return 1.0
-    res = pipeline(truth["img1"], truth["img2"], **settings)
-    ok = _correct(res, truth["H"])
-    gaps = {"count": (truth["need"] - ok.sum()) / truth["need"],
-            "precision": (truth["precision"] - (ok.mean() if len(ok) else 0.0)) / truth["precision"]}
-    if "budget" in truth:
-        gaps["budget"] = (res["flops"] - truth["budget"]) / truth["budget"]
+GENERATORS = {"3.13": debug_too_few, "3.14": debug_repetitive, "3.15": debug_too_slow, "3.16": debug_clustered}
+debug_case = debug_practice(GENERATORS)   # debug_case(exercise_id, seed=0): a broken artefact to practise on
+
+
+def debug_truth(exercise_id: str, seed: int = 0) -> dict:
+    """The hidden truth of `debug_case(exercise_id, seed)` (H, the requirements), for the notebook's pictures."""
+    return GENERATORS[exercise_id](np.random.default_rng(seed))[1]
+
+
+def true_homography(exercise_id: str, seed: int = 0) -> np.ndarray:
+    return debug_truth(exercise_id, seed)["H"]
+
+
+# ============================================================ measuring a repair ====
+
+def _ratios(case: dict, m: np.ndarray, among: np.ndarray | None = None) -> np.ndarray:
+    """d1/d2 of matches m: the distance of each pair over the distance to the nearest other keypoint of view 2
+    (among `among`, default all)."""
+    if not len(m):
+        return np.zeros(0)
+    D1, D2 = case["desc1"][m[:, 0]].astype(float), case["desc2"].astype(float)
+    among = np.arange(len(D2)) if among is None else among
+    d = np.sqrt(np.maximum(2 - 2 * D1 @ D2[among].T, 0))    # unit descriptors
+    own = np.sqrt(np.maximum(2 - 2 * np.sum(D1 * D2[m[:, 1]], 1), 0))
+    d[among[None, :] == m[:, 1:2]] = np.inf
+    return own / np.maximum(d.min(1), 1e-12)
+
+
+def _judge_matches(case: dict, k1: np.ndarray, k2: np.ndarray) -> np.ndarray:
+    """The judge's matcher for 3.16: kept keypoints only, brute force, ratio 0.8; indices into the full views."""
+    m = dd.ratio_match(case["desc1"][k1], case["desc2"][k2], 0.8)
+    return np.c_[k1[m[:, 0]], k2[m[:, 1]]].astype(int)
+
+
+def _coverage(truth: dict, m: np.ndarray) -> float:
+    """Fraction of view 1's 4 x 4 grid cells that view 2 sees (at a 16 px sampling) holding a correct match."""
+    W, Hh = truth["image_size"]
+    grid = np.mgrid[8:Hh:16, 8:W:16].reshape(2, -1).T[:, ::-1].astype(float)
+    seen = np.unique(cell_of(grid[dd._inside(dd.transfer(truth["H"], grid), (W, Hh), 0)], (W, Hh), (4, 4)))
+    ok = dd.correct(truth, m)
+    got = np.unique(cell_of(truth["kp1"][m[ok, 0]], (W, Hh), (4, 4))) if ok.any() else np.zeros(0, int)
+    return len(np.intersect1d(got, seen)) / len(seen)
+
+
+def _index_array(x, n: int, what: str, unique: bool = True) -> np.ndarray:
+    a = np.asarray(x)
+    if a.size == 0:
+        return np.zeros(0, int)
+    if not np.issubdtype(a.dtype, np.integer) or a.ndim != 1:
+        raise OutputError(f"{what}: expected a 1-D integer array of keypoint indices, got {a.dtype} {a.shape}")
+    if a.min() < 0 or a.max() >= n:
+        raise OutputError(f"{what}: indices must lie in 0..{n - 1}")
+    if unique and len(np.unique(a)) != len(a):
+        raise OutputError(f"{what}: an index appears twice")
+    return a.astype(int)
+
+
+def _matches_array(x, case: dict) -> np.ndarray:
+    m = np.asarray(x)
+    if m.size == 0:
+        return np.zeros((0, 2), int)
+    if m.ndim != 2 or m.shape[1] != 2 or not np.issubdtype(m.dtype, np.integer):
+        raise OutputError(f'"matches": expected an (M, 2) integer array of rows (i, j), got {m.dtype} {m.shape}')
+    _index_array(m[:, 0], len(case["kp1"]), '"matches" column i (one match per keypoint of view 1)')
+    _index_array(m[:, 1], len(case["kp2"]), '"matches" column j', unique=False)
+    return m.astype(int)
+
+
+def _fields(out, *names) -> dict:
+    if not isinstance(out, dict) or not set(names) <= set(out):
+        raise OutputError(f"expected a dict with keys {', '.join(repr(n) for n in names)}")
+    return out
+
+
+def _cause(out, case: Case) -> str:
+    cause = str(_fields(out, "cause")["cause"]).strip().lower().rstrip(")")
+    if cause not in CAUSES[case.info["id"]]:
+        raise OutputError(f'"cause": one of {", ".join(CAUSES[case.info["id"]])}, got {out["cause"]!r}')
+    return cause
+
+
+def _wrong_cause(cause: str, truth: dict) -> float:
+    return float(cause != truth["cause"])
+
+
+def _convert_matches(out, case: Case) -> dict:
+    m = _matches_array(_fields(out, "matches")["matches"], case.args[0])
+    return {"matches": m}
+
+
+def _convert_subset(out, case: Case) -> dict:
+    c = case.args[0]
+    o = _fields(out, "keep1", "keep2", "matches")
+    k1 = _index_array(o["keep1"], len(c["kp1"]), '"keep1"')
+    k2 = _index_array(o["keep2"], len(c["kp2"]), '"keep2"')
+    m = _matches_array(o["matches"], c)
+    if len(m) and not (np.isin(m[:, 0], k1).all() and np.isin(m[:, 1], k2).all()):
+        raise OutputError('"matches" must pair keypoints of keep1 with keypoints of keep2: the cost counts only '
+                          "the keypoints you compared")
+    return {"matches": m, "keep1": k1, "keep2": k2}
+
+
+def _convert_budget(out, case: Case) -> dict:
+    c, budget = case.args[0], case.expected["budget"]
+    o = _fields(out, "keep1", "keep2")
+    k1 = _index_array(o["keep1"], len(c["kp1"]), '"keep1"')
+    k2 = _index_array(o["keep2"], len(c["kp2"]), '"keep2"')
+    if max(len(k1), len(k2)) > budget:
+        raise OutputError(f"{len(k1)} and {len(k2)} keypoints kept: over the budget of {budget} per view. The fix "
+                          "must spend the same budget differently")
+    return {"keep1": k1, "keep2": k2, "matches": _judge_matches(c, k1, k2)}
+
+
+def _shortfall(out: dict, truth: dict) -> float:
+    """0 when every requirement holds; else the largest shortfall as a fraction of its requirement. What
+    was measured is left in truth["measured"], what failed in truth["failed"], for the hints."""
+    ok = dd.correct(truth, out["matches"])
+    got = {"count": int(ok.sum()), "precision": float(ok.mean()) if len(ok) else 0.0}
+    gaps = {"count": (truth["need"] - got["count"]) / truth["need"],
+            "precision": (truth["precision"] - got["precision"]) / truth["precision"]}
+    if "cost" in truth:
+        got["cost_ratio"] = len(out["keep1"]) * len(out["keep2"]) / truth["cost"]
+        gaps["cost"] = (got["cost_ratio"] - truth["max_cost_ratio"]) / truth["max_cost_ratio"]
     if "coverage" in truth:
-        cells = cell_of(res["x1"][ok], truth["img1"].shape[::-1], (4, 4)) if ok.any() else []
-        seen = cell_of(np.argwhere(truth["img1"] > 0)[::97, ::-1].astype(float), truth["img1"].shape[::-1], (4, 4))
-        cov = len(np.unique(cells)) / len(np.unique(seen))
-        gaps["coverage"] = (truth["coverage"] - cov) / truth["coverage"]
-    failed.update(k for k, g in gaps.items() if g > 0)
+        got["coverage"] = _coverage(truth, out["matches"])
+        gaps["coverage"] = (truth["coverage"] - got["coverage"]) / truth["coverage"]
+    truth["measured"], truth["failed"] = got, {k for k, g in gaps.items() if g > 0}
     return float(max(0.0, *gaps.values()))
 
 
-def _failed(*requirements, settings=lambda s: True):
-    """Hint condition: exactly these requirements failed (in the order checked) and `settings` holds."""
-    def when(case, out):
-        return case.expected.get("failed") == set(requirements) and settings(out)
-    return when
+def debug_rows(exercise_id: str, generator, convert, n: int = 2):
+    """Cases of one DEBUG exercise: the diagnosis (judged once, half the points) and the repair on `n` fresh
+    hidden pairs (the other half). The learner's function runs once per pair; both rows of pair 1 judge
+    that one run."""
+    def cases(rng):
+        for i in range(n):
+            case, truth = generator(rng)
+            run = shared_run(lambda fn, case=case: fn(copy.deepcopy(case)))   # the learner gets a copy
+            info = {"id": exercise_id}
+            if i == 0:
+                # 0 wrong: the cause is one letter of the case's list.
+                yield Case("diagnosis: the cause", (case,), truth, _wrong_cause, 0, "wrong", convert=_cause,
+                           call=run, info=info, key="diagnosis", weight=n)
+            # 0: every requirement stated in the exercise holds on the hidden pair (measured, not assumed).
+            yield Case(f"repair on hidden pair {i + 1}", (case,), truth, _shortfall, 0.0, "shortfall",
+                       convert=convert, call=run, info=info, key=f"hidden-pair-{i + 1}")
+    return cases
 
 
-def _strict(ratio):
-    return lambda s: s["ratio"] is not None and s["ratio"] < ratio
+# ============================================================ hints ====
+
+def _said(exercise_id: str) -> list[Hint]:
+    """One hint per wrong cause: what in the log or the data rules it out."""
+    def hint(letter, text):
+        return Hint(f"cause {letter}) is not it: {text}",
+                    lambda c, out, letter=letter: c.key == "diagnosis" and out == letter)
+    return [hint(k, t) for k, t in WHY_NOT[exercise_id].items()]
 
 
-DEBUG_HINTS = {
-    "3.13": [
-        Hint("still too few correct matches, and your ratio is strict (< 0.7): across a 2× zoom descriptors "
-             "change more, so the true neighbour's d1/d2 is often 0.6-0.8 — relax the ratio to about 0.8.",
-             lambda c, s: "count" in c.expected.get("failed", ()) and _strict(0.7)(s)),
-        Hint("still too few correct matches: with few keypoints per image (n_features), few are detected at the "
-             "same scale in both views of a 2× zoom — detect more (about 2,000).",
-             lambda c, s: "count" in c.expected.get("failed", ()) and s["n_features"] < 1000),
-        Hint("enough matches but too many wrong ones (under 60 % correct): the ratio is too loose; about 0.8 "
-             "keeps the distinctive ones.", _failed("precision")),
+def _short(*names):
+    return lambda c, out: c.key != "diagnosis" and bool(set(names) & c.expected.get("failed", set()))
+
+
+def _measured(c, key):
+    return c.expected.get("measured", {}).get(key, np.nan)
+
+
+def _rank(resp: np.ndarray) -> np.ndarray:
+    return np.argsort(np.argsort(-np.asarray(resp), kind="stable"))
+
+
+def _few_used(c, out) -> bool:
+    m = out["matches"]
+    return len(m) > 0 and _rank(c.args[0]["resp1"])[m[:, 0]].max() < 1000
+
+
+def _strict_ratio(c, out) -> bool:
+    m, case = out["matches"], c.args[0]
+    if not len(m):
+        return True
+    among = np.flatnonzero(_rank(case["resp2"]) <= _rank(case["resp2"])[m[:, 1]].max())
+    return bool(np.quantile(_ratios(case, m, among), 0.95) < 0.65)
+
+
+def _not_one_plane(c, out) -> bool:
+    """The returned matches are not all consistent with one homography (within 10 px)."""
+    m, case = out["matches"], c.args[0]
+    if len(m) < 8:
+        return False
+    x1, x2 = case["kp1"][m[:, 0]], case["kp2"][m[:, 1]]
+    H, _ = cv2.findHomography(x1, x2, cv2.RANSAC, 3.0, maxIters=2000)
+    return H is None or bool(np.max(np.linalg.norm(dd.transfer(H, x1) - x2, axis=1)) > 10)
+
+
+def _weak_kept(c, out) -> bool:
+    k1 = out["keep1"]
+    return len(k1) > 0 and bool(np.median(_rank(c.args[0]["resp1"])[k1]) > 0.5 * len(k1))
+
+
+def _strongest_kept(c, out) -> bool:
+    k1 = out["keep1"]
+    return len(k1) > 0 and bool(np.mean(_rank(c.args[0]["resp1"])[k1] < 2 * len(k1)) > 0.9)
+
+
+HINTS = {
+    "3.13": _said("3.13") + [
+        Hint(lambda c, out: f"{_measured(c, 'count')} correct matches (need {c.expected['need']}): your matches use "
+             "only view 1's strongest keypoints. Only those in the middle quarter can have a partner, and only if "
+             "view 2 kept it too: match (nearly) all detections, about 2,000 per view.",
+             lambda c, out: _short("count")(c, out) and _few_used(c, out)),
+        Hint(lambda c, out: f"{_measured(c, 'count')} correct matches (need {c.expected['need']}): every match you "
+             "kept has d1/d2 below 0.65, but across a 2x zoom a correct match's d1/d2 is often 0.6-0.8: relax the "
+             "ratio to about 0.8.", lambda c, out: _short("count")(c, out) and _strict_ratio(c, out)),
+        Hint(lambda c, out: f"only {_measured(c, 'precision'):.0%} of your matches are correct (need "
+             f"{c.expected['precision']:.0%}): without a ratio test, or with a loose one, every keypoint outside the "
+             "overlap still gets a nearest neighbour. Keep the ratio test at about 0.8.", _short("precision")),
     ],
-    "3.14": [
-        Hint("too many wrong matches (under 90 % correct): on identical bays the second-nearest neighbour is as "
-             "close as the first, so no ratio separates right from wrong — verify the geometry: a RANSAC "
-             "homography (ransac_px) keeps only matches consistent with one plane.",
-             lambda c, s: "precision" in c.expected.get("failed", ()) and not s["ransac_px"]),
-        Hint("too few correct matches survive (need 20): the ratio is so strict, or the RANSAC threshold so tight, "
-             "that the true matches go too — about 0.7 and 3 px.", _failed("count")),
-        Hint("still wrong matches after RANSAC: a threshold of many pixels accepts repeated bays that almost fit; "
-             "use about 3 px.", lambda c, s: "precision" in c.expected.get("failed", ()) and bool(s["ransac_px"])),
+    "3.14": _said("3.14") + [
+        Hint(lambda c, out: f"only {_measured(c, 'precision'):.0%} of your matches are correct (need "
+             f"{c.expected['precision']:.0%}), and they do not fit one homography: wrong matches one bay over look "
+             "exactly like right ones. Verify the geometry: RANSAC on a homography with a threshold of ~3 px (the "
+             "bays are 60-90 px apart: a threshold near a bay's width lets the neighbouring bay in).",
+             lambda c, out: _short("precision")(c, out) and _not_one_plane(c, out)),
+        Hint(lambda c, out: f"{_measured(c, 'count')} correct matches (need {c.expected['need']}): a strict ratio "
+             "test throws away the repeated parts' true matches (their second neighbour is the same part in the "
+             "next bay, d1/d2 ~ 0.8-1.0) and leaves the dozen unique features. Keep the nearest neighbours "
+             "(ratio 0.95 or none) and let RANSAC sort them.", _short("count")),
     ],
-    "3.15": [
-        Hint("over the budget: brute force costs n1 × n2 × 128 multiply-adds, so with 20,000 keypoints requested "
-             "it is the keypoint count, not the ratio test or mutual check, that must come down (2,000 × 2,000 × 128 "
-             "fits) — or use an approximate matcher (matcher='flann').", _failed("budget")),
-        Hint("within the budget, but too few correct matches (need 100): you cut more keypoints than the budget "
-             "requires — 2,000 per image fit.", lambda c, s: "count" in c.expected.get("failed", ())
-             and "budget" not in c.expected["failed"]),
+    "3.15": _said("3.15") + [
+        Hint(lambda c, out: f"you compared {len(out['keep1'])} x {len(out['keep2'])} keypoints, "
+             f"{_measured(c, 'cost_ratio'):.0%} of the broken run's distances (budget: "
+             f"{c.expected['max_cost_ratio']:.0%}): the cost is N1 x N2 x 128 whatever happens after it "
+             "(ratio, data type, mutual check). Match fewer keypoints: the ~2,000 strongest by response.",
+             _short("cost")),
+        Hint(lambda c, out: f"{_measured(c, 'count')} correct matches (need {c.expected['need']}): you kept weak "
+             "keypoints. A weak DoG extremum is mostly noise and rarely found again; keep the strongest by "
+             "response.", lambda c, out: _short("count")(c, out) and _weak_kept(c, out)),
+        Hint(lambda c, out: f"within budget, but {_measured(c, 'count')} correct matches (need "
+             f"{c.expected['need']}): you cut more keypoints than the budget needs. About 2,000 per view fit "
+             "(2,530 is the most).", lambda c, out: _short("count")(c, out) and not _weak_kept(c, out)
+             and len(out["keep1"]) < 1800),
     ],
-    "3.16": [
-        Hint("more keypoints than the budget of 200 per image (n_features): the fix must spread the same budget.",
-             _failed("features")),
-        Hint("the correct matches cover too few of the image's regions (need 60 % of the 4 × 4 cells the views "
-             "share): the strongest keypoints all sit on the poster — distribute the budget over a grid "
-             "(grid=(8, 8)) instead of taking the strongest.",
-             lambda c, s: "coverage" in c.expected.get("failed", ()) and not s["grid"]),
-        Hint("the correct matches cover too few regions even with a grid: a coarse grid still lets the poster "
-             "take most of the budget; use about 8 × 8 cells.",
-             lambda c, s: "coverage" in c.expected.get("failed", ()) and bool(s["grid"])),
+    "3.16": _said("3.16") + [
+        Hint(lambda c, out: f"correct matches in {_measured(c, 'coverage'):.0%} of the grid cells (need "
+             f"{c.expected['coverage']:.0%}): the keypoints you kept are the strongest, and they all sit on the "
+             "poster. Distribute the budget over a grid of both views (your 3.12, 8 x 8 cells).",
+             lambda c, out: _short("coverage")(c, out) and _strongest_kept(c, out)),
+        Hint(lambda c, out: f"{_measured(c, 'count')} correct matches (need {c.expected['need']}): a match needs "
+             "both ends kept. Select the same way in both views (the same grid rule, strongest first in each "
+             "cell); random or one-sided choices rarely keep both ends of a pair.",
+             lambda c, out: _short("count")(c, out) and not _strongest_kept(c, out)),
     ],
 }
 
 
-def _cases(generator):
-    # 0: every requirement stated in the exercise must hold on the hidden pair.
-    return debug_cases(generator, _debug_metric, 0.0, unit="shortfall", convert=_settings, n=2, label="hidden pair")
+# ============================================================ stand-ins (OpenCV), used by demos ====
+
+def _cv_nn(D1, D2, ratio):
+    knn = cv2.BFMatcher(cv2.NORM_L2).knnMatch(np.asarray(D1, np.float32), np.asarray(D2, np.float32), k=2)
+    return np.array([(a.queryIdx, a.trainIdx) for a, b in knn if ratio is None or a.distance < ratio * b.distance],
+                    int).reshape(-1, 2)
 
 
-def fix_too_few_standin(case):
-    return case["settings"] | {"n_features": 2000, "ratio": 0.8}
+def cv_fix_too_few(case):
+    return {"cause": ANSWER["3.13"], "matches": _cv_nn(case["desc1"], case["desc2"], 0.8)}
 
 
-def fix_repetitive_standin(case):
-    return case["settings"] | {"ratio": 0.7, "ransac_px": 3.0}
+def cv_fix_repetitive(case):
+    m = _cv_nn(case["desc1"], case["desc2"], None)
+    _, inl = cv2.findHomography(case["kp1"][m[:, 0]], case["kp2"][m[:, 1]], cv2.RANSAC, 3.0, maxIters=5000,
+                                confidence=0.9999)
+    return {"cause": ANSWER["3.14"], "matches": m[inl.ravel().astype(bool)]}
 
 
-def fix_too_slow_standin(case):
-    return case["settings"] | {"n_features": 2000}
+def cv_fix_too_slow(case):
+    k1, k2 = dd.strongest(case["resp1"], 2000), dd.strongest(case["resp2"], 2000)
+    m = _cv_nn(case["desc1"][k1], case["desc2"][k2], 0.8)
+    return {"cause": ANSWER["3.15"], "keep1": k1, "keep2": k2, "matches": np.c_[k1[m[:, 0]], k2[m[:, 1]]]}
 
 
-def fix_clustered_standin(case):
-    return case["settings"] | {"grid": (8, 8)}
-
-
-DEBUG_GENERATORS = {"3.13": debug_too_few, "3.14": debug_repetitive, "3.15": debug_too_slow, "3.16": debug_clustered}
-
-
-debug_case = debug_practice(DEBUG_GENERATORS)
-
-
-def true_homography(exercise_id: str, seed: int = 0) -> np.ndarray:
-    """The hidden H of debug_case(exercise_id, seed), for drawing correct/wrong matches in demos."""
-    return DEBUG_GENERATORS[exercise_id](np.random.default_rng(seed))[1]["H"]
+def cv_fix_clustered(case):
+    size = case["image_size"]
+    return {"cause": ANSWER["3.16"], "keep1": gt_distribute(case["kp1"], case["resp1"], size, 200, (8, 8)),
+            "keep2": gt_distribute(case["kp2"], case["resp2"], size, 200, (8, 8))}
 
 
 register(
-    Exercise(id="3.13", title="Too few matches", name="fix_too_few", kind="debug", points=2, cases=_cases(debug_too_few),
-             hints=DEBUG_HINTS["3.13"], fallback=fix_too_few_standin, timeout=30.0),
+    Exercise(id="3.13", title="Too few matches", name="fix_too_few", kind="debug", points=2,
+             cases=debug_rows("3.13", debug_too_few, _convert_matches), hints=HINTS["3.13"],
+             fallback=cv_fix_too_few, timeout=30.0),
     Exercise(id="3.14", title="Wrong matches on repetitive texture", name="fix_repetitive", kind="debug", points=2,
-             cases=_cases(debug_repetitive), hints=DEBUG_HINTS["3.14"], fallback=fix_repetitive_standin, timeout=30.0),
+             cases=debug_rows("3.14", debug_repetitive, _convert_matches), hints=HINTS["3.14"],
+             fallback=cv_fix_repetitive, timeout=30.0),
     Exercise(id="3.15", title="Matching too slow", name="fix_too_slow", kind="debug", points=2,
-             cases=_cases(debug_too_slow), hints=DEBUG_HINTS["3.15"], fallback=fix_too_slow_standin, timeout=30.0),
+             cases=debug_rows("3.15", debug_too_slow, _convert_subset), hints=HINTS["3.15"],
+             fallback=cv_fix_too_slow, timeout=60.0),
     Exercise(id="3.16", title="Features clustered on one region", name="fix_clustered", kind="debug", points=2,
-             cases=_cases(debug_clustered), hints=DEBUG_HINTS["3.16"], fallback=fix_clustered_standin, timeout=30.0),
+             cases=debug_rows("3.16", debug_clustered, _convert_budget), hints=HINTS["3.16"],
+             fallback=cv_fix_clustered, timeout=30.0),
 )

@@ -6,7 +6,7 @@ and sampling, torch for 3.19), split by the notebook's sections. Instructor-only
     scale_space   3.9 dog_detect (DoG, sub-pixel), 3.10 sift_descriptors (SIFT-lite)
     matching      3.11 match_descriptors (ratio test, mutual nearest neighbours)
     distribution  3.12 distribute_keypoints (grid), and ANMS / the quadtree, which also pass
-    debug         3.13-3.16 the settings that fix each broken set-up
+    debug         3.13-3.16 the diagnosis and repair of four broken set-ups (RANSAC homography from scratch)
     frontier      3.19 train_descriptor (a small CNN, InfoNCE)
     questions     the values of 3.1-3.4, 3.17-3.18, 3.20-3.22
 
@@ -18,7 +18,7 @@ from __future__ import annotations
 from .binary import hamming_distances, orb_descriptors, orientation_centroid
 from .common import gray
 from .corners import CIRCLE16, detect_corners, fast_detect, fast_score, nms_peaks, structure_tensor
-from .debug import fix_clustered, fix_repetitive, fix_too_few, fix_too_slow
+from .debug import dlt_homographies, fix_clustered, fix_repetitive, fix_too_few, fix_too_slow, ransac_homography
 from .distribution import distribute_anms, distribute_keypoints, distribute_quadtree
 from .frontier import train_descriptor
 from .matching import match_descriptors, squared_distances
@@ -36,5 +36,5 @@ __all__ = [
     # building blocks (tests, mutants, benchmarks, chapter 4's photo pipeline)
     "gray", "structure_tensor", "nms_peaks", "CIRCLE16", "fast_score", "orientation_centroid", "MOVE",
     "dominant_orientation", "pyramid", "sample_patches", "sift_lite", "squared_distances", "distribute_anms",
-    "distribute_quadtree",
+    "distribute_quadtree", "ransac_homography", "dlt_homographies",
 ]

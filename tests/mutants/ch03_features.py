@@ -282,54 +282,111 @@ def distribute_random(kps, scores, image_size, n, cells=(8, 8)):
     return np.random.default_rng(0).permutation(len(kps))[:n]
 
 
-# ----------------------------------------------------------------- DEBUG fixes that do not fix
+# ----------------------------------------------------------------- DEBUG: wrong repairs and wrong diagnoses
+# Each repair names the right cause (so the repair itself is judged) unless it is a wrong diagnosis.
+
+def _top(resp, n):
+    return np.argsort(-np.asarray(resp), kind="stable")[:n]
+
+
+def _subset_match(case, n, ratio):
+    k1, k2 = _top(case["resp1"], n), _top(case["resp2"], n)
+    m = F.match_descriptors(case["desc1"][k1], case["desc2"][k2], ratio=ratio)
+    return np.c_[k1[m[:, 0]], k2[m[:, 1]]]
+
 
 def too_few_ratio_only(case):
-    return dict(case["settings"], ratio=0.95)
+    return {"cause": "b", "matches": _subset_match(case, 150, 0.8)}   # still the 150 strongest
 
 
-def too_few_unchanged(case):
-    return dict(case["settings"])
+def too_few_more_only(case):
+    return {"cause": "b", "matches": _subset_match(case, 2000, 0.6)}  # still the strict ratio
 
 
-def too_few_ransac_only(case):
-    return dict(case["settings"], ransac_px=3.0)  # verification removes wrong matches; it adds no right ones
+def too_few_no_ratio(case):
+    return {"cause": "b", "matches": F.match_descriptors(case["desc1"], case["desc2"], ratio=None)}
 
 
-def repetitive_looser(case):
-    return dict(case["settings"], ratio=0.99)
+def too_few_ransac_diagnosis(case):
+    # diagnosed as missing verification: RANSAC on the broken matches (it removes matches, adds none)
+    m = _subset_match(case, 150, 0.6)
+    keep = F.ransac_homography(case["kp1"][m[:, 0]], case["kp2"][m[:, 1]]) if len(m) >= 4 else np.zeros(len(m), bool)
+    return {"cause": "d", "matches": m[keep]}
 
 
-def repetitive_unchanged(case):
-    return dict(case["settings"])
+def _verified(case, ratio, px):
+    m = F.match_descriptors(case["desc1"], case["desc2"], ratio=ratio)
+    return m[F.ransac_homography(case["kp1"][m[:, 0]], case["kp2"][m[:, 1]], px=px)]
+
+
+def repetitive_tighter(case):
+    return {"cause": "c", "matches": F.match_descriptors(case["desc1"], case["desc2"], ratio=0.6)}
 
 
 def repetitive_mutual_only(case):
-    return dict(case["settings"], mutual=True)  # the repeated bays are mutual nearest neighbours too
+    return {"cause": "c", "matches": F.match_descriptors(case["desc1"], case["desc2"], ratio=0.95, mutual=True)}
 
 
-def too_slow_unchanged(case):
-    return dict(case["settings"])
+def repetitive_loose_ransac(case):
+    return {"cause": "c", "matches": _verified(case, None, 100.0)}  # a threshold wider than a bay
+
+
+def repetitive_tight_then_ransac(case):
+    return {"cause": "c", "matches": _verified(case, 0.7, 3.0)}     # the seed's "tighten, then verify"
+
+
+def repetitive_wrong_diagnosis(case):
+    return dict(F.fix_repetitive(case), cause="a")
+
+
+def _kept(case, k1, k2, ratio=0.8):
+    m = F.match_descriptors(case["desc1"][k1], case["desc2"][k2], ratio=ratio)
+    return {"cause": "d", "keep1": k1, "keep2": k2, "matches": np.c_[k1[m[:, 0]], k2[m[:, 1]]]}
+
+
+def too_slow_unchanged_float16(case):
+    # "the data type is the cost": half-precision descriptors, every keypoint still compared
+    k1, k2 = np.arange(len(case["kp1"])), np.arange(len(case["kp2"]))
+    return dict(_kept(case, k1, k2), cause="b")
+
+
+def too_slow_random(case):
+    rng = np.random.default_rng(0)
+    return _kept(case, rng.permutation(len(case["kp1"]))[:2000], rng.permutation(len(case["kp2"]))[:2000])
 
 
 def too_slow_few(case):
-    return dict(case["settings"], n_features=100)
+    return _kept(case, _top(case["resp1"], 500), _top(case["resp2"], 500))
 
 
-def too_slow_ratio_only(case):
-    return dict(case["settings"], ratio=0.6)  # the ratio test runs after the N x N distances: no saving
-
-
-def clustered_more_features(case):
-    return dict(case["settings"], n_features=2000)  # over the 200-keypoint budget
+def too_slow_wrong_diagnosis(case):
+    return dict(F.fix_too_slow(case), cause="a")
 
 
 def clustered_unchanged(case):
-    return dict(case["settings"])
+    return {"cause": "a", "keep1": _top(case["resp1"], 200), "keep2": _top(case["resp2"], 200)}
 
 
-def clustered_mutual(case):
-    return dict(case["settings"], mutual=True, ratio=0.7)  # cleaner matches, still all on the poster
+def clustered_one_view(case):
+    size = case["image_size"]
+    return {"cause": "a", "keep1": F.distribute_keypoints(case["kp1"], case["resp1"], size, 200, (8, 8)),
+            "keep2": _top(case["resp2"], 200)}                 # view 2 still takes the strongest
+
+
+def clustered_random(case):
+    rng = np.random.default_rng(0)
+    return {"cause": "a", "keep1": rng.permutation(len(case["kp1"]))[:200],
+            "keep2": rng.permutation(len(case["kp2"]))[:200]}
+
+
+def clustered_over_budget(case):
+    size = case["image_size"]
+    return {"cause": "a", "keep1": F.distribute_keypoints(case["kp1"], case["resp1"], size, 2000, (8, 8)),
+            "keep2": F.distribute_keypoints(case["kp2"], case["resp2"], size, 2000, (8, 8))}
+
+
+def clustered_wrong_diagnosis(case):
+    return dict(F.fix_clustered(case), cause="b")
 
 
 # ----------------------------------------------------------------- 3.19 train_descriptor
@@ -384,18 +441,24 @@ MUTANTS = [
     ("3.12", "strongest n", distribute_top_n, "strongest n"),
     ("3.12", "one per cell", distribute_one_per_cell, "distinct indices"),
     ("3.12", "random", distribute_random, "leave many occupied cells empty"),
-    ("3.13", "ratio loosened only", too_few_ratio_only, "detect more"),
-    ("3.13", "unchanged", too_few_unchanged, "relax the ratio"),
-    ("3.13", "RANSAC added only", too_few_ransac_only, "relax the ratio"),
-    ("3.14", "ratio loosened", repetitive_looser, "verify the geometry"),
-    ("3.14", "unchanged", repetitive_unchanged, "verify the geometry"),
-    ("3.14", "mutual nearest neighbours only", repetitive_mutual_only, "verify the geometry"),
-    ("3.15", "unchanged", too_slow_unchanged, "keypoint count"),
-    ("3.15", "too few features", too_slow_few, "cut more keypoints"),
-    ("3.15", "ratio tightened only", too_slow_ratio_only, "keypoint count"),
-    ("3.16", "more features, over budget", clustered_more_features, "budget of 200"),
-    ("3.16", "unchanged", clustered_unchanged, "distribute the budget"),
-    ("3.16", "mutual + stricter ratio", clustered_mutual, "distribute the budget"),
+    ("3.13", "ratio relaxed, still 150 keypoints", too_few_ratio_only, "match (nearly) all detections"),
+    ("3.13", "more keypoints, still ratio 0.6", too_few_more_only, "relax the ratio"),
+    ("3.13", "ratio test dropped", too_few_no_ratio, "Keep the ratio test"),
+    ("3.13", "diagnosed as missing RANSAC", too_few_ransac_diagnosis, "RANSAC removes matches"),
+    ("3.14", "ratio tightened only", repetitive_tighter, "strict ratio test throws away"),
+    ("3.14", "mutual nearest neighbours only", repetitive_mutual_only, "Verify the geometry"),
+    ("3.14", "RANSAC wider than a bay", repetitive_loose_ransac, "Verify the geometry"),
+    ("3.14", "tightened, then RANSAC", repetitive_tight_then_ransac, "strict ratio test throws away"),
+    ("3.14", "diagnosed as a loose ratio", repetitive_wrong_diagnosis, "cause a) is not it"),
+    ("3.15", "every keypoint, half precision", too_slow_unchanged_float16, "Match fewer keypoints"),
+    ("3.15", "a random 2,000", too_slow_random, "you kept weak"),
+    ("3.15", "the 500 strongest", too_slow_few, "cut more keypoints than the budget needs"),
+    ("3.15", "diagnosed as the ratio test", too_slow_wrong_diagnosis, "cause a) is not it"),
+    ("3.16", "strongest 200, unchanged", clustered_unchanged, "Distribute the budget over a grid"),
+    ("3.16", "grid in view 1 only", clustered_one_view, "Select the same way in both views"),
+    ("3.16", "random 200", clustered_random, "Select the same way in both views"),
+    ("3.16", "grid of 2,000, over budget", clustered_over_budget, "over the budget"),
+    ("3.16", "diagnosed as an untextured wall", clustered_wrong_diagnosis, "cause b) is not it"),
     ("3.19", "untrained", descriptor_untrained, "P1[i] stays paired"),
     ("3.19", "raw pixels", descriptor_raw_pixels, "D <= 256"),
     ("3.19", "positives shuffled", descriptor_wrong_pairs, "P1[i] stays paired"),
