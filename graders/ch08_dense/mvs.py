@@ -52,7 +52,8 @@ def mvs_scene(rng: np.random.Generator, W: int = 112, H: int = 84, n_views: int 
     """A reference view (R = I, t = 0) and `n_views` neighbours of a few textured planes, with exact depth.
 
     blank: the front plane is textureless (8.17's scene). Returns I_ref, K_ref, images, Ks, Rs, ts,
-    depths (the hypotheses, uniform in inverse depth), Z_gt: (H, W) exact reference depth, planes."""
+    depths (the hypotheses, uniform in inverse depth), Z_gt: (H, W) exact reference depth, Z_views: the
+    neighbours' exact depth maps, planes (R_p, o_p, size: X_w = R_p (u, v, 0) + o_p)."""
     f = rng.uniform(90, 110)
     K_ref = np.array([[f, 0, (W - 1) / 2], [0, f, (H - 1) / 2], [0, 0, 1.0]])
     names = rng.choice(TEXTURED, 3, replace=False)
@@ -63,19 +64,20 @@ def mvs_scene(rng: np.random.Generator, W: int = 112, H: int = 84, n_views: int 
         planes.append(_plane(rng, c, (rng.uniform(1.2, 2.0), rng.uniform(1.0, 1.6)), 30,
                              "blank" if (blank and i == 0) else names[1 + i], f))
     I_ref, Z_gt = _render(planes, K_ref, np.eye(3), np.zeros(3), W, H)
-    images, Ks, Rs, ts = [], [], [], []
+    images, Ks, Rs, ts, Z_views = [], [], [], [], []
     for k in range(n_views):
         ang = 2 * np.pi * (k + rng.uniform(0, 0.5)) / n_views
         C = np.r_[np.cos(ang), np.sin(ang), 0.0] * rng.uniform(0.15, 0.3) + np.r_[0, 0, rng.normal(0, 0.03)]
         R, t = scene.look_at(C, np.r_[0.0, 0.0, 5.5] + rng.normal(0, 0.1, 3))
         K = K_ref.copy()
         K[0, 0] = K[1, 1] = f * rng.uniform(0.95, 1.05)
-        img, _ = _render(planes, K, R, t, W, H)
+        img, Z_k = _render(planes, K, R, t, W, H)
         images.append(img + rng.normal(0, noise, img.shape))
+        Z_views.append(Z_k)
         Ks.append(K), Rs.append(R), ts.append(t)
     depths = 1.0 / np.linspace(1 / Z_NEAR, 1 / Z_FAR, N_PLANES)
     return {"I_ref": I_ref + rng.normal(0, noise, I_ref.shape), "K_ref": K_ref, "images": images, "Ks": Ks,
-            "Rs": Rs, "ts": ts, "depths": depths, "Z_gt": Z_gt, "planes": planes}
+            "Rs": Rs, "ts": ts, "depths": depths, "Z_gt": Z_gt, "Z_views": Z_views, "planes": planes}
 
 
 # ----------------------------------------------------------------- the grader's own sweep

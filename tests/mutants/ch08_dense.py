@@ -207,4 +207,66 @@ MUTANTS += [
     ("8.10", "neighbour sampled at H⁻¹ p", sweep_inverse_homography, "most depths are wrong"),
 ]
 
+
+# ----------------------------------------------------------------- 8.11 fusion
+
+def _fuse(depths, Ks, Rs, ts, rel_tol, min_consistent, *, filt=True, self_vote=False, absolute=False,
+          forward_R=False, euclid=False):
+    out = []
+    for i, Z in enumerate(depths):
+        Z = np.asarray(Z, float)
+        v, u = np.nonzero(np.isfinite(Z))
+        z = Z[v, u]
+        Xc = (np.linalg.inv(Ks[i]) @ np.stack([u, v, np.ones_like(z)])).T * z[:, None]
+        X = (Xc - ts[i]) @ Rs[i].T if forward_R else (Xc - ts[i]) @ Rs[i]
+        if not filt:
+            out.append(X)
+            continue
+        votes = np.zeros(len(X), int)
+        for j in range(len(depths)):
+            if j == i and not self_vote:
+                continue
+            Xj = X @ Rs[j].T + ts[j]
+            zj = np.linalg.norm(Xj, axis=1) if euclid else Xj[:, 2]
+            q = Xj @ Ks[j].T
+            with np.errstate(all="ignore"):
+                uj, vj = np.rint(q[:, 0] / q[:, 2]), np.rint(q[:, 1] / q[:, 2])
+            H, W = depths[j].shape
+            ok = (Xj[:, 2] > 0) & (uj >= 0) & (uj < W) & (vj >= 0) & (vj < H)
+            d = np.full(len(X), np.nan)
+            d[ok] = np.asarray(depths[j])[vj[ok].astype(int), uj[ok].astype(int)]
+            with np.errstate(invalid="ignore"):
+                votes += np.abs(d - zj) <= (rel_tol if absolute else rel_tol * zj)
+        out.append(X[votes >= min_consistent])
+    return np.concatenate(out)
+
+
+def fuse_no_filter(depths, Ks, Rs, ts, rel_tol=0.01, min_consistent=2):
+    return _fuse(depths, Ks, Rs, ts, rel_tol, min_consistent, filt=False)
+
+
+def fuse_self_vote(depths, Ks, Rs, ts, rel_tol=0.01, min_consistent=2):
+    return _fuse(depths, Ks, Rs, ts, rel_tol, min_consistent, self_vote=True)
+
+
+def fuse_absolute_tolerance(depths, Ks, Rs, ts, rel_tol=0.01, min_consistent=2):
+    return _fuse(depths, Ks, Rs, ts, rel_tol, min_consistent, absolute=True)
+
+
+def fuse_backproject_with_R(depths, Ks, Rs, ts, rel_tol=0.01, min_consistent=2):
+    return _fuse(depths, Ks, Rs, ts, rel_tol, min_consistent, forward_R=True)
+
+
+def fuse_range_not_depth(depths, Ks, Rs, ts, rel_tol=0.01, min_consistent=2):
+    return _fuse(depths, Ks, Rs, ts, rel_tol, min_consistent, euclid=True)
+
+
+MUTANTS += [
+    ("8.11", "no consistency filter", fuse_no_filter, "the consistency filter is missing"),
+    ("8.11", "a view votes for itself", fuse_self_vote, "j ≠ i"),
+    ("8.11", "absolute depth tolerance", fuse_absolute_tolerance, None),
+    ("8.11", "back-projection with R instead of Rᵀ", fuse_backproject_with_R, None),
+    ("8.11", "range instead of depth", fuse_range_not_depth, "fewer points survive"),
+]
+
 # neural (8.4-8.7, 8.12-8.16, 8.18-8.23, 8.25)
