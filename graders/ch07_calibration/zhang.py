@@ -309,7 +309,7 @@ def _calibration_cases(rng):
         yield Case(f"{label}: K vs OpenCV's", args, K_o, lambda out, K: max_abs(out[0][:2], K[:2]), 0.5, "px",
                    convert=_convert_calibration, call=run, key=f"{key}-K", info=info, tags=(key,))
         # 0.5 px: the lens maps every ray the corners cover within half a pixel of OpenCV's lens.
-        yield Case(f"{label}: lens over the image vs OpenCV's", args, (K_o, d_o),
+        yield Case(f"{label}: lens where the corners are vs OpenCV's", args, (K_o, d_o),
                    lambda out, ref, uv=uv: _distortion_px((out[0], out[1]), ref, uv), 0.5, "px", convert=_convert_calibration,
                    call=run, key=f"{key}-lens", info=info, tags=(key,))
 

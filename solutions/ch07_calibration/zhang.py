@@ -74,42 +74,44 @@ def extrinsics_from_homography(H: np.ndarray, K: np.ndarray) -> tuple[np.ndarray
 
 # ----------------------------------------------------------------- 7.8 Levenberg-Marquardt
 
-def _project(X: np.ndarray, k: np.ndarray, dist: np.ndarray, R: np.ndarray, t: np.ndarray):
-    """Pixels (N, 2) and the Jacobians d uv / d(fx, fy, cx, cy, k1, k2, p1, p2, k3): (N, 2, 9) and
-    d uv / d(δθ, δt): (N, 2, 6), the rotation perturbed on the left: R <- Exp(δθ) R."""
+def _project(X: np.ndarray, k: np.ndarray, dist: np.ndarray, R: np.ndarray, t: np.ndarray, jac: bool = True):
+    """Pixels (..., N, 2) of board points X: (N, 3) through poses R: (..., 3, 3), t: (..., 3) (one view
+    or a stack of views), and the Jacobians d uv / d(fx, fy, cx, cy, k1, k2, p1, p2, k3): (..., N, 2, 9)
+    and d uv / d(δθ, δt): (..., N, 2, 6), the rotation perturbed on the left: R <- Exp(δθ) R."""
     fx, fy, cx, cy = k
     k1, k2, p1, p2, k3 = dist
-    RX = X @ R.T
-    Xc = RX + t
-    z = Xc[:, 2]
-    x, y = Xc[:, 0] / z, Xc[:, 1] / z
+    RX = np.einsum("...ij,nj->...ni", R, X)
+    Xc = RX + np.asarray(t)[..., None, :]
+    z = Xc[..., 2]
+    x, y = Xc[..., 0] / z, Xc[..., 1] / z
     r2 = x * x + y * y
     radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    dR = k1 + 2 * k2 * r2 + 3 * k3 * r2 * r2            # d radial / d r2
     xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
     yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
-    n = len(X)
-    J_in = np.zeros((n, 2, 9))
-    J_in[:, 0, 0], J_in[:, 0, 2], J_in[:, 1, 1], J_in[:, 1, 3] = xd, 1.0, yd, 1.0
-    d_dist_x = np.c_[x * r2, x * r2 ** 2, 2 * x * y, r2 + 2 * x * x, x * r2 ** 3]
-    d_dist_y = np.c_[y * r2, y * r2 ** 2, r2 + 2 * y * y, 2 * x * y, y * r2 ** 3]
-    J_in[:, 0, 4:], J_in[:, 1, 4:] = fx * d_dist_x, fy * d_dist_y
+    uv = np.stack([fx * xd + cx, fy * yd + cy], -1)
+    if not jac:
+        return uv
+    dR = k1 + 2 * k2 * r2 + 3 * k3 * r2 * r2            # d radial / d r2
+    J_in = np.zeros(x.shape + (2, 9))
+    J_in[..., 0, 0], J_in[..., 0, 2], J_in[..., 1, 1], J_in[..., 1, 3] = xd, 1.0, yd, 1.0
+    J_in[..., 0, 4:] = fx * np.stack([x * r2, x * r2 ** 2, 2 * x * y, r2 + 2 * x * x, x * r2 ** 3], -1)
+    J_in[..., 1, 4:] = fy * np.stack([y * r2, y * r2 ** 2, r2 + 2 * y * y, 2 * x * y, y * r2 ** 3], -1)
     # d(xd, yd) / d(x, y)
-    Dxy = np.empty((n, 2, 2))
-    Dxy[:, 0, 0] = radial + 2 * x * x * dR + 2 * p1 * y + 6 * p2 * x
-    Dxy[:, 0, 1] = 2 * x * y * dR + 2 * p1 * x + 2 * p2 * y
-    Dxy[:, 1, 0] = 2 * x * y * dR + 2 * p1 * x + 2 * p2 * y
-    Dxy[:, 1, 1] = radial + 2 * y * y * dR + 6 * p1 * y + 2 * p2 * x
-    Dp = np.zeros((n, 2, 3))                             # d(x, y) / d X_c
-    Dp[:, 0, 0], Dp[:, 0, 2] = 1 / z, -x / z
-    Dp[:, 1, 1], Dp[:, 1, 2] = 1 / z, -y / z
-    chain = np.array([[fx, 0.0], [0.0, fy]]) @ Dxy @ Dp  # (n, 2, 3): d uv / d X_c
-    J_pose = np.concatenate([chain @ -skew(RX), chain], axis=2)   # d X_c/dδθ = -[R X]x, d X_c/dt = I
-    return np.c_[fx * xd + cx, fy * yd + cy], J_in, J_pose
+    Dxy = np.empty(x.shape + (2, 2))
+    Dxy[..., 0, 0] = radial + 2 * x * x * dR + 2 * p1 * y + 6 * p2 * x
+    Dxy[..., 0, 1] = 2 * x * y * dR + 2 * p1 * x + 2 * p2 * y
+    Dxy[..., 1, 0] = Dxy[..., 0, 1]
+    Dxy[..., 1, 1] = radial + 2 * y * y * dR + 6 * p1 * y + 2 * p2 * x
+    Dp = np.zeros(x.shape + (2, 3))                      # d(x, y) / d X_c
+    Dp[..., 0, 0], Dp[..., 0, 2] = 1 / z, -x / z
+    Dp[..., 1, 1], Dp[..., 1, 2] = 1 / z, -y / z
+    chain = np.array([[fx, 0.0], [0.0, fy]]) @ Dxy @ Dp  # (..., N, 2, 3): d uv / d X_c
+    J_pose = np.concatenate([chain @ -skew(RX), chain], axis=-1)   # d X_c/dδθ = -[R X]x, d X_c/dt = I
+    return uv, J_in, J_pose
 
 
 def _residuals(X, uv, k, dist, Rs, ts):
-    return np.concatenate([(_project(X, k, dist, R, t)[0] - u).ravel() for u, R, t in zip(uv, Rs, ts)])
+    return (_project(X, k, dist, Rs, ts, jac=False) - uv).ravel()
 
 
 def refine_calibration(X: np.ndarray, uv: np.ndarray, K0: np.ndarray, dist0: np.ndarray, Rs0: np.ndarray,
@@ -130,22 +132,20 @@ def refine_calibration(X: np.ndarray, uv: np.ndarray, K0: np.ndarray, dist0: np.
     cost = 0.5 * np.sum(_residuals(X, uv, k, dist, Rs, ts) ** 2)
     lam = None
     for _ in range(max_iter):
-        A, g_a = np.zeros((9, 9)), np.zeros(9)
-        Bs, Ds, g_p = np.zeros((V, 9, 6)), np.zeros((V, 6, 6)), np.zeros((V, 6))
-        for i in range(V):
-            p, Ji, Jp = _project(X, k, dist, Rs[i], ts[i])
-            r = (p - uv[i]).ravel()
-            Ji, Jp = Ji.reshape(-1, 9), Jp.reshape(-1, 6)
-            A += Ji.T @ Ji
-            g_a += Ji.T @ r
-            Bs[i], Ds[i], g_p[i] = Ji.T @ Jp, Jp.T @ Jp, Jp.T @ r
+        p, Ji, Jp = _project(X, k, dist, Rs, ts)            # every view at once
+        r = (p - uv).reshape(V, -1)                         # (V, 2N)
+        Ji, Jp = Ji.reshape(V, -1, 9), Jp.reshape(V, -1, 6)
+        A, g_a = np.einsum("vri,vrj->ij", Ji, Ji), np.einsum("vri,vr->i", Ji, r)
+        Bs, Ds = np.einsum("vri,vrj->vij", Ji, Jp), np.einsum("vri,vrj->vij", Jp, Jp)
+        g_p = np.einsum("vri,vr->vi", Jp, r)
         if lam is None:                                   # Nielsen: τ · max diag, τ = 1e-3
             lam = 1e-3 * max(A.diagonal().max(), Ds.diagonal(axis1=1, axis2=2).max())
         while True:
             Dl = Ds + lam * np.eye(6)
             Dinv = np.linalg.inv(Dl)
-            S = A + lam * np.eye(9) - np.einsum("vij,vjk,vlk->il", Bs, Dinv, Bs)
-            rhs = -g_a + np.einsum("vij,vjk,vk->i", Bs, Dinv, g_p)
+            BD = Bs @ Dinv                                  # (V, 9, 6): B_v D_v⁻¹
+            S = A + lam * np.eye(9) - (BD @ np.transpose(Bs, (0, 2, 1))).sum(0)
+            rhs = -g_a + np.einsum("vij,vj->i", BD, g_p)
             da = np.linalg.solve(S, rhs)
             dp = np.einsum("vij,vj->vi", Dinv, -g_p - np.einsum("vji,j->vi", Bs, da))
             k_new, dist_new = k + da[:4], dist + da[4:]

@@ -141,9 +141,11 @@ def refine_no_distortion(X, uv, K0, dist0, Rs0, ts0):
     """Only K and the poses: the lens left at the start (a pinhole calibration of a barrel lens)."""
     saved = ref_zhang._project
 
-    def pinhole(X, k, dist, R, t):
+    def pinhole(X, k, dist, R, t, jac=True):
+        if not jac:
+            return saved(X, k, np.zeros(5), R, t, jac=False)
         p, Ji, Jp = saved(X, k, np.zeros(5), R, t)
-        Ji[:, :, 4:] = 0.0
+        Ji[..., 4:] = 0.0
         return p, Ji, Jp
     ref_zhang._project = pinhole
     try:
@@ -157,9 +159,11 @@ def refine_no_k3(X, uv, K0, dist0, Rs0, ts0):
     """Four coefficients (k1, k2, p1, p2): k3 never estimated."""
     saved = ref_zhang._project
 
-    def four(X, k, dist, R, t):
+    def four(X, k, dist, R, t, jac=True):
+        if not jac:
+            return saved(X, k, dist, R, t, jac=False)
         p, Ji, Jp = saved(X, k, dist, R, t)
-        Ji[:, :, 8] = 0.0
+        Ji[..., 8] = 0.0
         return p, Ji, Jp
     ref_zhang._project = four
     try:
@@ -172,7 +176,9 @@ def refine_poses_fixed(X, uv, K0, dist0, Rs0, ts0):
     """Intrinsics and lens refined, every view's pose held at its start."""
     saved = ref_zhang._project
 
-    def fixed(X, k, dist, R, t):
+    def fixed(X, k, dist, R, t, jac=True):
+        if not jac:
+            return saved(X, k, dist, R, t, jac=False)
         p, Ji, Jp = saved(X, k, dist, R, t)
         return p, Ji, 0.0 * Jp
     ref_zhang._project = fixed
