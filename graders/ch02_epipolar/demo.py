@@ -77,7 +77,6 @@ def usac_comparison(ransac: Callable | None = None, outliers=(0.1, 0.3, 0.5, 0.7
                                method=name, outliers=o, noise_px=sigma))
         if ransac is not None:
             p = _fundamental_problem(x1, x2)
-            p["threshold"] = threshold
             t0 = time.perf_counter()
             F, inl = ransac(p["n"], p["sample_size"], p["solve"], p["residuals"], threshold, refit=p["refit"],
                             confidence=confidence, max_iters=max_iters, rng=0)
