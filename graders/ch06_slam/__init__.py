@@ -20,12 +20,13 @@ from .g2o_io import gt_read_g2o
 from .manifold import gt_between_residuals, gt_exp, gt_lie_ops, gt_log, random_poses
 from .posegraphs import (align_first, ate_rmse, g2o_chi2, graph_args, gt_chi2, gtsam_optimize, load_posegraph,
                          make_graph, subgraph)
+from .posegraphs import gt_chi2_terms
 from .posegraphs import pose_errors as gauge_pose_errors
 
 __all__: list[str] = [
     "CAUSES", "debug_case", "debug_truth", "gtsam_fix_drift", "gtsam_fix_inconsistent", "gtsam_fix_jumps",
     "fd_differentiable_pose_graph", "ring_graph", "align_first", "ate_rmse", "gt_read_g2o", "gt_optimize_pose_graph", "gt_robust_pose_graph", "plant_false_loops", "g2o_chi2", "graph_args", "gt_between_residuals", "gt_chi2", "gt_exp", "gt_lie_ops",
-    "gt_log", "gtsam_optimize", "load_posegraph", "make_graph", "gauge_pose_errors", "random_poses", "subgraph",
+    "gt_log", "gt_chi2_terms", "gtsam_optimize", "load_posegraph", "make_graph", "gauge_pose_errors", "random_poses", "subgraph",
 ]
 
 # front-end (6.12–6.17, 6.20)
@@ -37,9 +38,9 @@ __all__ += ["evo_trajectory_errors", "load_tum_pair", "read_tum", "synthetic_pai
 # /fe:612
 # fe:617
 from . import imu  # noqa: E402,F401 (register 6.17)
-from .imu import gtsam_deltas, gtsam_preintegrate, imu_window, true_deltas  # noqa: E402
+from .imu import gtsam_deltas, gtsam_preintegrate, imu_window, numpy_preintegrate, true_deltas  # noqa: E402,E501
 
-__all__ += ["gtsam_deltas", "gtsam_preintegrate", "imu_window", "true_deltas"]
+__all__ += ["gtsam_deltas", "gtsam_preintegrate", "imu_window", "numpy_preintegrate", "true_deltas"]
 # /fe:617
 # fe:614
 from . import place_recognition  # noqa: E402,F401 (register 6.14)

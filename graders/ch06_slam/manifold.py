@@ -66,7 +66,8 @@ def tangents(rng, n: int, dim: int) -> np.ndarray:
     xi[:, rot] *= rng.uniform(0, 0.97 * np.pi, (n, 1)) / np.linalg.norm(xi[:, rot], axis=1, keepdims=True)
     # Zero and tiny rotations: the series paths. SE(2) stops at 1e-5 because GTSAM's Pose2 Expmap/Logmap
     # lose ~2e-16 |v| / theta there (2e-7 at 1e-9, measured); its Pose3 stays accurate to 1e-15.
-    xi[:4, rot] *= np.array([0.0, 1e-5 if dim == 2 else 1e-9, 1e-4, 1e-3])[:, None]
+    tiny = np.array([0.0, 1e-5 if dim == 2 else 1e-9, 1e-4, 1e-3])[:, None]
+    xi[:4, rot] *= tiny / np.maximum(np.linalg.norm(xi[:4, rot], axis=1, keepdims=True), 1e-300)
     return xi
 
 
