@@ -156,6 +156,13 @@ def _correct(out, db_g, db_a):
     return dR @ so3_exp(J[0:3, :3] @ db_g), dv + J[3:6] @ db, dp + J[6:9] @ db
 
 
+def numpy_preintegrate(omega_m, acc_m, dt, b_g, b_a):
+    """Stand-in for 6.17: the grader's numpy loop of Forster's scheme (gtsam_preintegrate, whose Jacobians come
+    from 12 extra gtsam integrations, is the library-backed version the tests hold it to)."""
+    return _model(np.asarray(omega_m, float), np.asarray(acc_m, float), float(dt), np.asarray(b_g, float),
+                  np.asarray(b_a, float))
+
+
 # ----------------------------------------------------------------- exercise
 
 def _convert(out, case):
@@ -270,7 +277,7 @@ register(
         points=3,
         cases=cases_preintegrate,
         hints=HINTS,
-        fallback=gtsam_preintegrate,
+        fallback=numpy_preintegrate,
         arg_names=("omega_m", "acc_m", "dt", "b_g", "b_a"),
         timeout=20.0,
     ),

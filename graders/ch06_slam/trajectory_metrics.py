@@ -225,8 +225,14 @@ HINTS = [
 
 
 def fallback_trajectory_errors(stamps_est, T_est, stamps_gt, T_gt, with_scale=False, delta=1):
-    """Stand-in for 6.12: evo computes the figures."""
-    return evo_trajectory_errors(stamps_est, T_est, stamps_gt, T_gt, with_scale=with_scale, delta=delta)
+    """Stand-in for 6.12: the grader's numpy model of evo's figures (evo itself takes ~0.6 s on the TUM pair;
+    the test holds the two together)."""
+    from types import SimpleNamespace
+
+    case = SimpleNamespace(args=(np.asarray(stamps_est, float), np.asarray(T_est, float),
+                                 np.asarray(stamps_gt, float), np.asarray(T_gt, float)),
+                           kwargs={"with_scale": with_scale, "delta": delta})
+    return _model(case)
 
 
 register(
