@@ -125,11 +125,33 @@ def match_and_verify(keypoints: list, descriptors: list, ratio: float = 0.8, see
     return {p: m for p, m in results if m is not None}
 
 
+def camera_ids(paths: list, sizes: list) -> list[int]:
+    """One id per camera: images whose EXIF names the same make, model and focal length and that have the same
+    size share an id (their focal length is one unknown, COLMAP's single_camera_per_folder for one lens); an
+    image without EXIF model or focal length gets an id of its own. The EXIF focal length itself is not used
+    as a prior (phones report it in mm of an unknown sensor, and a wrong prior is worse than none)."""
+    from PIL import Image
+
+    ids, seen = [], {}
+    for k, (path, size) in enumerate(zip(paths, sizes)):
+        try:
+            with Image.open(path) as im:
+                exif = im.getexif()
+                make, model = exif.get(271), exif.get(272)
+                focal = exif.get_ifd(0x8769).get(37386)
+        except OSError:
+            make = model = focal = None
+        key = (make, model, str(focal), tuple(size)) if model and focal else ("image", k)
+        ids.append(seen.setdefault(key, len(seen)))
+    return ids
+
+
 def reconstruct_folder(folder, max_side: int = 1024, n_features: int = 6000, upsample: float = 2.0,
                        workers: int = 2, verbose: bool = False, seed: int = 0) -> dict:
     """The whole pipeline on a folder of photos (*.jpg, *.png), cameras unknown.
 
-    Images are downscaled to max_side; features are extracted in `workers` processes. Returns the
+    Images are downscaled to max_side; features are extracted in `workers` processes; images of one camera
+    (EXIF make, model, focal length and size: `camera_ids`) share their self-calibrated starting f. Returns the
     `incremental_sfm` result plus "names", "keypoints" (in the downscaled images), "image_sizes",
     "scales" (downscaled / original) and "timings" (seconds per stage).
     """
@@ -154,7 +176,8 @@ def reconstruct_folder(folder, max_side: int = 1024, n_features: int = 6000, ups
     t0 = time.perf_counter()
     sizes = [f[2] for f in feats]
     recon = incremental_sfm({"keypoints": [k[:, :2] for k in keypoints], "matches": matches, "image_sizes": sizes,
-                             "K": None, "verified": True}, seed=seed, verbose=verbose)
+                             "K": None, "verified": True, "camera_ids": camera_ids(paths, sizes)},
+                            seed=seed, verbose=verbose)
     timings["mapping"] = time.perf_counter() - t0
     timings["total"] = sum(timings.values())
     recon.update(names=[p.name for p in paths], keypoints=[k[:, :2] for k in keypoints], image_sizes=sizes,

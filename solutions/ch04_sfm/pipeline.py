@@ -12,8 +12,10 @@ The loop (Schönberger & Frahm, "Structure-from-Motion Revisited", CVPR 2016):
      `two_view_init` and ranked by `rank_initial_pairs` (many E inliers, low H/E ratio, wide
      enough triangulation angle); the first pair passing all tests is taken; global BA.
   2. next best view: the unregistered image that sees the most triangulated points; P3P inside
-     RANSAC (12 px, as COLMAP), accepted with >= 30 inliers. Unknown focal: a few focal lengths
-     are tried and the best refined with the pose (COLMAP samples focal lengths the same way).
+     RANSAC (12 px, as COLMAP), accepted with >= 30 inliers (>= 25 %), >= 30 of them within 4 px
+     after refinement and spread over the image (a few agreeing points on one patch can fit a wrong
+     pose). Unknown focal: a few focal lengths are tried and the best refined with the pose (COLMAP
+     samples focal lengths the same way).
   3. triangulate the tracks the new image completes (multi-view DLT), keep points seen under
      >= 1.5 degrees with every observation within 4 px.
   4. local BA (the new image, its best-connected neighbours and the points it sees), then filter:
@@ -57,6 +59,9 @@ MIN_PNP_RATIO = 0.25        # COLMAP: abs_pose_min_inlier_ratio = 0.25
 
 
 ABS_POSE_PX = 12.0          # COLMAP: abs_pose_max_error = 12 (registration RANSAC threshold)
+
+
+MIN_PNP_CELLS = 4           # a registration's 4 px inliers cover >= 4 cells of a 4 x 4 grid (not one patch)
 
 
 MIN_PAIR_MATCHES = 15       # COLMAP: min_num_inliers of a verified pair = 15
@@ -121,6 +126,7 @@ class _Model:
         self.K = np.array([np.asarray(K, float) for K in K_list]) if self.known_K else \
             np.array([default_intrinsics(w, h) for w, h in sizes])
         self.k = np.zeros((n, 2))
+        self.sizes = [(int(w), int(h)) for w, h in sizes]
         self.max_side = np.array([max(w, h) for w, h in sizes], float)
         self.half_diag = np.array([np.hypot(w, h) / 2 for w, h in sizes], float)
         self.R, self.t = np.tile(np.eye(3), (n, 1, 1)), np.zeros((n, 3))
@@ -382,7 +388,8 @@ def _initialise(m: _Model, keypoints, matches: dict, n_first: int = 3, n_partner
     rest), each with its best-matched partners. The partners of a first image are scored with
     `two_view_init` (E and H inliers, median angle) and ranked by `rank_initial_pairs`; the
     first pair passing all three of its tests and giving >= 30 good points is taken. If no pair
-    passes, every scored pair is tried in rank order."""
+    passes, a second round with twice the first images and partners; then every scored pair is tried in
+    rank order."""
     degree = np.zeros(m.n)
     for (i, j), mt in matches.items():
         degree[[i, j]] += len(mt)
@@ -402,12 +409,15 @@ def _initialise(m: _Model, keypoints, matches: dict, n_first: int = 3, n_partner
         return (st["n_inliers_E"] >= INIT_MIN_INLIERS and st["median_angle_deg"] >= INIT_MIN_ANGLE_DEG
                 and st["n_inliers_H"] <= INIT_MAX_H_RATIO * st["n_inliers_E"])
 
-    for a in np.argsort(-degree, kind="stable")[:n_first]:
-        partners = sorted((p for p in matches if a in p), key=lambda p: -len(matches[p]))[:n_partners]
-        stats = [score(p)[1] for p in partners]
-        for r in rank_initial_pairs(stats, INIT_MIN_INLIERS, INIT_MAX_H_RATIO, INIT_MIN_ANGLE_DEG):
-            if passes(stats[r]) and _try_pair(m, matches, partners[r], scored[partners[r]][0]):
-                return True
+    # COLMAP's order; when no pair passes, a wider round (more first images, more partners) before any pair
+    # that fails a test: on a larger set the best-connected images can all be shots from one spot
+    for k_first, k_partners in ((n_first, n_partners), (2 * n_first, 2 * n_partners)):
+        for a in np.argsort(-degree, kind="stable")[:k_first]:
+            partners = sorted((p for p in matches if a in p), key=lambda p: -len(matches[p]))[:k_partners]
+            stats = [score(p)[1] for p in partners]
+            for r in rank_initial_pairs(stats, INIT_MIN_INLIERS, INIT_MAX_H_RATIO, INIT_MIN_ANGLE_DEG):
+                if passes(stats[r]) and _try_pair(m, matches, partners[r], scored[partners[r]][0]):
+                    return True
     pairs = list(scored)
     for r in rank_initial_pairs([scored[p][1] for p in pairs], INIT_MIN_INLIERS, INIT_MAX_H_RATIO, INIT_MIN_ANGLE_DEG):
         if _try_pair(m, matches, pairs[r], scored[pairs[r]][0]):
@@ -418,7 +428,8 @@ def _initialise(m: _Model, keypoints, matches: dict, n_first: int = 3, n_partner
 def _register(m: _Model, i: int, seed: int = 0) -> bool:
     """Register image i by P3P RANSAC on its 2D-3D correspondences, COLMAP's way: inlier threshold
     12 px (abs_pose_max_error; the 4 px filter after BA is the tight one), accepted with >= 30
-    inliers making up >= 25 % of the correspondences. With an unknown focal length, the factors
+    inliers making up >= 25 % of the correspondences, then `_pose_supported` (>= 30 within 4 px after
+    refinement, spread over the image). With an unknown focal length, the factors
     FOCAL_FACTORS x f are tried (a wrong f bends the bearings, so it finds fewer inliers), the
     pose and f of the best are refined together on its inliers, and RANSAC runs once more with
     that f. Activates the inlier observations."""
@@ -447,11 +458,30 @@ def _register(m: _Model, i: int, seed: int = 0) -> bool:
         m.K[i] = K
     if R is None or inl.sum() < MIN_PNP_INLIERS or inl.mean() < MIN_PNP_RATIO:
         return False
+    if not _pose_supported(X, x, K if not m.known_K else m.K[i], R, t, m.sizes[i]):
+        return False
     m.R[i], m.t[i] = R, t
     m.registered[i] = True
     m.order.append(i)
     m.obs_on[sel[inl]] = True
     return True
+
+
+def _pose_supported(X: np.ndarray, x: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, size) -> bool:
+    """After refinement, does the pose explain enough of the image? RANSAC's 12 px inliers can agree with a
+    wrong pose (a repeated facade, a focal length traded against depth); a right pose puts most of them within
+    4 px. Asks >= 30 correspondences within 4 px (in front of the camera) covering >= 4 cells of a 4 x 4 grid
+    of the image: a few points on one patch pin neither f nor the rotation about the patch.
+    X: (N, 3), x: (N, 2) pixels; size: (width, height)."""
+    Xc = X @ R.T + t
+    z = Xc[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = (Xc[:, :2] / z[:, None]) @ K[:2, :2].T + K[:2, 2]
+    good = (z > 0) & (np.linalg.norm(uv - x, axis=1) < MAX_REPROJ_PX)
+    if good.sum() < MIN_PNP_INLIERS:
+        return False
+    cells = np.floor(x[good] / np.asarray(size, float) * 4).clip(0, 3)
+    return len(np.unique(cells[:, 0] * 4 + cells[:, 1])) >= MIN_PNP_CELLS
 
 
 def _neighbours(m: _Model, i: int, n: int) -> list[int]:
@@ -478,7 +508,8 @@ def incremental_sfm(problem: dict, seed: int = 0, local_window: int = 6, global_
     keypoints: list of (N_i, 2) pixels; matches: {(i, j): (M, 2) int keypoint pairs}, i < j, raw or
     verified (they are verified again unless problem["verified"] is True); image_sizes: list of
     (width, height); K: list of (3, 3), or None for unknown intrinsics (f = 1.2 max(w, h), f, k1,
-    k2 refined per camera).
+    k2 refined per camera); optional camera_ids: (n,) ints, images taken with one camera (same lens and
+    zoom) share one self-calibrated starting f.
     Returns {"cameras": {i: {"R", "t", "K", "k"}} (registered only), "points": (P, 3),
     "tracks": list of P {image: keypoint}}.
     """
@@ -492,7 +523,7 @@ def incremental_sfm(problem: dict, seed: int = 0, local_window: int = 6, global_
         matches = _verify(keypoints, matches, K_list, seed)
     m = _Model(keypoints, build_tracks(matches), K_list, sizes)
     if K_list is None and problem.get("self_calibrate", True):
-        self_calibrate(m.K, keypoints, matches, min_matches=2 * MIN_PAIR_MATCHES)
+        self_calibrate(m.K, keypoints, matches, min_matches=2 * MIN_PAIR_MATCHES, groups=problem.get("camera_ids"))
     log = (lambda *a: print(f"[{time.perf_counter() - start:6.2f} s]", *a)) if verbose else (lambda *a: None)
     if not _initialise(m, keypoints, matches, seed=seed, verbose=verbose):
         log("no initial pair")
