@@ -5,18 +5,19 @@ Oracles: the real Middlebury motorcycle pair with its ground-truth disparity (sc
 rectified pairs with exact disparity, and multi-view scenes of textured planes rendered by
 `graders.scene` with exact depth (plane-sweep MVS and depth-map fusion are judged on it).
 
-Geometry modules: `stereo` (8.8-8.9), `mvs` (8.10), `fusion` (8.11), `questions` (8.1-8.3, 8.24). Importing the package registers the
+Geometry modules: `stereo` (8.8-8.9), `mvs` (8.10), `fusion` (8.11), `debug` (8.17), `questions` (8.1-8.3, 8.24). Importing the package registers the
 chapter; the names below are the API of the notebook, the tests and the benchmark.
 """
 from __future__ import annotations
 
-from . import fusion, mvs, questions, stereo  # noqa: F401 (register 8.1-8.3, 8.8-8.11, 8.24)
+from . import debug, fusion, mvs, questions, stereo  # noqa: F401 (register 8.1-8.3, 8.8-8.11, 8.17, 8.24)
+from .debug import CAUSES, broken_mvs, debug_case, debug_truth
 from .fusion import fusion_problem, gt_fuse, on_surface
 from .mvs import depth_accuracy, gt_plane_sweep, mvs_scene, sweep_costs, sweep_homography, sweep_region
 from .stereo import (cost_volume, cv_block_matching, cv_sgbm, gt_block_matching, gt_sgm, judged_region, motorcycle,
                      motorcycle_crop, stereo_scores, synthetic_pair, wta_lr)
 
-__all__: list[str] = ["fusion_problem", "gt_fuse", "on_surface", "depth_accuracy", "gt_plane_sweep", "mvs_scene", "sweep_costs", "sweep_homography",
+__all__: list[str] = ["CAUSES", "broken_mvs", "debug_case", "debug_truth", "fusion_problem", "gt_fuse", "on_surface", "depth_accuracy", "gt_plane_sweep", "mvs_scene", "sweep_costs", "sweep_homography",
                       "sweep_region", "cost_volume", "cv_block_matching", "cv_sgbm", "gt_block_matching", "gt_sgm", "judged_region",
                       "motorcycle", "motorcycle_crop", "stereo_scores", "synthetic_pair", "wta_lr"]
 

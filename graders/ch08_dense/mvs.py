@@ -21,6 +21,7 @@ from graders.engine import Case, Exercise, Hint, register
 
 TEXTURED = ("brick", "gravel", "grass")     # detail everywhere (the others have sky or flat regions: 8.17)
 Z_NEAR, Z_FAR, N_PLANES = 3.0, 8.0, 64
+BLANK_MARGIN = 0.2   # 8.17's poster: a textured frame 20 % of its size wide around a blank centre
 REL_OK = 0.03        # "accurate": within 3 % of the true depth (~1.5-2.5 hypothesis steps of 64 in inverse depth)
 
 
@@ -31,7 +32,13 @@ def _plane(rng, centre, size, max_tilt_deg, name, f):
     normal_tilt = scene.rotation_about(np.r_[rng.normal(size=2), 0.0], np.radians(rng.uniform(0, max_tilt_deg)))
     R_p = normal_tilt                                       # plane axes u, v and normal (the columns) in the world
     o_p = centre - R_p @ np.r_[size[0] / 2, size[1] / 2, 0.0]
-    tex = np.ones(tex_px[::-1], np.float32) * 0.5 if name == "blank" else scene.texture(name, tex_px)
+    if name == "blank":          # a poster: textured frame, blank (constant) centre
+        tex = scene.texture("gravel", tex_px).copy()
+        h, w = tex.shape
+        my, mx = int(BLANK_MARGIN * h), int(BLANK_MARGIN * w)
+        tex[my:h - my, mx:w - mx] = tex.mean()
+    else:
+        tex = scene.texture(name, tex_px)
     return {"R_p": R_p, "o_p": o_p, "size": size, "tex": tex, "name": name}
 
 

@@ -9,11 +9,13 @@ from __future__ import annotations
 
 from .questions import *  # noqa: F401,F403 (8.1-8.3, 8.24)
 from .questions import __all__ as _questions
+from .debug import fill_holes_with_planes, fix_textureless_holes
 from .fusion import fuse_depth_maps
 from .mvs import bilinear, plane_homography, plane_sweep, sweep_volume
 from .stereo import block_matching, census_volume, sad_volume, sgm, sgm_stereo
 
 __all__ = list(_questions) + ["block_matching", "census_volume", "sad_volume", "sgm", "sgm_stereo",
-                              "bilinear", "plane_homography", "plane_sweep", "sweep_volume", "fuse_depth_maps"]
+                              "bilinear", "plane_homography", "plane_sweep", "sweep_volume", "fuse_depth_maps",
+                              "fill_holes_with_planes", "fix_textureless_holes"]
 
 # neural (8.4-8.7, 8.12-8.16, 8.18-8.23, 8.25)

@@ -269,4 +269,48 @@ MUTANTS += [
     ("8.11", "range instead of depth", fuse_range_not_depth, "fewer points survive"),
 ]
 
+
+# ----------------------------------------------------------------- 8.17 MVS holes in textureless areas
+
+def _filled_with(case, value_of):
+    Z = np.array(case["depth"], float)
+    holes = np.isnan(Z)
+    Z[holes] = value_of(Z, holes)
+    return Z
+
+
+def holes_wrong_cause(case):
+    """Blames occlusion; fills the holes with the median depth of everything seen."""
+    return {"cause": "occlusion", "depth": _filled_with(case, lambda Z, h: np.nanmedian(Z))}
+
+
+def holes_left_in(case):
+    """Names the cause but hands the colleague's depth map back unchanged."""
+    return {"cause": "textureless", "depth": np.array(case["depth"], float)}
+
+
+def holes_nearest_fill(case):
+    """Nearest valid depth for each hole (grows the background into the poster)."""
+    Z = np.array(case["depth"], float)
+    holes = np.isnan(Z)
+    idx = ndimage.distance_transform_edt(holes, return_distances=False, return_indices=True)
+    return {"cause": "textureless", "depth": Z[tuple(idx)]}
+
+
+def holes_blur_everything(case):
+    """Fills the holes with a wide NaN-aware blur and smooths every pixel with it."""
+    Z = np.array(case["depth"], float)
+    w = np.isfinite(Z).astype(float)
+    num = ndimage.gaussian_filter(np.nan_to_num(Z), 6)
+    den = ndimage.gaussian_filter(w, 6)
+    return {"cause": "textureless", "depth": num / np.maximum(den, 1e-6)}
+
+
+MUTANTS += [
+    ("8.17", "blames occlusion, median fill", holes_wrong_cause, "look at the log"),
+    ("8.17", "holes left in", holes_left_in, "the holes are still there"),
+    ("8.17", "nearest-depth fill", holes_nearest_fill, None),
+    ("8.17", "blur everything", holes_blur_everything, None),
+]
+
 # neural (8.4-8.7, 8.12-8.16, 8.18-8.23, 8.25)

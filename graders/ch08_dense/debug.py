@@ -1,0 +1,149 @@
+"""8.17 (DEBUG) — MVS has holes in textureless areas.
+
+The colleague's plane sweep (`broken_mvs`: 5×5 SAD, winner-take-all, then a uniqueness filter that drops
+pixels whose best plane is not clearly better than any plane 3+ steps away) leaves holes in a poster
+whose centre is blank: every depth costs the same there. The case holds the views, the run's depth map,
+log and metrics; the learner names the cause (graded once, from CAUSES) and returns a repaired depth map,
+judged on fresh draws against the exact depth: the blank centre must get the poster's depth (within 3 %)
+and the textured pixels must stay as good as the colleague's.
+"""
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+from graders.engine import Case, Exercise, Hint, OutputError, debug_practice, register, shared_run
+
+from . import mvs
+
+CAUSES = {
+    "textureless": "the holes are where the surface has no texture: every depth plane costs the same there, and "
+                   "the uniqueness filter rejects the flat cost curves",
+    "occlusion": "the holes are regions the neighbours cannot see",
+    "range": "the holes are surfaces outside the swept depth range",
+    "exposure": "the neighbours are exposed differently, so every SAD cost is high",
+    "poses": "one neighbour's pose is wrong",
+}
+
+
+def broken_mvs(case: dict, r: int = 2, uniqueness: float = 1.05) -> dict:
+    """The colleague's MVS run: plane sweep (SAD, (2r+1)² window), WTA, then keep a pixel only if every
+    plane 3 or more steps from the winner costs at least `uniqueness` × the winner's cost.
+    Returns {"depth": (H, W) with NaN holes, "log": [str], "metrics": {...}}."""
+    args = (case["I_ref"], case["K_ref"], case["images"], case["Ks"], case["Rs"], case["ts"], case["depths"])
+    C = mvs.sweep_costs(*args, r=r)
+    i = C.argmin(2)
+    P = C.shape[2]
+    far = np.abs(np.arange(P)[None, None, :] - i[..., None]) >= 3
+    best = np.take_along_axis(C, i[..., None], 2)[..., 0]
+    runner_up = np.where(far, C, np.inf).min(2)
+    keep = runner_up >= uniqueness * np.maximum(best, 1e-9)
+    Z = np.where(keep, np.asarray(case["depths"])[i], np.nan)
+    gy, gx = np.gradient(case["I_ref"])
+    grad = np.hypot(gx, gy)
+    holes = ~keep
+    metrics = {"hole_fraction": float(holes.mean()), "mean_gradient_in_holes": float(grad[holes].mean()),
+               "mean_gradient_elsewhere": float(grad[keep].mean()), "planes": P,
+               "depth_range_m": (float(np.min(case["depths"])), float(np.max(case["depths"])))}
+    log = [f"plane sweep: {P} planes in [{metrics['depth_range_m'][0]:.1f}, {metrics['depth_range_m'][1]:.1f}] m, "
+           f"{len(case['images'])} neighbours, SAD {2 * r + 1}x{2 * r + 1}",
+           f"uniqueness filter (x{uniqueness}): {100 * metrics['hole_fraction']:.1f} % of the pixels dropped",
+           f"mean |grad I| in the holes {metrics['mean_gradient_in_holes']:.4f}, elsewhere "
+           f"{metrics['mean_gradient_elsewhere']:.4f}"]
+    return {"depth": Z, "log": log, "metrics": metrics}
+
+
+def debug_holes(rng: np.random.Generator) -> tuple[dict, dict]:
+    """A scene whose front plane is a poster with a textured frame and a blank centre, and the broken run."""
+    s = mvs.mvs_scene(rng, n_views=3, blank=True)
+    case = {k: s[k] for k in ("I_ref", "K_ref", "images", "Ks", "Rs", "ts", "depths")}
+    run = broken_mvs(case)
+    case.update({"depth": run["depth"], "log": run["log"], "metrics": run["metrics"],
+                 "settings": {"r": 2, "uniqueness": 1.05}, "causes": dict(CAUSES)})
+    region = mvs.sweep_region(s["K_ref"], s["Ks"], s["Rs"], s["ts"], s["depths"], s["I_ref"].shape, 2)
+    blank = _blank_centre(s) & region
+    truth = {"cause": "textureless", "Z_gt": s["Z_gt"], "region": region, "blank": blank,
+             "broken_textured": _share(run["depth"], s["Z_gt"], region & ~blank)}
+    return case, truth
+
+
+def _blank_centre(s) -> np.ndarray:
+    """Reference pixels that see the blank centre of the poster (its texture is exactly constant there)."""
+    poster = next(p for p in s["planes"] if p["name"] == "blank")
+    H, W = s["I_ref"].shape
+    ys, xs = np.mgrid[0:H, 0:W].astype(float)
+    rays = np.stack([xs, ys, np.ones_like(xs)], -1) @ np.linalg.inv(s["K_ref"]).T
+    X = rays * s["Z_gt"][..., None]
+    local = (X - poster["o_p"]) @ poster["R_p"]
+    w, h = poster["size"]
+    m = mvs.BLANK_MARGIN + 0.05                  # a little inside the blank part: its edge pixels mix the frame
+    inside = (local[..., 0] > m * w) & (local[..., 0] < (1 - m) * w) & (local[..., 1] > m * h) & (local[..., 1] < (1 - m) * h)
+    return inside & (np.abs(local[..., 2]) < 1e-6 * s["Z_gt"])
+
+
+def _share(Z, Z_gt, mask) -> float:
+    with np.errstate(invalid="ignore"):
+        good = np.abs(Z - Z_gt) <= mvs.REL_OK * Z_gt
+    return float((good & mask).sum() / max(mask.sum(), 1))
+
+
+def _convert(out, case):
+    if not isinstance(out, dict) or not {"cause", "depth"} <= set(out):
+        raise OutputError('expected a dict {"cause": one of CAUSES, "depth": (H, W) repaired depth map}')
+    cause = str(out["cause"]).strip().lower()
+    if cause not in CAUSES:
+        raise OutputError(f'"cause" must be one of {", ".join(CAUSES)}; got {out["cause"]!r}')
+    try:
+        Z = np.array(out["depth"], dtype=float)
+    except Exception:
+        raise OutputError('"depth" must be a (H, W) numeric array') from None
+    if Z.shape != case.args[0]["I_ref"].shape:
+        raise OutputError(f'"depth" has shape {Z.shape}, expected {case.args[0]["I_ref"].shape}')
+    return {"cause": cause, "depth": Z}
+
+
+def _cases(rng):
+    for i in range(2):
+        case, truth = debug_holes(rng)
+        call = shared_run(lambda fn, c=case: fn(copy.deepcopy(c)))
+        if i == 0:
+            yield Case("the cause you named", (case,), truth, lambda o, t: float(o["cause"] != t["cause"]), 0,
+                       "wrong", convert=_convert, call=call, key="cause", tags=("cause",))
+        # 0.8: the holes cover ~85-90 % of the blank centre; filling them from the frame (inverse depth is affine
+        # across a plane) puts them within 3 %, even if the few lucky WTA depths left in the centre stay wrong;
+        # leaving the holes scores ~0.1, filling them with the background's depth ~0.1.
+        yield Case(f"fresh case {i + 1}: blank centre within 3 % of the true depth", (case,), truth,
+                   lambda o, t: max(0.0, 0.8 - _share(o["depth"], t["Z_gt"], t["blank"])), 0.0, "short of 80 %",
+                   convert=_convert, call=call, key=f"blank-{i + 1}", tags=("fix",))
+        # 0.02: the repair must not damage the textured pixels the colleague's run got right.
+        yield Case(f"fresh case {i + 1}: textured pixels within 3 %, vs the colleague's run", (case,), truth,
+                   lambda o, t: max(0.0, t["broken_textured"] - _share(o["depth"], t["Z_gt"], t["region"] & ~t["blank"])),
+                   0.02, "", convert=_convert, call=call, key=f"textured-{i + 1}", tags=("fix",))
+
+
+HOLE_HINTS = [
+    Hint(lambda c, o: f"look at the log: the holes' mean gradient is {c.args[0]['metrics']['mean_gradient_in_holes']:.4f} "
+         f"against {c.args[0]['metrics']['mean_gradient_elsewhere']:.4f} elsewhere — what does that say about the "
+         "surface there?", lambda c, o: c.key == "cause" and o["cause"] != "textureless"),
+    Hint("the holes are still there (NaN counts as wrong): photometric matching cannot decide a depth where there is "
+         "no texture; take it from the textured surroundings of the same surface (e.g. interpolate inverse depth, "
+         "which is affine in the pixel coordinates across a plane, or fit a plane to the hole's rim).",
+         lambda c, o: c.key.startswith("blank") and np.isnan(o["depth"][c.expected["blank"]]).mean() > 0.5),
+    Hint("the holes are filled, but not with the poster's depth: filling from every neighbour pixel (or a blur) mixes in "
+         "the background; use the surface around the hole (the poster's textured frame) and interpolate 1/Z, not Z.",
+         lambda c, o: c.key.startswith("blank") and np.isnan(o["depth"][c.expected["blank"]]).mean() <= 0.5),
+    Hint("the repair damaged the pixels the colleague's run got right: keep its valid depths and fill only the holes.",
+         lambda c, o: c.key.startswith("textured")),
+]
+
+register(Exercise(
+    id="8.17", title="MVS has holes in textureless areas", name="fix_textureless_holes", kind="debug", points=2,
+    cases=_cases, hints=HOLE_HINTS, fallback=None, timeout=60.0))
+
+debug_case = debug_practice({"8.17": debug_holes})   # debug_case("8.17", seed): a broken run to practise on
+
+
+def debug_truth(exercise_id: str, seed: int = 0) -> dict:
+    """The hidden truth of debug_case(exercise_id, seed), for the model-answer pictures."""
+    return debug_holes(np.random.default_rng(seed))[1]
