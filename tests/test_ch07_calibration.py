@@ -100,3 +100,16 @@ def test_real_views_match_the_stored_opencv_calibration():
     K, dist, Rs, ts, rms = ch7.cv_calibrate(ch7.board(), ch7.real_corners(), flags=cv2.CALIB_FIX_ASPECT_RATIO)
     assert abs(K[0, 0] - 535.916) < 1.0 and abs(K[0, 0] - K[1, 1]) < 1e-9
     assert abs(rms - 0.393) < 0.03
+
+
+def test_corner_exercise_without_the_real_views():
+    # Without $COURSE_DATA, 7.17 grades on rendered boards: the reference passes, a mutant does not.
+    import dataclasses
+
+    from graders import grade
+    from graders.ch07_calibration.corners import _synthetic_cases
+    from mutants.ch07_calibration import corners_gradient_centroid
+
+    ex = dataclasses.replace(EXERCISES["7.17"], cases=_synthetic_cases)
+    assert grade(ex, calibration.refine_corners, seed=4).score == ex.points
+    assert grade(ex, corners_gradient_centroid, seed=4).score < ex.points
