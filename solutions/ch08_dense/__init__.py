@@ -19,3 +19,5 @@ __all__ = list(_questions) + ["block_matching", "census_volume", "sad_volume", "
                               "fill_holes_with_planes", "fix_textureless_holes"]
 
 # neural (8.4-8.7, 8.12-8.16, 8.18-8.23, 8.25)
+from .nerf import volume_render  # noqa: E402
+__all__ += ["volume_render"]

@@ -314,3 +314,63 @@ MUTANTS += [
 ]
 
 # neural (8.4-8.7, 8.12-8.16, 8.18-8.23, 8.25)
+
+# ----------------------------------------------------------------- 8.12 volume rendering + inverse CDF
+# One small numpy renderer written here (product form of T, searchsorted inverse CDF), one mistake each.
+
+def _render(sigma, rgb, t, t_far, u, *, T_mode="exclusive", alpha="exp", last=None, depth="sum", fine="interp"):
+    sigma, rgb, t, u = (np.asarray(a, float) for a in (sigma, rgb, t, u))
+    edges = np.concatenate([t, np.full((len(t), 1), t_far if last is None else last)], 1)
+    tau = sigma * np.diff(edges, axis=1)
+    a = 1 - np.exp(-tau) if alpha == "exp" else np.minimum(tau, 1.0)
+    if T_mode == "exclusive":
+        T = np.cumprod(np.concatenate([np.ones((len(a), 1)), 1 - a[:, :-1]], 1), 1)
+    else:
+        T = np.cumprod(1 - a, 1)
+    w = T * a
+    acc = w.sum(1)
+    d = (w * t).sum(1) / (acc if depth == "normalised" else 1.0)
+    if last is not None:
+        edges[:, -1] = t_far
+    pdf = np.ones_like(w) if fine == "uniform" else w
+    cdf = np.concatenate([np.zeros((len(w), 1)), np.cumsum(pdf, 1) / pdf.sum(1, keepdims=True)], 1)
+    tf = np.empty_like(u)
+    for r in range(len(u)):
+        i = np.clip(np.searchsorted(cdf[r], u[r], side="right"), 1, len(cdf[r]) - 1) - 1
+        frac = (u[r] - cdf[r][i]) / np.maximum(cdf[r][i + 1] - cdf[r][i], 1e-12)
+        tf[r] = edges[r][i] if fine == "left" else edges[r][i] + frac * (edges[r][i + 1] - edges[r][i])
+    return w, (w[..., None] * rgb).sum(1), d, acc, tf
+
+
+def vr_inclusive_T(sigma, rgb, t, t_far, u):
+    return _render(sigma, rgb, t, t_far, u, T_mode="inclusive")
+
+
+def vr_linear_alpha(sigma, rgb, t, t_far, u):
+    return _render(sigma, rgb, t, t_far, u, alpha="linear")
+
+
+def vr_infinite_last(sigma, rgb, t, t_far, u):
+    return _render(sigma, rgb, t, t_far, u, last=1e10)
+
+
+def vr_normalised_depth(sigma, rgb, t, t_far, u):
+    return _render(sigma, rgb, t, t_far, u, depth="normalised")
+
+
+def vr_left_edges(sigma, rgb, t, t_far, u):
+    return _render(sigma, rgb, t, t_far, u, fine="left")
+
+
+def vr_uniform_fine(sigma, rgb, t, t_far, u):
+    return _render(sigma, rgb, t, t_far, u, fine="uniform")
+
+
+MUTANTS += [
+    ("8.12", "T_i includes sample i", vr_inclusive_T, "off by one sample"),
+    ("8.12", "alpha = sigma delta", vr_linear_alpha, "not σ_i δ_i"),
+    ("8.12", "last delta 1e10", vr_infinite_last, "ends at t_far"),
+    ("8.12", "depth divided by opacity", vr_normalised_depth, "not divided by the"),
+    ("8.12", "fine samples at bin edges", vr_left_edges, "sit at the bin edges"),
+    ("8.12", "fine samples ignore the weights", vr_uniform_fine, "do not follow the weights"),
+]
