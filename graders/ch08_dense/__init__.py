@@ -25,3 +25,6 @@ __all__: list[str] = ["CAUSES", "broken_mvs", "debug_case", "debug_truth", "fusi
 from . import nerf  # noqa: F401,E402 (register 8.12)
 from .nerf import analytic_render, gt_volume_render, ray_batch  # noqa: E402
 __all__ += ["analytic_render", "gt_volume_render", "ray_batch"]
+from . import splat  # noqa: F401,E402 (register 8.14)
+from .splat import gaussian_scene, gt_project, gt_project_gaussians  # noqa: E402
+__all__ += ["gaussian_scene", "gt_project", "gt_project_gaussians"]

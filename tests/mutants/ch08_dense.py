@@ -374,3 +374,79 @@ MUTANTS += [
     ("8.12", "fine samples at bin edges", vr_left_edges, "sit at the bin edges"),
     ("8.12", "fine samples ignore the weights", vr_uniform_fine, "do not follow the weights"),
 ]
+
+# ----------------------------------------------------------------- 8.14 Gaussian projection
+# A numpy projector written here (closed-form J, eigvalsh radius), one mistake each.
+
+def _proj(mu, q, s, R, t, K, W, H, *, dil=0.3, sq=True, use_W=True, affine=False, norm=True, lam="max", cull="ok"):
+    mu, q, s = (np.asarray(a, float) for a in (mu, q, s))
+    if norm:
+        q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    Rq = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y), 2 * (x * y + w * z),
+                   1 - 2 * (x * x + z * z), 2 * (y * z - w * x), 2 * (x * z - w * y), 2 * (y * z + w * x),
+                   1 - 2 * (x * x + y * y)], 1).reshape(-1, 3, 3)
+    D = s ** 2 if sq else s
+    Sigma = np.einsum("nij,nj,nkj->nik", Rq, D, Rq)
+    Xc = mu @ R.T + t
+    zc = np.where(Xc[:, 2] > 0.2, Xc[:, 2], 1.0)
+    J = np.zeros((len(mu), 2, 3))
+    J[:, 0, 0], J[:, 1, 1] = K[0, 0] / zc, K[1, 1] / zc
+    if not affine:
+        J[:, 0, 2], J[:, 1, 2] = -K[0, 0] * Xc[:, 0] / zc ** 2, -K[1, 1] * Xc[:, 1] / zc ** 2
+    JW = J @ R if use_W else J
+    cov = JW @ Sigma @ JW.transpose(0, 2, 1) + dil * np.eye(2)
+    mean = np.stack([K[0, 0] * Xc[:, 0] / zc + K[0, 2], K[1, 1] * Xc[:, 1] / zc + K[1, 2]], 1)
+    conic = np.stack([cov[:, 1, 1], -cov[:, 0, 1], cov[:, 0, 0]], 1) / np.linalg.det(cov)[:, None]
+    ev = np.linalg.eigvalsh(cov)
+    radius = np.ceil(3 * np.sqrt(ev[:, 1] if lam == "max" else ev[:, 0]))
+    vis = Xc[:, 2] > 0.2
+    if cull == "ok":
+        vis &= (mean[:, 0] + radius > 0) & (mean[:, 0] - radius < W) & (mean[:, 1] + radius > 0) & (mean[:, 1] - radius < H)
+    elif cull == "centre":
+        vis &= (mean[:, 0] >= 0) & (mean[:, 0] < W) & (mean[:, 1] >= 0) & (mean[:, 1] < H)
+    return mean, cov, conic, radius, Xc[:, 2], vis
+
+
+def pg_no_dilation(*a):
+    return _proj(*a, dil=0.0)
+
+
+def pg_scale_not_squared(*a):
+    return _proj(*a, sq=False)
+
+
+def pg_no_view_rotation(*a):
+    return _proj(*a, use_W=False)
+
+
+def pg_affine_jacobian(*a):
+    return _proj(*a, affine=True)
+
+
+def pg_unnormalised_q(*a):
+    return _proj(*a, norm=False)
+
+
+def pg_radius_min_eig(*a):
+    return _proj(*a, lam="min")
+
+
+def pg_depth_only_culling(*a):
+    return _proj(*a, cull="depth")
+
+
+def pg_centre_culling(*a):
+    return _proj(*a, cull="centre")
+
+
+MUTANTS += [
+    ("8.14", "no 0.3 px dilation", pg_no_dilation, "0.3 px² low-pass"),
+    ("8.14", "R S Rᵀ", pg_scale_not_squared, "scales enter squared"),
+    ("8.14", "no W", pg_no_view_rotation, "world-to-camera rotation is missing"),
+    ("8.14", "affine Jacobian", pg_affine_jacobian, "third column"),
+    ("8.14", "quaternion not normalised", pg_unnormalised_q, "normalise the quaternion"),
+    ("8.14", "radius from the smaller eigenvalue", pg_radius_min_eig, "larger eigenvalue"),
+    ("8.14", "culling by depth only", pg_depth_only_culling, "near plane"),
+    ("8.14", "culling by the centre only", pg_centre_culling, "near plane"),
+]
