@@ -28,3 +28,6 @@ __all__ += ["analytic_render", "gt_volume_render", "ray_batch"]
 from . import splat  # noqa: F401,E402 (register 8.14)
 from .splat import gaussian_scene, gt_project, gt_project_gaussians  # noqa: E402
 __all__ += ["gaussian_scene", "gt_project", "gt_project_gaussians"]
+from . import raster  # noqa: F401,E402 (register 8.15)
+from .raster import brute_force_weights, gt_rasterize, splat_batch  # noqa: E402
+__all__ += ["brute_force_weights", "gt_rasterize", "splat_batch"]

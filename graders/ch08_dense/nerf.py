@@ -16,6 +16,19 @@ from graders.convert import OutputError
 from graders.engine import Case, Exercise, Hint, register, shared_run
 
 
+class single_thread:
+    """torch on one thread inside the block (docs/ENGINE.md, "Threads and timing"): for small tensors the
+    thread pool costs more than it saves, much more on a busy machine. Restores the previous setting."""
+
+    def __enter__(self):
+        import torch
+        self.torch, self.threads = torch, torch.get_num_threads()
+        torch.set_num_threads(1)
+
+    def __exit__(self, *exc):
+        self.torch.set_num_threads(self.threads)
+
+
 def to_numpy(x) -> np.ndarray:
     """A torch tensor (with or without grad) or an array-like as a float64 array."""
     if hasattr(x, "detach"):

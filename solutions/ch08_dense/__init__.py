@@ -21,5 +21,5 @@ __all__ = list(_questions) + ["block_matching", "census_volume", "sad_volume", "
 # neural (8.4-8.7, 8.12-8.16, 8.18-8.23, 8.25)
 from .nerf import volume_render  # noqa: E402
 __all__ += ["volume_render"]
-from .splat import project_gaussians, quat_to_R  # noqa: E402
-__all__ += ["project_gaussians", "quat_to_R"]
+from .splat import project_gaussians, quat_to_R, rasterize  # noqa: E402
+__all__ += ["project_gaussians", "quat_to_R", "rasterize"]

@@ -450,3 +450,81 @@ MUTANTS += [
     ("8.14", "culling by depth only", pg_depth_only_culling, "near plane"),
     ("8.14", "culling by the centre only", pg_centre_culling, "near plane"),
 ]
+
+# ----------------------------------------------------------------- 8.15 tiled compositing
+# A numpy tile loop written here (weights per tile, then image = weights @ colours in torch so that the
+# colour gradient exists), one mistake each.
+
+def _tiles(means2d, conic, color, opacity, depth, radius, W, H, *, order="near", stop="before", binning="square",
+           half=True, torch_out=True):
+    import torch
+    m, cn, o, d, r = (np.asarray(x.detach() if hasattr(x, "detach") else x, float)
+                      for x in (means2d, conic, opacity, depth, radius))
+    N = len(m)
+    Wt = np.zeros((H * W, N))
+    Tf = np.ones(H * W)
+    if binning == "square":
+        lo, hi = np.floor((m - r[:, None]) / 16), np.floor((m + r[:, None]) / 16)
+    else:                                           # mistake: only the centre's tile
+        lo = hi = np.floor(m / 16)
+    for ty in range(-(-H // 16)):
+        for tx in range(-(-W // 16)):
+            idx = np.flatnonzero((r > 0) & (lo[:, 0] <= tx) & (tx <= hi[:, 0]) & (lo[:, 1] <= ty) & (ty <= hi[:, 1]))
+            if not len(idx):
+                continue
+            idx = idx[np.argsort(d[idx] if order == "near" else -d[idx])]
+            ys, xs = np.mgrid[ty * 16:min(H, ty * 16 + 16), tx * 16:min(W, tx * 16 + 16)]
+            pix = (ys * W + xs).ravel()
+            dx, dy = xs.ravel()[:, None] - m[idx, 0], ys.ravel()[:, None] - m[idx, 1]
+            q = cn[idx, 0] * dx * dx + 2 * cn[idx, 1] * dx * dy + cn[idx, 2] * dy * dy
+            a = np.minimum(0.99, o[idx] * np.exp(-0.5 * q if half else -q))
+            a[a < 1 / 255] = 0
+            T = np.ones(len(pix))
+            live = np.ones(len(pix), bool)
+            for k in range(len(idx)):
+                nxt = T * (1 - a[:, k])
+                if stop == "before":
+                    live &= nxt >= 1e-4
+                ak = np.where(live, a[:, k], 0.0)
+                Wt[pix, idx[k]] = T * ak
+                T = T * (1 - ak)
+                if stop == "after":
+                    live &= T >= 1e-4
+            Tf[pix] = T
+    if not torch_out:
+        return (Wt @ np.asarray(color.detach() if hasattr(color, "detach") else color)).reshape(H, W, 3), Tf.reshape(H, W)
+    return (torch.as_tensor(Wt, dtype=color.dtype) @ color).reshape(H, W, 3), torch.as_tensor(Tf).reshape(H, W)
+
+
+def rz_back_to_front(*a):
+    return _tiles(*a, order="far")
+
+
+def rz_no_early_stop(*a):
+    return _tiles(*a, stop="none")
+
+
+def rz_stop_after_adding(*a):
+    return _tiles(*a, stop="after")
+
+
+def rz_centre_tile_only(*a):
+    return _tiles(*a, binning="centre")
+
+
+def rz_no_half(*a):
+    return _tiles(*a, half=False)
+
+
+def rz_numpy_no_grad(*a):
+    return _tiles(*a, torch_out=False)
+
+
+MUTANTS += [
+    ("8.15", "back to front", rz_back_to_front, "back to front"),
+    ("8.15", "no early stop", rz_no_early_stop, "no early stop"),
+    ("8.15", "early stop after adding", rz_stop_after_adding, "no early stop"),
+    ("8.15", "centre tile only", rz_centre_tile_only, "EVERY tile"),
+    ("8.15", "exp(-q) without the 1/2", rz_no_half, None),
+    ("8.15", "numpy image, no gradient", rz_numpy_no_grad, "not differentiable"),
+]
