@@ -94,4 +94,14 @@ register(
             "suffice. (c) 0.1 mm at 10 m/s → 10 µs: only a hardware trigger. (d) 1 mm at 0.5 m/s → 2 ms: NTP.",
         hints={0: "0.5 ms allowed: NTP's ~1 ms is too loose, a hardware trigger more than needed.",
                2: "10 µs allowed: only a hardware trigger (< 1 µs) fits."}),
+    choice_question(
+        id="7.20", title="Judge the capture plan", name="capture_verdicts", kind="design",
+        answers=["degenerate", "good", "weak"], options=["good", "weak", "degenerate"],
+        explanation="(a) Fronto-parallel views give h1 ∝ K e1 and h2 ∝ K e2 whatever the distance or shift: every view "
+            "repeats the same two rows of V b = 0, so K is not determined (f trades with the distance). (b) Tilts of "
+            "30-45° about different axes, corners and edges covered: good. (c) Many tilted views, all in the image "
+            "centre: K is fine but the lens is only known where the corners were — the edges extrapolate a "
+            "polynomial (this chapter's 7.8 lens check judges only the covered region for that reason).",
+        hints={0: "every fronto-parallel view gives the same h1, h2 directions (K e1, K e2): the rows of V repeat.",
+               2: "all corners in the centre: the distortion at the edges is never measured."}),
 )

@@ -8,14 +8,14 @@ from __future__ import annotations
 from .corners import refine_corners
 from .debug import fix_stereo_drift, fix_time_offset
 from .motion import hand_eye, time_offset
-from .questions import (board_width_m, debug_causes, desync_mm, hand_eye_identifiable, rms_verdicts,
-                        recalibration_trigger, sync_choice, zhang_counts)
+from .questions import (board_width_m, capture_verdicts, debug_causes, desync_mm, hand_eye_identifiable,
+                        recalibration_trigger, rms_verdicts, sync_choice, zhang_counts)
 from .stereo import stereo_extrinsics, stereo_rectify
 from .zhang import (board_homography, calibrate_camera, extrinsics_from_homography, intrinsics_from_homographies,
                     refine_calibration)
 
 __all__ = ["board_homography", "calibrate_camera", "extrinsics_from_homography", "intrinsics_from_homographies",
            "refine_calibration", "stereo_extrinsics", "stereo_rectify", "hand_eye", "time_offset",
-           "board_width_m", "debug_causes", "desync_mm", "hand_eye_identifiable", "rms_verdicts",
+           "board_width_m", "capture_verdicts", "debug_causes", "desync_mm", "hand_eye_identifiable", "rms_verdicts",
            "recalibration_trigger", "sync_choice", "zhang_counts", "refine_corners",
            "fix_stereo_drift", "fix_time_offset"]

@@ -10,6 +10,7 @@ hand_eye_identifiable = ["no", "no", "yes", "yes"]
 debug_causes = ["extrinsics drifted", "time offset", "mount shift", "rolling shutter"]
 board_width_m = 0.5 * 2 * 1.5 * np.tan(np.radians(30.0))
 sync_choice = ["PTP", "software", "hardware trigger", "NTP"]
+capture_verdicts = ["degenerate", "good", "weak"]
 
 
 def recalibration_trigger(residuals: np.ndarray, baseline: float, window: int = 50, factor: float = 2.0) -> int:
