@@ -72,8 +72,8 @@ CHAPTERS: tuple[Chapter, ...] = (
             "robust kernels (graded on intel and parking-garage against GTSAM), ATE/RPE, monocular VO, "
             "bag-of-words loop closure, keyframes and covisibility, IMU pre-integration"),
     Chapter(7, "calibration", "Calibration",
-            "Zhang's method on real chessboard views (normalised DLT, closed-form K, extrinsics, LM with analytic "
-            "Jacobians), stereo extrinsics and rectification, hand-eye AX = XB, camera-IMU time offset, an online "
+            "Zhang's method on real chessboard views (sub-pixel corners, normalised DLT, closed-form K, extrinsics, "
+            "LM with analytic Jacobians), stereo extrinsics and rectification, hand-eye AX = XB, camera-IMU time offset, an online "
             "recalibration monitor"),
     Chapter(8, "dense", "Dense reconstruction: MVS, NeRF, 3D Gaussian splatting",
             "disparity and matching costs, block matching with sub-pixel refinement and left-right check, "
