@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 
+import cv2
 import numpy as np
 
 from graders.engine import Case, Exercise, Hint, OutputError, debug_practice, register, shared_run
@@ -56,15 +57,20 @@ def broken_mvs(case: dict, r: int = 2, uniqueness: float = 1.05) -> dict:
 
 def debug_holes(rng: np.random.Generator) -> tuple[dict, dict]:
     """A scene whose front plane is a poster with a textured frame and a blank centre, and the broken run."""
-    s = mvs.mvs_scene(rng, n_views=3, blank=True)
+    for _ in range(100):       # redraw scenes whose poster is not seen whole (a second plane in front of it, ...)
+        s = mvs.mvs_scene(rng, n_views=3, blank=True)
+        region = mvs.sweep_region(s["K_ref"], s["Ks"], s["Rs"], s["ts"], s["depths"], s["I_ref"].shape, 2)
+        centre = _blank_centre(s)
+        if centre.sum() >= 150 and (centre & region).sum() >= 0.95 * centre.sum():
+            break
+    blank = centre & region
     case = {k: s[k] for k in ("I_ref", "K_ref", "images", "Ks", "Rs", "ts", "depths")}
     run = broken_mvs(case)
     case.update({"depth": run["depth"], "log": run["log"], "metrics": run["metrics"],
                  "settings": {"r": 2, "uniqueness": 1.05}, "causes": dict(CAUSES)})
-    region = mvs.sweep_region(s["K_ref"], s["Ks"], s["Rs"], s["ts"], s["depths"], s["I_ref"].shape, 2)
-    blank = _blank_centre(s) & region
     truth = {"cause": "textureless", "Z_gt": s["Z_gt"], "region": region, "blank": blank,
              "broken_textured": _share(run["depth"], s["Z_gt"], region & ~blank)}
+    truth["bar"] = min(0.8, _share(gt_fill(case), s["Z_gt"], blank) - 0.15)
     return case, truth
 
 
@@ -74,12 +80,40 @@ def _blank_centre(s) -> np.ndarray:
     H, W = s["I_ref"].shape
     ys, xs = np.mgrid[0:H, 0:W].astype(float)
     rays = np.stack([xs, ys, np.ones_like(xs)], -1) @ np.linalg.inv(s["K_ref"]).T
-    X = rays * s["Z_gt"][..., None]
+    X = rays * np.where(np.isfinite(s["Z_gt"]), s["Z_gt"], 0.0)[..., None]
     local = (X - poster["o_p"]) @ poster["R_p"]
     w, h = poster["size"]
     m = mvs.BLANK_MARGIN + 0.05                  # a little inside the blank part: its edge pixels mix the frame
     inside = (local[..., 0] > m * w) & (local[..., 0] < (1 - m) * w) & (local[..., 1] > m * h) & (local[..., 1] < (1 - m) * h)
     return inside & (np.abs(local[..., 2]) < 1e-6 * s["Z_gt"])
+
+
+def gt_fill(case: dict) -> np.ndarray:
+    """The grader's own repair, to set each draw's bar: untextured regions (5×5 local std < 0.01, cv2.blur)
+    get a trimmed least-squares plane in inverse depth fitted to the valid depths on their 4 px rim."""
+    I = np.float32(case["I_ref"])
+    mean, sq = cv2.blur(I, (5, 5)), cv2.blur(I * I, (5, 5))
+    flat = cv2.morphologyEx((np.sqrt(np.maximum(sq - mean * mean, 0)) < 0.01).astype(np.uint8), cv2.MORPH_OPEN,
+                            np.ones((3, 3), np.uint8))
+    Z = np.array(case["depth"], float)
+    Z[flat.astype(bool)] = np.nan
+    n, labels = cv2.connectedComponents(flat, connectivity=4)
+    for k in range(1, n):
+        region = labels == k
+        rim = cv2.dilate(region.astype(np.uint8), np.ones((9, 9), np.uint8)).astype(bool) & np.isfinite(Z)
+        v, u = np.nonzero(rim)
+        if len(u) < 10:
+            continue
+        A, w = np.c_[u, v, np.ones(len(u))], 1.0 / Z[v, u]
+        keep = np.ones(len(u), bool)
+        for _ in range(5):                     # trim the rim pixels that belong to another surface
+            p = np.linalg.lstsq(A[keep], w[keep], rcond=None)[0]
+            res = np.abs(A @ p - w) / w
+            keep = res <= max(0.02, np.quantile(res, 0.5))
+        hv, hu = np.nonzero(region)
+        fill = p[0] * hu + p[1] * hv + p[2]
+        Z[hv, hu] = np.where(fill > 0, 1.0 / np.maximum(fill, 1e-9), np.nan)
+    return Z
 
 
 def _share(Z, Z_gt, mask) -> float:
@@ -110,11 +144,12 @@ def _cases(rng):
         if i == 0:
             yield Case("the cause you named", (case,), truth, lambda o, t: float(o["cause"] != t["cause"]), 0,
                        "wrong", convert=_convert, call=call, key="cause", tags=("cause",))
-        # 0.8: the holes cover ~85-90 % of the blank centre; filling them from the frame (inverse depth is affine
-        # across a plane) puts them within 3 %, even if the few lucky WTA depths left in the centre stay wrong;
-        # leaving the holes scores ~0.1, filling them with the background's depth ~0.1.
-        yield Case(f"fresh case {i + 1}: blank centre within 3 % of the true depth", (case,), truth,
-                   lambda o, t: max(0.0, 0.8 - _share(o["depth"], t["Z_gt"], t["blank"])), 0.0, "short of 80 %",
+        # The bar: 80 % of the blank centre within 3 %, or 15 % below what the grader's own plane fill reaches
+        # on this draw when the rim itself is poor (a poster next to weakly textured background). Filling from
+        # the frame (1/Z is affine across a plane) reaches 85-100 % on most draws; leaving the holes or
+        # filling them with the background's depth scores ~0.1.
+        yield Case(f"fresh case {i + 1}: blank centre within 3 % of the true depth, short of the bar", (case,), truth,
+                   lambda o, t: max(0.0, t["bar"] - _share(o["depth"], t["Z_gt"], t["blank"])), 0.0, "",
                    convert=_convert, call=call, key=f"blank-{i + 1}", tags=("fix",))
         # 0.02: the repair must not damage the textured pixels the colleague's run got right.
         yield Case(f"fresh case {i + 1}: textured pixels within 3 %, vs the colleague's run", (case,), truth,

@@ -67,9 +67,11 @@ def mvs_scene(rng: np.random.Generator, W: int = 112, H: int = 84, n_views: int 
     planes = [_plane(rng, np.r_[rng.uniform(-0.3, 0.3, 2), rng.uniform(6.0, 7.0)], (10.0, 8.0), 15, names[0], f)]
     for i in range(int(rng.integers(1, 3))):
         z = rng.uniform(3.8, 4.8)
-        c = np.r_[rng.uniform(-0.8, 0.8) * z / f * W / 2, rng.uniform(-0.6, 0.6) * z / f * H / 2, z]
-        planes.append(_plane(rng, c, (rng.uniform(1.2, 2.0), rng.uniform(1.0, 1.6)), 30,
-                             "blank" if (blank and i == 0) else names[1 + i], f))
+        poster = blank and i == 0          # 8.17's poster: larger and near the centre, so it is judged whole
+        spread = 0.25 if poster else 0.8
+        c = np.r_[rng.uniform(-spread, spread) * z / f * W / 2, rng.uniform(-spread, spread) * z / f * H / 2, z]
+        size = (rng.uniform(2.0, 2.4), rng.uniform(1.5, 1.8)) if poster else (rng.uniform(1.2, 2.0), rng.uniform(1.0, 1.6))
+        planes.append(_plane(rng, c, size, 20 if poster else 30, "blank" if poster else names[1 + i], f))
     I_ref, Z_gt = _render(planes, K_ref, np.eye(3), np.zeros(3), W, H)
     images, Ks, Rs, ts, Z_views = [], [], [], [], []
     for k in range(n_views):
