@@ -31,3 +31,7 @@ __all__ += ["gaussian_scene", "gt_project", "gt_project_gaussians"]
 from . import raster  # noqa: F401,E402 (register 8.15)
 from .raster import brute_force_weights, gt_rasterize, splat_batch  # noqa: E402
 __all__ += ["brute_force_weights", "gt_rasterize", "splat_batch"]
+from . import fit2d  # noqa: F401,E402 (register 8.16)
+from .fit2d import gt_fit_splats, initial_gaussians, psnr, render_splats, target_image  # noqa: E402
+__all__ += ["gt_fit_splats", "initial_gaussians", "psnr", "render_splats", "target_image", "single_thread"]
+from .nerf import single_thread  # noqa: E402

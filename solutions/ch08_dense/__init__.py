@@ -23,3 +23,5 @@ from .nerf import volume_render  # noqa: E402
 __all__ += ["volume_render"]
 from .splat import project_gaussians, quat_to_R, rasterize  # noqa: E402
 __all__ += ["project_gaussians", "quat_to_R", "rasterize"]
+from .fit2d import fit_splats, render_splats_torch  # noqa: E402
+__all__ += ["fit_splats", "render_splats_torch"]

@@ -528,3 +528,37 @@ MUTANTS += [
     ("8.15", "exp(-q) without the 1/2", rz_no_half, None),
     ("8.15", "numpy image, no gradient", rz_numpy_no_grad, "not differentiable"),
 ]
+
+# ----------------------------------------------------------------- 8.16 splatting fit
+# The course's reference fit with one step switched off (the grader's stand-in is a separate fitter).
+
+def _fit(*a, **kw):
+    from solutions.ch08_dense.fit2d import fit_splats
+    return fit_splats(*a, **kw)
+
+
+def fit_no_densify(target, init, steps=150, max_gaussians=64):
+    return _fit(target, init, steps, max_gaussians, densify_until=-1)
+
+
+def fit_no_prune(target, init, steps=150, max_gaussians=64):
+    return _fit(target, init, steps, max_gaussians, o_min=0.0)
+
+
+def fit_no_budget(target, init, steps=150, max_gaussians=64):
+    """Densifies every 15 steps and forgets the cap."""
+    return _fit(target, init, steps, 10 ** 6, every=15)
+
+
+def fit_untrained(target, init, steps=150, max_gaussians=64):
+    """Returns the initial Gaussians with the floaters dropped: no optimisation at all."""
+    keep = np.asarray(init["opacity"]) >= 0.005
+    return {k: np.asarray(v)[keep] for k, v in init.items()}
+
+
+MUTANTS += [
+    ("8.16", "no densification", fit_no_densify, "no more Gaussians than it started"),
+    ("8.16", "no pruning", fit_no_prune, "prune them"),
+    ("8.16", "no budget", fit_no_budget, "cap densification"),
+    ("8.16", "untrained", fit_untrained, "no more Gaussians than it started"),
+]
