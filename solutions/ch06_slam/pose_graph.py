@@ -169,24 +169,28 @@ def _optimize(T, edges, Z, info, kernel, c, max_iter, rel_tol):
     k = info.shape[-1]
     cost = lambda P: _kernel(chi2_terms(P, edges, Z, info), kernel, c)   # noqa: E731
     rho, w = cost(T)
-    f, lam = rho.sum(), 1e-6
+    f, lam = rho.sum(), 0.0    # pure Gauss-Newton until a step fails (Marquardt damping slows the weak directions)
     pattern = _block_pattern(edges, k)
     for _ in range(max_iter):
         H, g = _normal_equations(T, edges, Z, info, w, pattern)
         H, g = H[k:, k:], g[k:]                                        # gauge: the first pose is held
         while True:
             D = sp.diags(lam * np.maximum(H.diagonal(), 1e-12))
-            delta = _solve_spd((H + D).tocsc(), -g)
+            try:
+                delta = _solve_spd((H + D).tocsc(), -g)
+            except RuntimeError:                        # singular (a pose left unconstrained): damp and retry
+                lam = max(10 * lam, 1e-6)
+                continue
             T_new = T.copy()
             T_new[1:] = T[1:] @ exp(delta.reshape(-1, k))
             rho_new, w_new = cost(T_new)
             f_new = rho_new.sum()
             if f_new <= f:
-                lam = max(lam / 10, 1e-12)
+                lam = lam / 10 if lam > 1e-9 else 0.0
                 break
             if f_new - f <= rel_tol * f or lam > 1e8:   # converged: what is left is rounding
                 return T
-            lam *= 10
+            lam = max(10 * lam, 1e-6)
         done = f - f_new <= rel_tol * f
         T, f, w = T_new, f_new, w_new
         if done:
@@ -195,7 +199,9 @@ def _optimize(T, edges, Z, info, kernel, c, max_iter, rel_tol):
 
 
 def optimize_pose_graph(T, edges, Z, info, max_iter: int = 100, rel_tol: float = 1e-10) -> np.ndarray:
-    """Exercise 6.10: Levenberg-Marquardt (Gauss-Newton steps, damping only when a step fails) on the manifold.
+    """Exercise 6.10: Levenberg-Marquardt on the manifold: pure Gauss-Newton steps, damping lambda diag(H) only
+    after a step fails (from the start, Marquardt's scaling slows the weakly constrained directions: the
+    garage took 8 iterations instead of 5).
 
     Minimises sum_e r_e^T info_e r_e with the first pose held fixed (the gauge). Returns T (N, d+1, d+1)."""
     return _optimize(T, np.asarray(edges), Z, np.asarray(info, float), None, 1.0, max_iter, rel_tol)
