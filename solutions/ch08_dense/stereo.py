@@ -91,6 +91,8 @@ def _sweep(C: np.ndarray, P1: float, P2: float, dirs: list[tuple[int, int]], S: 
         cost = C[rows]                                       # (k, M, D): each path's current row
         if i == 0:
             cur = cost.copy()
+        elif all(dx == 0 for _, dx in dirs):
+            pred = prev                                      # straight paths: the predecessor is the previous row
         else:
             pred[:] = 0.0
             for j, (_, dx) in enumerate(dirs):              # predecessor column x - dx
@@ -100,11 +102,13 @@ def _sweep(C: np.ndarray, P1: float, P2: float, dirs: list[tuple[int, int]], S: 
                     pred[j, 1:] = prev[j, :-1]
                 else:
                     pred[j, :-1] = prev[j, 1:]
+        if i > 0:
             best = pred.min(axis=2, keepdims=True)
             step = np.minimum(pred, best + P2)
             np.minimum(step[..., 1:], pred[..., :-1] + P1, out=step[..., 1:])
             np.minimum(step[..., :-1], pred[..., 1:] + P1, out=step[..., :-1])
-            cur = cost + step - best
+            step -= best
+            cur = cost + step
         for j, r in enumerate(rows):
             S[r] += cur[j]
         prev = cur
@@ -120,8 +124,11 @@ def sgm(C: np.ndarray, P1: float, P2: float, paths: int = 8) -> np.ndarray:
     S = np.zeros_like(C)
     vertical = [(1, 0), (-1, 0)] + ([(1, 1), (1, -1), (-1, 1), (-1, -1)] if int(paths) == 8 else [])
     _sweep(C, P1, P2, vertical, S)                          # rows: down, up and the diagonals
-    St = S.transpose(1, 0, 2)                               # a view: columns are swept as rows
-    _sweep(np.ascontiguousarray(C.transpose(1, 0, 2)), P1, P2, [(1, 0), (-1, 0)], St)
+    # Columns are swept as the rows of the transposed volume, accumulated in their own contiguous array
+    # (writing row by row into a transposed view of S would be strided and slow).
+    S_h = np.zeros((C.shape[1], C.shape[0], C.shape[2]), C.dtype)
+    _sweep(np.ascontiguousarray(C.transpose(1, 0, 2)), P1, P2, [(1, 0), (-1, 0)], S_h)
+    S += S_h.transpose(1, 0, 2)
     return S
 
 
@@ -132,15 +139,14 @@ def census_volume(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3) -> n
     def signature(I):
         P = np.pad(I, r, mode="edge")
         H, W = I.shape
-        code = np.zeros((H, W), np.uint64)
-        bit = 0
+        bits = np.zeros((H, W, 64), bool)                  # one byte per bit, packed into a uint64 below
+        k = 0
         for i in range(-r, r + 1):
             for j in range(-r, r + 1):
                 if i or j:
-                    darker = P[r + i:r + i + H, r + j:r + j + W] < I
-                    code[darker] |= np.uint64(1) << np.uint64(bit)
-                    bit += 1
-        return code
+                    np.less(P[r + i:r + i + H, r + j:r + j + W], I, out=bits[..., k])
+                    k += 1
+        return np.packbits(bits, axis=-1).view(np.uint64)[..., 0]
     s_l, s_r = signature(I_l), signature(I_r)
     H, W = I_l.shape
     C = np.empty((H, W, d_max + 1), dtype=np.int16)
