@@ -35,3 +35,4 @@ from . import fit2d  # noqa: F401,E402 (register 8.16)
 from .fit2d import gt_fit_splats, initial_gaussians, psnr, render_splats, target_image  # noqa: E402
 __all__ += ["gt_fit_splats", "initial_gaussians", "psnr", "render_splats", "target_image", "single_thread"]
 from .nerf import single_thread  # noqa: E402
+from . import neural_questions  # noqa: F401,E402 (register 8.4-8.7, 8.22-8.23)

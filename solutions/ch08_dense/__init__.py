@@ -25,3 +25,6 @@ from .splat import project_gaussians, quat_to_R, rasterize  # noqa: E402
 __all__ += ["project_gaussians", "quat_to_R", "rasterize"]
 from .fit2d import fit_splats, render_splats_torch  # noqa: E402
 __all__ += ["fit_splats", "render_splats_torch"]
+from .neural_questions import *  # noqa: F401,F403,E402 (8.4-8.7, 8.22-8.23)
+from .neural_questions import __all__ as _neural_questions  # noqa: E402
+__all__ += list(_neural_questions)
