@@ -417,7 +417,7 @@ def _judge_case(ex: Exercise, fn: Callable, case: Case) -> tuple[CaseResult, str
     if not np.isfinite(row.error):
         row.error, row.message = None, "error is not finite"
         return row, outcome.kind
-    row.passed = row.error <= case.tol
+    row.passed = bool(row.error <= float(case.tol))   # a numpy tol would make a numpy bool, which JSON refuses
     if outcome.mutated:
         row.passed = False
         row.message = f"modified its input {', '.join(outcome.mutated)} in place; work on a copy"

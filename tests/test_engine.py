@@ -295,3 +295,18 @@ def test_converters_say_what_is_wrong():
         as_mask([0, 2, 1], 3)
     with pytest.raises(OutputError, match="positive"):
         as_sim3((-1.0, np.eye(3), np.zeros(3)))
+
+
+def test_a_numpy_tolerance_still_gives_a_json_result():
+    # A case written with a numpy tolerance (np.float64 from a computation) used to make `passed` a
+    # numpy bool, which the graded worker could not serialise ("exit status 1").
+    import json
+
+    def cases(rng):
+        x = rng.normal(size=(5, 2))
+        return [Case("numpy tol", (x,), 2 * x, max_distance, np.float64(1e-9), "px", shape=(5, 2))]
+
+    ex = Exercise(id="0.9", title="double it", name="double", kind="code", points=1, cases=cases)
+    r = grade(ex, good, seed=0)
+    assert type(r.cases[0].passed) is bool
+    json.dumps(r.to_dict())
