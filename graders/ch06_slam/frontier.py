@@ -29,7 +29,7 @@ def _mat(x: np.ndarray) -> np.ndarray:
 
 def ring_graph(rng, n: int = 12) -> dict:
     """n poses on a circle (radius 2.5-4 m), odometry, the loop n-1 -> 0 and one chord; noise 10 cm / 2.9 deg
-    (residuals large enough that the curvature terms a cut graph drops change the derivative by >= 1e-3)."""
+    (residuals large enough that the curvature terms a cut graph drops change the derivative by >= 7e-4)."""
     rad = rng.uniform(2.5, 4.0)
     th = np.linspace(0, 2 * np.pi, n, endpoint=False) + rng.uniform(0, 2 * np.pi)
     truth = _mat(np.c_[rad * np.cos(th), rad * np.sin(th), th + np.pi / 2])
