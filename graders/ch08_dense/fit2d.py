@@ -69,7 +69,7 @@ def _render_t(p, H, W, torch):
     return (g @ torch.sigmoid(p["c"])).reshape(H, W, 3)
 
 
-def gt_fit_splats(target, init, steps=150, max_gaussians=64, seed=0):
+def gt_fit_splats(target, init, steps=150, max_gaussians=64, seed=0, densify=True):
     """8.16's stand-in: Adam on (μ, log s, θ, logit c, logit o); every 30 steps up to 120 the Gaussians with
     the largest accumulated position gradient are densified (split in two along the long axis if wider than
     1.5 px, cloned otherwise), those below o = 0.005 pruned, the budget kept by opacity."""
@@ -94,7 +94,7 @@ def gt_fit_splats(target, init, steps=150, max_gaussians=64, seed=0):
                 acc += p["means"].grad.norm(dim=1)
                 opt.step()
             p = {n: v.detach() for n, v in p.items()}
-            if k + 30 < steps and k + 30 <= 120:
+            if densify and k + 30 < steps and k + 30 <= 120:
                 p = _densify_prune(p, acc, max_gaussians, torch)
         keep = torch.sigmoid(p["o"]) >= O_PRUNE
         return {"means": p["means"][keep].numpy(), "scales": torch.exp(p["log_s"][keep]).numpy(),

@@ -562,3 +562,29 @@ MUTANTS += [
     ("8.16", "no budget", fit_no_budget, "cap densification"),
     ("8.16", "untrained", fit_untrained, "no more Gaussians than it started"),
 ]
+
+# ----------------------------------------------------------------- 8.21 DEBUG blurry splats
+
+def blurry_wrong_cause(case):
+    """Blames the learning rate; refits with densification anyway (the fix is right, the diagnosis is not)."""
+    s = case["settings"]
+    return {"cause": "learning_rate", "gaussians": _fit(case["target"], case["init"], s["steps"], s["max_gaussians"])}
+
+
+def blurry_more_steps(case):
+    """Names the cause but only trains longer, still without densification."""
+    s = case["settings"]
+    return {"cause": "no_densification",
+            "gaussians": _fit(case["target"], case["init"], 2 * s["steps"], s["max_gaussians"], densify_until=-1)}
+
+
+def blurry_unchanged(case):
+    """Right cause, the colleague's Gaussians handed back."""
+    return {"cause": "no_densification", "gaussians": case["gaussians"]}
+
+
+MUTANTS += [
+    ("8.21", "blames the learning rate", blurry_wrong_cause, "look at the log"),
+    ("8.21", "more steps, no densification", blurry_more_steps, "no more Gaussians than the initialisation"),
+    ("8.21", "unchanged", blurry_unchanged, "no more Gaussians than the initialisation"),
+]
