@@ -135,9 +135,10 @@ HINTS = [
 
 
 # Poses: 6 Gauss-Newton steps from the odometry start converge to ~1e-8 (5 suffice on every draw measured); GTSAM stops at 1e-12 relative error:
-# 1e-6 (m and rad; measured <= 2e-8). Derivative: the reference agrees with central differences to <= 2e-5
-# relative (the differences' own noise); 5e-4 separates the converged solver's derivative from the Gauss-Newton
-# model of a cut graph (>= 7e-4 measured on these rings; reference <= 2e-5) and from too few steps.
+# 1e-6 (m and rad; measured <= 3e-7). Derivative: the reference agrees with central differences of GTSAM's
+# solution to <= 2e-5 relative on most rings but up to 8.8e-4 on a few (seed 5694013: GTSAM's optimum itself
+# 2.7e-7 m from the reference's), so 3e-3 relative; a sign slip or too few steps is off by O(1). (A graph cut
+# inside the loop, 7e-4 to 2e-2 off, cannot be told from that oracle noise on every draw.)
 def cases_differentiable(rng):
     for i in range(2):
         g = ring_graph(rng)
@@ -146,7 +147,7 @@ def cases_differentiable(rng):
         run = shared_run(_call_one_thread(args))
         yield Case(f"ring {i + 1}: refined poses vs GTSAM", args, exp, _pose_error, 1e-6, "max abs",
                    convert=_convert, call=run, key=f"ring-{i + 1}-poses", tags=("poses",))
-        yield Case(f"ring {i + 1}: d(last pose)/d(measurements) vs finite differences", args, exp, _grad_error, 5e-4,
+        yield Case(f"ring {i + 1}: d(last pose)/d(measurements) vs finite differences", args, exp, _grad_error, 3e-3,
                    "rel.", convert=_convert, call=run, key=f"ring-{i + 1}-derivative", tags=("derivative",))
 
 
