@@ -135,10 +135,11 @@ HINTS = [
 
 
 # Poses: 6 Gauss-Newton steps from the odometry start converge to ~1e-8 (5 suffice on every draw measured); GTSAM stops at 1e-12 relative error:
-# 1e-6 (m and rad; measured <= 3e-7). Derivative: the reference agrees with central differences of GTSAM's
-# solution to <= 2e-5 relative on most rings but up to 8.8e-4 on a few (seed 5694013: GTSAM's optimum itself
-# 2.7e-7 m from the reference's), so 3e-3 relative; a sign slip or too few steps is off by O(1). (A graph cut
-# inside the loop, 7e-4 to 2e-2 off, cannot be told from that oracle noise on every draw.)
+# Poses: 1e-6 (m and rad). Derivative: the reference agrees with central differences of GTSAM's solution to
+# <= 2e-5 relative on most rings, but on ~3 % of draws GTSAM's own optimum sits 1e-7-4e-7 m from the reference's
+# (seeds 3724299812, 2145742452: GTSAM's Pose2 Log loses digits at the tiny residual angles of the optimum) and
+# the differences then disagree by up to 4.4e-2. Until the oracle is replaced by an exact one, 0.1 relative:
+# it still catches a sign slip (2.0), too few steps and a free gauge (the pose case), not a cut graph.
 def cases_differentiable(rng):
     for i in range(2):
         g = ring_graph(rng)
@@ -147,7 +148,7 @@ def cases_differentiable(rng):
         run = shared_run(_call_one_thread(args))
         yield Case(f"ring {i + 1}: refined poses vs GTSAM", args, exp, _pose_error, 1e-6, "max abs",
                    convert=_convert, call=run, key=f"ring-{i + 1}-poses", tags=("poses",))
-        yield Case(f"ring {i + 1}: d(last pose)/d(measurements) vs finite differences", args, exp, _grad_error, 3e-3,
+        yield Case(f"ring {i + 1}: d(last pose)/d(measurements) vs finite differences", args, exp, _grad_error, 0.1,
                    "rel.", convert=_convert, call=run, key=f"ring-{i + 1}-derivative", tags=("derivative",))
 
 
