@@ -4,9 +4,10 @@
 floods of output, mutating its arguments); it returns an `Outcome` that says what went wrong.
 Only `KeyboardInterrupt` is let through, so a learner can still stop a cell.
 
-Time limits use SIGALRM, which interrupts Python code (an endless `while` loop) but not a single
-long C call; it is available only in the main thread (a notebook cell and `python -m graders`
-both run there). The shell grader adds a hard per-exercise limit by running every notebook in a
+Time limits count the CPU time of the learner's thread, with a wall-clock backstop for code that
+waits; a watcher thread raises the limit in the main thread with SIGALRM, which interrupts Python
+code (an endless `while` loop) but not a single long C call, and works only in the main thread (a
+notebook cell and `python -m graders` both run there). The shell grader adds a hard per-exercise limit by running every notebook in a
 worker process it can kill (see `graders.cli`).
 """
 from __future__ import annotations
@@ -14,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import copy
 import io
+import os
 import signal
 import threading
 import time
@@ -61,23 +63,50 @@ class _CappedWriter(io.TextIOBase):
         return "".join(self.parts)
 
 
+# A case's limit counts the CPU time of the thread that runs the learner's code, so an honest answer
+# is not cut off because the machine is busy (a class graded side by side, CI beside other jobs). The
+# calling thread takes its share of multi-threaded numpy/torch work, so on an idle machine this is the
+# wall clock. Code that waits without computing (sleep, input, a lock, a busy helper thread) is stopped
+# by the wall clock at WALL_FACTOR times the limit (generous: on a machine loaded ten times over,
+# honest code gets a tenth of a core).
+WALL_FACTOR = 10.0
+POLL_S = 0.02
+
+
 @contextlib.contextmanager
 def _time_limit(seconds: float | None):
-    usable = (seconds is not None and seconds > 0 and hasattr(signal, "setitimer")
+    usable = (seconds is not None and seconds > 0 and hasattr(time, "pthread_getcpuclockid")
               and threading.current_thread() is threading.main_thread())
     if not usable:
         yield
         return
+    me = threading.get_ident()
+    clock = time.pthread_getcpuclockid(me)
+    cpu0, wall0 = time.clock_gettime(clock), time.monotonic()
+    done, why = threading.Event(), []
+
+    def watch() -> None:
+        while not done.wait(POLL_S):
+            cpu, wall = time.clock_gettime(clock) - cpu0, time.monotonic() - wall0
+            if cpu >= seconds or wall >= WALL_FACTOR * seconds:
+                why.append("cpu" if cpu >= seconds else "wall")
+                signal.pthread_kill(me, signal.SIGALRM)
+                return
 
     def _raise(signum, frame):
-        raise TimeLimitExceeded(f"time limit of {seconds:g} s exceeded")
+        if why and why[0] == "wall":
+            raise TimeLimitExceeded(f"time limit exceeded: still running after {WALL_FACTOR * seconds:g} s "
+                                    f"(waiting, not computing?)")
+        raise TimeLimitExceeded(f"time limit of {seconds:g} s exceeded (counted in CPU time)")
 
     previous = signal.signal(signal.SIGALRM, _raise)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
+    watcher = threading.Thread(target=watch, name="cv3d-time-limit", daemon=True)
+    watcher.start()
     try:
         yield
     finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
+        done.set()
+        watcher.join()
         signal.signal(signal.SIGALRM, previous)
 
 
