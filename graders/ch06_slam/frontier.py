@@ -118,7 +118,7 @@ def _grad_error(out, exp) -> float:
 
 
 def _poses_right(case, out) -> bool:
-    return _pose_error(out, case.expected) <= 1e-6
+    return _pose_error(out, case.expected) <= 1e-4
 
 
 HINTS = [
@@ -135,7 +135,7 @@ HINTS = [
 
 
 # Poses: 6 Gauss-Newton steps from the odometry start converge to ~1e-8 (5 suffice on every draw measured); GTSAM stops at 1e-12 relative error:
-# Poses: 1e-6 (m and rad). Derivative: the reference agrees with central differences of GTSAM's solution to
+# Poses: 1e-4 (m and rad): GTSAM's optimum itself is off by up to 6e-6 on some rings (seed 958034347). Derivative: the reference agrees with central differences of GTSAM's solution to
 # <= 2e-5 relative on most rings, but on ~3 % of draws GTSAM's own optimum sits 1e-7-4e-7 m from the reference's
 # (seeds 3724299812, 2145742452: GTSAM's Pose2 Log loses digits at the tiny residual angles of the optimum) and
 # the differences then disagree by up to 4.4e-2. Until the oracle is replaced by an exact one, 0.1 relative:
@@ -146,7 +146,7 @@ def cases_differentiable(rng):
         args = (g["x0"], g["edges"], g["z"], g["info"])
         exp = fd_pose_graph_gradient(*args)
         run = shared_run(_call_one_thread(args))
-        yield Case(f"ring {i + 1}: refined poses vs GTSAM", args, exp, _pose_error, 1e-6, "max abs",
+        yield Case(f"ring {i + 1}: refined poses vs GTSAM", args, exp, _pose_error, 1e-4, "max abs",
                    convert=_convert, call=run, key=f"ring-{i + 1}-poses", tags=("poses",))
         yield Case(f"ring {i + 1}: d(last pose)/d(measurements) vs finite differences", args, exp, _grad_error, 0.1,
                    "rel.", convert=_convert, call=run, key=f"ring-{i + 1}-derivative", tags=("derivative",))
