@@ -12,10 +12,8 @@ The loop (Schönberger & Frahm, "Structure-from-Motion Revisited", CVPR 2016):
      `two_view_init` and ranked by `rank_initial_pairs` (many E inliers, low H/E ratio, wide
      enough triangulation angle); the first pair passing all tests is taken; global BA.
   2. next best view: the unregistered image that sees the most triangulated points; P3P inside
-     RANSAC (12 px, as COLMAP), accepted with >= 30 inliers (>= 25 %), >= 30 of them within 4 px
-     after refinement and spread over the image (a few agreeing points on one patch can fit a wrong
-     pose). Unknown focal: a few focal lengths are tried and the best refined with the pose (COLMAP
-     samples focal lengths the same way).
+     RANSAC (12 px, as COLMAP), accepted with >= 30 inliers (>= 25 %). Unknown focal: a few focal
+     lengths are tried and the best refined with the pose (COLMAP samples focal lengths the same way).
   3. triangulate the tracks the new image completes (multi-view DLT), keep points seen under
      >= 1.5 degrees with every observation within 4 px.
   4. local BA (the new image, its best-connected neighbours and the points it sees), then filter:
@@ -59,9 +57,6 @@ MIN_PNP_RATIO = 0.25        # COLMAP: abs_pose_min_inlier_ratio = 0.25
 
 
 ABS_POSE_PX = 12.0          # COLMAP: abs_pose_max_error = 12 (registration RANSAC threshold)
-
-
-MIN_PNP_CELLS = 4           # a registration's 4 px inliers cover >= 4 cells of a 4 x 4 grid (not one patch)
 
 
 MIN_PAIR_MATCHES = 15       # COLMAP: min_num_inliers of a verified pair = 15
@@ -126,7 +121,6 @@ class _Model:
         self.K = np.array([np.asarray(K, float) for K in K_list]) if self.known_K else \
             np.array([default_intrinsics(w, h) for w, h in sizes])
         self.k = np.zeros((n, 2))
-        self.sizes = [(int(w), int(h)) for w, h in sizes]
         self.max_side = np.array([max(w, h) for w, h in sizes], float)
         self.half_diag = np.array([np.hypot(w, h) / 2 for w, h in sizes], float)
         self.R, self.t = np.tile(np.eye(3), (n, 1, 1)), np.zeros((n, 3))
@@ -428,8 +422,7 @@ def _initialise(m: _Model, keypoints, matches: dict, n_first: int = 3, n_partner
 def _register(m: _Model, i: int, seed: int = 0) -> bool:
     """Register image i by P3P RANSAC on its 2D-3D correspondences, COLMAP's way: inlier threshold
     12 px (abs_pose_max_error; the 4 px filter after BA is the tight one), accepted with >= 30
-    inliers making up >= 25 % of the correspondences, then `_pose_supported` (>= 30 within 4 px after
-    refinement, spread over the image). With an unknown focal length, the factors
+    inliers making up >= 25 % of the correspondences. With an unknown focal length, the factors
     FOCAL_FACTORS x f are tried (a wrong f bends the bearings, so it finds fewer inliers), the
     pose and f of the best are refined together on its inliers, and RANSAC runs once more with
     that f. Activates the inlier observations."""
@@ -458,30 +451,11 @@ def _register(m: _Model, i: int, seed: int = 0) -> bool:
         m.K[i] = K
     if R is None or inl.sum() < MIN_PNP_INLIERS or inl.mean() < MIN_PNP_RATIO:
         return False
-    if not _pose_supported(X, x, K if not m.known_K else m.K[i], R, t, m.sizes[i]):
-        return False
     m.R[i], m.t[i] = R, t
     m.registered[i] = True
     m.order.append(i)
     m.obs_on[sel[inl]] = True
     return True
-
-
-def _pose_supported(X: np.ndarray, x: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, size) -> bool:
-    """After refinement, does the pose explain enough of the image? RANSAC's 12 px inliers can agree with a
-    wrong pose (a repeated facade, a focal length traded against depth); a right pose puts most of them within
-    4 px. Asks >= 30 correspondences within 4 px (in front of the camera) covering >= 4 cells of a 4 x 4 grid
-    of the image: a few points on one patch pin neither f nor the rotation about the patch.
-    X: (N, 3), x: (N, 2) pixels; size: (width, height)."""
-    Xc = X @ R.T + t
-    z = Xc[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        uv = (Xc[:, :2] / z[:, None]) @ K[:2, :2].T + K[:2, 2]
-    good = (z > 0) & (np.linalg.norm(uv - x, axis=1) < MAX_REPROJ_PX)
-    if good.sum() < MIN_PNP_INLIERS:
-        return False
-    cells = np.floor(x[good] / np.asarray(size, float) * 4).clip(0, 3)
-    return len(np.unique(cells[:, 0] * 4 + cells[:, 1])) >= MIN_PNP_CELLS
 
 
 def _neighbours(m: _Model, i: int, n: int) -> list[int]:
