@@ -32,7 +32,7 @@ import time
 from typing import Any, Callable
 
 from .learner import receive_bytes, send
-from .sandbox import TimeLimitExceeded
+from .sandbox import TimeLimitExceeded, current_cotangent
 
 MARGIN_S = 5.0          # the judge waits this much longer than the learner's own time limit
 CPU_SECONDS = 1800      # CPU time of one learner process (it is restarted after every time-out)
@@ -87,17 +87,28 @@ def _tensors_back(value: Any, parent: "RemoteFunction | None" = None) -> Any:
     return value
 
 
-def _with_gradients(value: Any, grads: list, args: tuple) -> Any:
-    """A scalar tensor equal to the learner's value whose gradients on the judge's own input tensors are
-    the learner's: value + Σ <g_i, x_i − x_i.detach()> (exact to first order, which is all backward sees)."""
+def _with_gradients(value: Any, grads: list, args: tuple, cotangent: Any = None) -> Any:
+    """A tensor equal to the learner's value whose gradients on the judge's own input tensors are the
+    learner's: value + L/|L|² Σ <g_i, x_i − x_i.detach()>, with g_i = d(value · L)/dx_i computed on the
+    learner's side (L = 1 for a scalar cost). Backward of (out · L).sum() then gives exactly g_i."""
     import torch
     flat = [a for arg in args for a in (arg if isinstance(arg, (list, tuple)) else [arg])]
     leaves = [a for a in flat if isinstance(a, torch.Tensor) and a.requires_grad]
     out = torch.as_tensor(value, dtype=leaves[0].dtype).reshape(value.shape)
-    for x, g in zip(leaves, grads):
-        if g is not None:
-            out = out + (torch.as_tensor(g, dtype=x.dtype) * (x - x.detach())).sum()
-    return out
+    L = torch.ones((), dtype=out.dtype) if cotangent is None else torch.as_tensor(cotangent, dtype=out.dtype)
+    first_order = sum((torch.as_tensor(g, dtype=x.dtype) * (x - x.detach())).sum()
+                      for x, g in zip(leaves, grads) if g is not None)
+    return out + L / (L * L).sum() * first_order
+
+
+def _gradients_back(value: Any, reply: dict, args: tuple, cotangent: Any) -> Any:
+    """Put the learner's gradients on the output they belong to: the value itself, or element `at` of it."""
+    at = reply.get("grad_at")
+    if at is None:
+        return _with_gradients(reply["value"]["__tensor__"], reply["grads"], args, cotangent)
+    parts = list(value)
+    parts[at] = _with_gradients(reply["value"][at]["__tensor__"], reply["grads"], args, cotangent)
+    return type(value)(parts)
 
 
 # ------------------------------------------------------------------ callbacks into the judge
@@ -400,7 +411,8 @@ class RemoteFunction:
         if self.parent is not None:
             self.deadline = self.parent.deadline
         request = {"op": "call", "name": self.__name__, "handle": self.handle, "args": _swap_callables(args, table),
-                   "kwargs": _swap_callables(kwargs, table), "timeout": timeout, "names": self.exercise.arg_names}
+                   "kwargs": _swap_callables(kwargs, table), "timeout": timeout, "names": self.exercise.arg_names,
+                   "cotangent": current_cotangent()}
         try:
             reply = self.learner._exchange(request, timeout + MARGIN_S, table)
         except TimeLimitExceeded:
@@ -420,7 +432,7 @@ class RemoteFunction:
         if kind == "ok":
             value = _tensors_back(reply["value"], owner)
             if reply.get("grads") is not None:
-                value = _with_gradients(reply["value"]["__tensor__"], reply["grads"], args)
+                value = _gradients_back(value, reply, args, request["cotangent"])
             return value
         if kind == "not_implemented":
             raise NotImplementedError

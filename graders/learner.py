@@ -225,7 +225,7 @@ def _call(namespace: dict, request: dict) -> dict:
              "stdout_truncated": out.stdout_truncated, "mutated": out.mutated, "used": sorted(set(_used))}
     if out.kind == "ok":
         reply["value"] = _plain(out.value)
-        reply["grads"] = _input_gradients(out.value, request["args"])
+        reply["grads"], reply["grad_at"] = _input_gradients(out.value, request["args"], request.get("cotangent"))
     return reply
 
 
@@ -248,17 +248,27 @@ def _leaves(args: tuple) -> list:
     return [a for a in flat if isinstance(a, torch.Tensor) and a.requires_grad]
 
 
-def _input_gradients(value: Any, args: tuple) -> list | None:
-    """d value / d input for a scalar tensor output with a graph (a differentiable cost): the judge
+def _input_gradients(value: Any, args: tuple, cotangent: Any = None) -> tuple[list | None, int | None]:
+    """d value / d input for a scalar tensor output with a graph (a differentiable cost), or d(value · L)/d
+    input for a tensor output (or element `at` of a returned tuple) when the judge sent L: the judge
     rebuilds a first-order stand-in with the same value and the same gradients on its own inputs."""
     torch = sys.modules.get("torch")
-    if torch is None or not isinstance(value, torch.Tensor) or value.grad_fn is None or value.numel() != 1:
-        return None
-    leaves = _leaves(args)
+    leaves = _leaves(args) if torch is not None else []
     if not leaves:
-        return None
-    grads = torch.autograd.grad(value.sum(), leaves, allow_unused=True)
-    return [None if g is None else g.detach().cpu().numpy() for g in grads]
+        return None, None
+    candidates = [(None, value)] + (list(enumerate(value)) if isinstance(value, (list, tuple)) else [])
+    for at, v in candidates:
+        if not isinstance(v, torch.Tensor) or v.grad_fn is None:
+            continue
+        if cotangent is None and v.numel() == 1 and at is None:
+            scalar = v.sum()
+        elif cotangent is not None and tuple(v.shape) == tuple(cotangent.shape):
+            scalar = (v * torch.as_tensor(cotangent, dtype=v.dtype)).sum()
+        else:
+            continue
+        grads = torch.autograd.grad(scalar, leaves, allow_unused=True)
+        return [None if g is None else g.detach().cpu().numpy() for g in grads], at
+    return None, None
 
 
 _handles: list[Callable] = []     # functions the learner's code returned (a trained descriptor, ...)

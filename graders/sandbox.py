@@ -13,6 +13,7 @@ worker process it can kill (see `graders.cli`).
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import copy
 import io
 import os
@@ -108,6 +109,26 @@ def _time_limit(seconds: float | None):
         done.set()
         watcher.join()
         signal.signal(signal.SIGALRM, previous)
+
+
+_COTANGENT: contextvars.ContextVar = contextvars.ContextVar("cotangent", default=None)
+
+
+@contextlib.contextmanager
+def backward_weights(L: np.ndarray):
+    """The judge will call `(output * L).sum().backward()` on the tensor the learner's function returns.
+    In graded mode the learner's code runs in another process and its autograd graph cannot cross, so
+    the learner's side computes d(output · L)/d(inputs) and the judge gets a stand-in tensor with the same
+    value and, for this L, the same gradients. Without isolation this changes nothing."""
+    token = _COTANGENT.set(np.asarray(L, dtype=float))
+    try:
+        yield
+    finally:
+        _COTANGENT.reset(token)
+
+
+def current_cotangent() -> np.ndarray | None:
+    return _COTANGENT.get()
 
 
 def _snapshot(x: Any) -> Any:

@@ -13,6 +13,7 @@ import numpy as np
 
 from graders.convert import OutputError
 from graders.engine import Case, Exercise, Hint, register, shared_run
+from graders.sandbox import backward_weights
 
 from .nerf import single_thread, to_numpy
 
@@ -84,7 +85,7 @@ def _torch_args(b):
 def _run(fn, b, L):
     import torch
     args = _torch_args(b)
-    with single_thread():
+    with single_thread(), backward_weights(L):   # graded mode: the learner's side takes d(img · L)/d colours
         img, T = fn(*args, b["W"], b["H"])
         grad = None
         if isinstance(img, torch.Tensor) and img.requires_grad:
