@@ -7,8 +7,8 @@ Only `KeyboardInterrupt` is let through, so a learner can still stop a cell.
 Time limits count the CPU time of the learner's thread, with a wall-clock backstop for code that
 waits; a watcher thread raises the limit in the main thread with SIGALRM, which interrupts Python
 code (an endless `while` loop) but not a single long C call, and works only in the main thread (a
-notebook cell and `python -m graders` both run there). The shell grader adds a hard per-exercise limit by running every notebook in a
-worker process it can kill (see `graders.cli`).
+notebook cell and `python -m graders` both run there). The shell grader adds a hard per-exercise
+limit by running every notebook in a worker process it can kill (see `graders.cli`).
 """
 from __future__ import annotations
 
@@ -16,7 +16,6 @@ import contextlib
 import contextvars
 import copy
 import io
-import os
 import signal
 import threading
 import time
