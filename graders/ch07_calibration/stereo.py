@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 
 from graders.compare import rotation_angle_deg
-from graders.convert import OutputError, as_rotation
+from graders.convert import OutputError, as_rotation, as_pose
 from graders.engine import Case, Exercise, Hint, raised, register, shared_run
 from graders.geometry import so3_exp
 
@@ -121,15 +121,7 @@ ARGS_9 = ("X", "uv1", "uv2", "K1", "d1", "K2", "d2", "Rs1", "ts1", "Rs2", "ts2")
 
 
 def _convert_rig(out, case):
-    try:
-        R, t = out
-        t = np.asarray(t, float).reshape(-1)
-    except Exception:
-        raise OutputError("expected a pair (R, t) with R: (3, 3) and t: (3,)") from None
-    R = as_rotation(R)
-    if t.shape != (3,) or not np.isfinite(t).all():
-        raise OutputError(f"t must be a finite (3,) array, got shape {t.shape}")
-    return R, t
+    return as_pose(out)   # (R, t): R in SO(3), t finite (3,)
 
 
 def _extrinsics_cases(rng):

@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 
 from graders.compare import max_abs, up_to_scale
-from graders.convert import OutputError, as_array, as_rotation
+from graders.convert import OutputError, as_array, as_rotation, as_pose
 from graders.engine import Case, Exercise, Hint, like, raised, register, shared_run
 from graders.geometry import from_h, project, to_h
 
@@ -198,17 +198,7 @@ register(Exercise(
 # ----------------------------------------------------------------- 7.7 extrinsics_from_homography
 
 def _convert_pose(out, case):
-    if out is None:
-        raise OutputError("returned None: is a `return` missing?")
-    try:
-        R, t = out
-        t = np.asarray(t, float).reshape(-1)
-    except Exception:
-        raise OutputError("expected a pair (R, t) with R: (3, 3) and t: (3,)") from None
-    R = as_rotation(R)
-    if t.shape != (3,) or not np.isfinite(t).all():
-        raise OutputError(f"t must be a finite (3,) array, got shape {t.shape}")
-    return R, t
+    return as_pose(out)   # (R, t): R in SO(3), t finite (3,)
 
 
 def _pose_error_px(pose, info):
