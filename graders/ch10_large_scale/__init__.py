@@ -1,0 +1,29 @@
+"""Chapter 10 — large-scale and learned 3D: exercise specifications, oracles and stand-ins, one module
+per section.
+
+Oracles: brute-force descriptor matching (retrieval), pycolmap (estimate_sim3d_robust,
+align_reconstructions_via_points), the grader's own Umeyama (graders.geometry) and exact synthetic
+ground truth (textured-plane renders of known places, sub-reconstructions with known poses).
+
+Modules (part A): `questions` (10.1-10.3, 10.14-10.16), `retrieval` (10.6), `sim3` (10.7),
+`merge` (10.8), `debug` (10.11).
+Modules (part B): `pointmaps` (10.4-10.5, 10.9), `distributed` (10.10), `debug_b` (10.12-10.13),
+`frontier` (10.17), `demo` (the widget).
+Importing the package registers the chapter; the names below are the API of the notebook, the tests
+and the benchmark.
+"""
+from __future__ import annotations
+
+from graders.engine import debug_practice
+
+from . import questions  # noqa: F401 (registers 10.1-10.3, 10.14-10.16)
+
+# ---- part A
+# (retrieval, sim3, merge, debug imports land here)
+DEBUG_GENERATORS: dict = {}
+__all__ = ["debug_case"]
+
+# ---- part B (pointmaps, distributed, debug_b, frontier, demo): add imports, DEBUG_GENERATORS entries
+# and __all__ names below this line.
+
+debug_case = debug_practice(DEBUG_GENERATORS)   # every DEBUG exercise's practice case (10.11-10.13)
