@@ -1,4 +1,4 @@
-"""Chapter 6 graders (core: 6.1-6.11, 6.18, 6.19, 6.21-6.26): the reference and the gtsam-backed versions
+"""Chapter 6 graders (core: 6.1-6.11, 6.18, 6.19, 6.21-6.27): the reference and the gtsam-backed versions
 pass; every mutant fails. Front-end's exercises are tested in tests/test_ch06_slam_frontend.py.
 
 Seeds are fixed so a failure here is reproducible; the graders themselves draw fresh seeds for learners.
@@ -28,6 +28,7 @@ def reference(ex) -> object:
 LIBRARY = {
     "6.7": (ch6.gt_lie_ops, {}),
     "6.8": (ch6.gt_read_g2o, {}),
+    "6.27": (ch6.gt_write_g2o, {}),       # gtsam.writeG2o: 6 significant digits, inside 6.27's tolerance
     "6.9": (ch6.gt_between_residuals, {}),
     "6.10": (ch6.gt_optimize_pose_graph, {}),
     "6.11": (ch6.gt_robust_pose_graph, {}),
@@ -64,6 +65,15 @@ def test_write_g2o_round_trips_through_gtsam(tmp_path):
         back = ch6.gt_read_g2o(path)
         assert np.abs(back["info"] - g["info"]).max() < 1e-9 * np.abs(g["info"]).max()
         assert np.abs(back["T"] - g["T"]).max() < 1e-12 and (back["edges"] == g["edges"]).all()
+
+
+def test_write_g2o_in_another_order_gets_full_marks():
+    # A g2o file may list vertices and edges in any order; 6.27 must not take points off a writer that reverses them.
+    def reversed_writer(path, graph):
+        slam.write_g2o(path, graph)
+        lines = open(path).read().splitlines()
+        open(path, "w").write("\n".join(lines[::-1]) + "\n")
+    checks.assert_full_marks(EXERCISES["6.27"], reversed_writer, seed=4)
 
 
 @pytest.mark.skipif(not HAVE_POSEGRAPH, reason="pose graphs not available (python -m graders.datasets fetch posegraph)")

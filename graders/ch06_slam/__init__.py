@@ -7,16 +7,16 @@ the objective value, never element by element). Real data: the intel (SE(2)) and
 (SE(3)) pose graphs via `graders.datasets`.
 
 Core modules: `posegraphs` (GTSAM glue, synthetic and real graphs, gauge-free metrics), `manifold`
-(6.7, 6.9), `g2o_io` (6.8), `optimizer` (6.10, 6.11), `debug` (6.18, 6.19, 6.21), `frontier` (6.26), `questions` (6.1-6.6, 6.22-6.25). Importing the package registers the chapter; the
+(6.7, 6.9), `g2o_io` (6.8, 6.27), `optimizer` (6.10, 6.11), `debug` (6.18, 6.19, 6.21), `frontier` (6.26), `questions` (6.1-6.6, 6.22-6.25). Importing the package registers the chapter; the
 names below are the API of the notebook, the tests and the benchmark.
 """
 from __future__ import annotations
 
-from . import debug, frontier, g2o_io, manifold, optimizer, questions  # noqa: F401 (6.7-6.11, 6.18, 6.19, 6.21, 6.26; 6.1-6.6, 6.22-6.25)
+from . import debug, frontier, g2o_io, manifold, optimizer, questions  # noqa: F401 (6.7-6.11, 6.18, 6.19, 6.21, 6.26, 6.27; 6.1-6.6, 6.22-6.25)
 from .frontier import fd_differentiable_pose_graph, ring_graph
 from .debug import CAUSES, debug_case, debug_truth, gtsam_fix_drift, gtsam_fix_inconsistent, gtsam_fix_jumps
 from .optimizer import gt_optimize_pose_graph, gt_robust_pose_graph, plant_false_loops
-from .g2o_io import gt_read_g2o
+from .g2o_io import gt_read_g2o, gt_write_g2o
 from .manifold import gt_between_residuals, gt_exp, gt_lie_ops, gt_log, random_poses
 from .posegraphs import (align_first, ate_rmse, g2o_chi2, graph_args, gt_chi2, gtsam_optimize, load_posegraph,
                          make_graph, subgraph)
@@ -25,7 +25,7 @@ from .posegraphs import pose_errors as gauge_pose_errors
 
 __all__: list[str] = [
     "CAUSES", "debug_case", "debug_truth", "gtsam_fix_drift", "gtsam_fix_inconsistent", "gtsam_fix_jumps",
-    "fd_differentiable_pose_graph", "ring_graph", "align_first", "ate_rmse", "gt_read_g2o", "gt_optimize_pose_graph", "gt_robust_pose_graph", "plant_false_loops", "g2o_chi2", "graph_args", "gt_between_residuals", "gt_chi2", "gt_exp", "gt_lie_ops",
+    "fd_differentiable_pose_graph", "ring_graph", "align_first", "ate_rmse", "gt_read_g2o", "gt_write_g2o", "gt_optimize_pose_graph", "gt_robust_pose_graph", "plant_false_loops", "g2o_chi2", "graph_args", "gt_between_residuals", "gt_chi2", "gt_exp", "gt_lie_ops",
     "gt_log", "gt_chi2_terms", "gtsam_optimize", "load_posegraph", "make_graph", "gauge_pose_errors", "random_poses", "subgraph",
 ]
 

@@ -1,10 +1,14 @@
-"""Chapter 6, section 2: 6.8 `read_g2o`, a g2o pose graph with its information matrices.
+"""Chapter 6, section 2: 6.8 `read_g2o` and 6.27 `write_g2o`, a g2o pose graph with its information matrices.
 
 Oracle: gtsam.readG2o (which also permutes SE(3) information to its rotation-first order) on the same
 text. Files: synthetic SE(2) graphs in g2o's text (vertex ids not contiguous, listed out of order, full
 information matrices), synthetic SE(3) graphs written by gtsam.writeG2o, and the real intel and
 parking-garage files. g2o stores the upper triangle of each information matrix row by row,
 I11 I12 ... I1k I22 ... Ikk, in its own error order: (x, y, theta) for SE(2), (t, q_xyz) for SE(3).
+
+6.27's oracle is the graph handed to the learner's writer; the file is read back with gtsam.readG2o (after the
+grader's own scan of each line's layout) and compared up to quaternion sign (poses as matrices), on synthetic SE(2)
+and SE(3) graphs and on the real files re-written.
 """
 from __future__ import annotations
 
@@ -14,7 +18,7 @@ import tempfile
 import numpy as np
 
 from graders import datasets
-from graders.engine import Case, Exercise, OutputError, like, raised, register
+from graders.engine import Case, Exercise, Hint, OutputError, like, raised, register
 
 from .manifold import gt_exp, random_poses
 from .posegraphs import POSEGRAPH_FILES, gtsam_pose, make_graph
@@ -195,4 +199,272 @@ register(Exercise(
     hints=HINTS,
     fallback=gt_read_g2o,
     arg_names=("path",),
+))
+
+
+# ----------------------------------------------------------------- 6.27 write_g2o
+# The learner's writer round-trips through gtsam.readG2o: the file must be one a library reads back into the same
+# graph. Before GTSAM reads it, the grader's own scan checks each line's token count, so a file GTSAM would read
+# "successfully" by ignoring extra numbers (a full information matrix) is rejected with the reason.
+
+_LAYOUT = {"VERTEX_SE2": (1, 3, 0), "EDGE_SE2": (2, 3, 3), "VERTEX_SE3:QUAT": (1, 7, 0), "EDGE_SE3:QUAT": (2, 7, 6)}
+
+
+def gt_write_g2o(path, graph: dict) -> None:
+    """gtsam.writeG2o of read_g2o's dict, keys = the vertex ids (the library-backed 6.27 and its stand-in).
+    GTSAM writes 6 significant digits, as the real files hold."""
+    import gtsam
+    from .posegraphs import to_gtsam
+    ids = np.asarray(graph["ids"], int)
+    g, v = to_gtsam(graph["T"], graph["edges"], graph["Z"], graph["info"], prior=False)
+    renamed, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    is3 = np.shape(graph["T"])[-1] == 4
+    for n, i in enumerate(ids):
+        values.insert(int(i), v.atPose3(n) if is3 else v.atPose2(n))
+    Factor = gtsam.BetweenFactorPose3 if is3 else gtsam.BetweenFactorPose2
+    for k in range(g.size()):
+        f = g.at(k)
+        a, b = f.keys()
+        renamed.add(Factor(int(ids[a]), int(ids[b]), f.measured(), f.noiseModel()))
+    gtsam.writeG2o(renamed, values, str(path))
+
+
+def _scan_g2o(text: str) -> None:
+    """Reject a file whose lines GTSAM would misread or skip: the wrong number of values for the tag, ids that
+    are not integers, unknown tags (g2o's FIX and comments are allowed)."""
+    kinds = set()
+    for n, line in enumerate(text.splitlines(), 1):
+        tok = line.split()
+        if not tok or tok[0].startswith("#") or tok[0] == "FIX":
+            continue
+        if tok[0] not in _LAYOUT:
+            raise OutputError(f"line {n}: unknown element {tok[0]!r} (expected {', '.join(_LAYOUT)})")
+        n_ids, nz, k = _LAYOUT[tok[0]]
+        kinds.add(tok[0].split("_")[1])
+        try:
+            [int(t) for t in tok[1:1 + n_ids]]
+            [float(t) for t in tok[1 + n_ids:]]
+        except ValueError:
+            raise OutputError(f"line {n}: ids must be integers and values numbers: {line[:80]!r}") from None
+        want, got = nz + k * (k + 1) // 2, len(tok) - 1 - n_ids
+        if got != want:
+            full = f" (the full {k}x{k} information matrix? g2o stores its upper triangle)" if got == nz + k * k else ""
+            raise OutputError(f"line {n}: {tok[0]} has {got} values after the ids, expected {want}{full}")
+    if not kinds:
+        raise OutputError("the file holds no VERTEX or EDGE lines")
+    if len(kinds) > 1:
+        raise OutputError(f"SE(2) and SE(3) elements mixed in one file: {sorted(kinds)}")
+
+
+def _written_by(graph: dict):
+    """How 6.27 calls the learner: write_g2o(path, graph) with a fresh path; the file's text is the output."""
+    def call(fn):
+        with tempfile.TemporaryDirectory(prefix="cv3d_ch06_") as folder:
+            path = os.path.join(folder, "graph.g2o")
+            fn(path, {k: np.array(v) for k, v in graph.items()})
+            return open(path).read() if os.path.exists(path) else None
+    return call
+
+
+def _convert_written(text, case):
+    if not isinstance(text, str):
+        raise OutputError("no file at the path write_g2o was given: write the graph there")
+    _scan_g2o(text)
+    try:
+        back = _expected_from_text(text)
+    except Exception as exc:  # GTSAM could not read the file
+        raise OutputError(f"gtsam.readG2o cannot read the file: {type(exc).__name__}: {exc}") from None
+    out = _convert(back, case)
+    out["info_text"] = _info_as_written(text, case.expected["info"].shape[-1])
+    return out
+
+
+def _info_as_written(text: str, k: int) -> np.ndarray:
+    """The information values of the EDGE lines in file order, as the upper triangle row by row, in the residual's
+    order: the grader's own reading, for hints (GTSAM turns a matrix that is not positive definite into another)."""
+    rows = [line.split() for line in text.splitlines() if line.startswith("EDGE_SE")]
+    vals = np.array([[float(v) for v in tok[-k * (k + 1) // 2:]] for tok in rows])
+    iu = np.triu_indices(k)
+    info = np.zeros((len(vals), k, k))
+    info[:, iu[0], iu[1]] = vals
+    info[:, iu[1], iu[0]] = vals
+    order = [3, 4, 5, 0, 1, 2] if k == 6 else [0, 1, 2]
+    return info[:, order][:, :, order]
+
+
+def _same_edge_order(out: dict, exp: dict) -> dict:
+    """out with its edges in the expected order (a file may list edges in any order): both sorted by (i, j), a
+    repeated pair by its measured x (repeats differ by their noise, ~1e-2, far above what writing changes, 5e-6)."""
+    if out["edges"].shape == exp["edges"].shape and (out["edges"] == exp["edges"]).all():
+        return out
+    d = exp["T"].shape[-1] - 1
+
+    def order(g):
+        return np.lexsort((g["Z"][:, 0, d], g["edges"][:, 1], g["edges"][:, 0]))
+    a, b = order(out), order(exp)
+    inv = np.empty_like(b)
+    inv[b] = np.arange(len(b))
+    return dict(out, **{k: out[k][a][inv] for k in ("edges", "Z", "info", "info_text") if k in out})
+
+
+def _round_trip_error(out: dict, exp: dict) -> float:
+    """The largest relative error of what was read back: ids and edges exactly (a mismatch counts 1), positions
+    relative to max(1 m, |t|), rotations by angle (rad), information relative to each matrix's largest entry."""
+    if out["ids"].shape != exp["ids"].shape or np.any(out["ids"] != exp["ids"]):
+        return 1.0
+    out = _same_edge_order(out, exp)
+    if np.any(out["edges"] != exp["edges"]):
+        return 1.0
+    d = exp["T"].shape[-1] - 1
+    err = []
+    for key in ("T", "Z"):
+        A, B = out[key], exp[key]
+        t_err = np.linalg.norm(A[:, :d, d] - B[:, :d, d], axis=1) / np.maximum(1.0, np.linalg.norm(B[:, :d, d], axis=1))
+        Rd = np.swapaxes(B[:, :d, :d], 1, 2) @ A[:, :d, :d]
+        if d == 2:
+            angle = np.abs(np.arctan2(Rd[:, 1, 0], Rd[:, 0, 0]))
+        else:
+            skew = np.c_[Rd[:, 2, 1] - Rd[:, 1, 2], Rd[:, 0, 2] - Rd[:, 2, 0], Rd[:, 1, 0] - Rd[:, 0, 1]]
+            angle = np.arctan2(0.5 * np.linalg.norm(skew, axis=1), 0.5 * (np.trace(Rd, axis1=1, axis2=2) - 1))
+        err += [t_err.max(), angle.max()]
+    err.append((np.abs(out["info"] - exp["info"]).max(axis=(1, 2)) / np.abs(exp["info"]).max(axis=(1, 2))).max())
+    return float(max(err))
+
+
+def _graph_for_writing(rng, dim: int) -> dict:
+    """A graph to write: random poses (angles to 0.97 pi, a few tiny), ids increasing with gaps (not row numbers),
+    measurements near the relative poses, full SPD information spanning three orders of magnitude."""
+    n, m = (40, 70) if dim == 2 else (30, 50)
+    k = 3 if dim == 2 else 6
+    T = random_poses(rng, n, dim)
+    edges = np.r_[np.c_[np.arange(n - 1), np.arange(1, n)], [rng.choice(n, 2, replace=False) for _ in range(m - n + 1)]]
+    Z = np.linalg.inv(T[edges[:, 0]]) @ T[edges[:, 1]] @ gt_exp(rng.normal(0, 0.05, (m, k)))
+    A = rng.normal(0, 1, (m, k, k)) * 10 ** rng.uniform(0, 1.5, (m, 1, k))
+    info = A @ np.swapaxes(A, 1, 2) + np.eye(k)
+    ids = 2 + np.cumsum(rng.integers(1, 9, n))
+    return {"ids": ids, "T": T, "edges": edges.astype(int), "Z": Z, "info": 0.5 * (info + np.swapaxes(info, 1, 2))}
+
+
+def _read_back_as(case, **change):
+    """What GTSAM reads back from a file written with one known slip (a hint's model); NaN where it cannot apply."""
+    exp = case.expected
+    d = exp["T"].shape[-1] - 1
+    if change.get("dim", d) != d:
+        return {k: np.full_like(np.asarray(v, float), np.nan) for k, v in exp.items()}
+    out = {k: np.array(v, float) for k, v in exp.items()}
+    out["ids"], out["edges"] = exp["ids"], exp["edges"]
+    if "info" in change:
+        out["info"] = change["info"](exp["info"], d)
+    for key in ("T", "Z"):
+        if key in change:
+            out[key] = change[key](exp[key])
+    return out
+
+
+def _lower_read_as_upper(info, d):
+    """The lower triangle written row by row (= the upper one column by column), read as the upper row by row."""
+    order = [3, 4, 5, 0, 1, 2] if d == 3 else [0, 1, 2]
+    G = info[:, order][:, :, order]                                       # g2o's order, as written
+    k = G.shape[-1]
+    iu, il = np.triu_indices(k), np.tril_indices(k)
+    back = np.zeros_like(G)
+    back[:, iu[0], iu[1]] = G[:, il[0], il[1]]
+    back[:, iu[1], iu[0]] = G[:, il[0], il[1]]
+    return back[:, order][:, :, order]
+
+
+def _not_permuted(info, d):
+    order = [3, 4, 5, 0, 1, 2]
+    return info[:, order][:, :, order]
+
+
+def _quaternion_wxyz(T):
+    from scipy.spatial.transform import Rotation
+    q = Rotation.from_matrix(T[:, :3, :3]).as_quat()                      # (x, y, z, w)
+    out = T.copy()
+    out[:, :3, :3] = Rotation.from_quat(q[:, [3, 0, 1, 2]]).as_matrix()   # w x y z read as x y z w
+    return out
+
+
+def _theta_degrees(T):
+    theta = np.degrees(np.arctan2(T[:, 1, 0], T[:, 0, 0]))
+    out = T.copy()
+    out[:, 0, 0], out[:, 0, 1], out[:, 1, 0], out[:, 1, 1] = np.cos(theta), -np.sin(theta), np.sin(theta), np.cos(theta)
+    return out
+
+
+def _lost_digits(case, out) -> bool:
+    """Right ids, edges and structure, but off by more than 6 significant digits allow and less than 1e-2:
+    the numbers were printed with too few digits."""
+    try:
+        return WRITE_TOL < _round_trip_error(out, case.expected) < 1e-2
+    except Exception:
+        return False
+
+
+def _info_filled_transposed(case, out) -> bool:
+    """The information values in the file are the lower triangle row by row (GTSAM's reading of such a matrix,
+    often indefinite, says little, so this reads the file's numbers directly)."""
+    try:
+        exp = case.expected
+        got = _same_edge_order(out, exp)["info_text"]
+        wrong = _lower_read_as_upper(exp["info"], exp["T"].shape[-1] - 1)
+        return bool((np.abs(got - wrong).max(axis=(1, 2)) / np.abs(wrong).max(axis=(1, 2))).max() <= WRITE_TOL)
+    except Exception:
+        return False
+
+
+WRITE_HINTS = [
+    Hint("the information matrices come back transposed in their fill order: write the upper triangle row by row "
+         "(I11 I12 ... I1k I22 ... Ikk), not the lower one or column by column.", _info_filled_transposed),
+    raised(r"full \dx\d information", "the full information matrix was written: g2o stores only its upper "
+                                      "triangle, row by row (6 values for SE(2), 21 for SE(3))."),
+    like(lambda c: _read_back_as(c, dim=3, info=_not_permuted),
+         "SE(3) information written in the residual's order (rotation first): g2o's order is (translation, "
+         "rotation), so permute rows and columns back before writing."),
+    like(lambda c: _read_back_as(c, dim=3, T=_quaternion_wxyz, Z=_quaternion_wxyz),
+         "the quaternion is written w first: g2o's VERTEX_SE3:QUAT and EDGE_SE3:QUAT lines hold qx qy qz qw."),
+    like(lambda c: _read_back_as(c, dim=2, T=_theta_degrees, Z=_theta_degrees),
+         "theta is written in degrees: g2o's SE(2) angle is in radians."),
+    like(lambda c: _read_back_as(c, Z=lambda Z: np.linalg.inv(Z)),
+         "every edge measurement comes back inverted: an EDGE i j line holds Z_ij = T_i^-1 T_j, the pose of j in "
+         "i's frame, as the graph stores it."),
+    like(lambda c: dict(_read_back_as(c), ids=np.arange(len(c.expected["ids"]))),
+         "vertex ids were written as row numbers: write graph['ids'][n] for row n, and each edge as the ids of its "
+         "two rows."),
+    Hint(lambda case, out: f"the round trip is off by {_round_trip_error(out, case.expected):.1e} (relative): the "
+                           "numbers lost digits (%.3f keeps three decimals). Write at least 6 significant digits; "
+                           "repr(float) or %.17g loses nothing.", _lost_digits),
+]
+
+# 3e-5: a file written with 6 significant digits (gtsam.writeG2o, the real files) reads back within 5e-6 relative per
+# number; an SE(2) angle near pi, within 1.6e-5 rad; quaternion components within 5e-7 (2e-6 rad). Three decimals
+# (%.3f) leave up to 5e-4 m or rad on values near 1, a 10x-30x margin either side. Parsing itself is exact to 1e-15.
+WRITE_TOL = 3e-5
+
+
+def cases_write_g2o(rng):
+    for dim, what in ((2, "SE(2)"), (3, "SE(3)")):
+        g = _graph_for_writing(rng, dim)
+        yield Case(f"{what}: ids with gaps, full information, angles to 0.97 pi", ("graph.g2o", g), g,
+                   _round_trip_error, WRITE_TOL, "relative", convert=_convert_written, call=_written_by(g),
+                   key=f"synthetic-se{dim}")
+    if datasets.available("posegraph"):
+        for name in ("intel", "garage"):
+            g = {k: v for k, v in _real(name).items()}
+            yield Case(f"real: {POSEGRAPH_FILES[name]} re-written", ("graph.g2o", g), g, _round_trip_error,
+                       WRITE_TOL, "relative", convert=_convert_written, call=_written_by(g), key=f"real-{name}",
+                       tags=("real",))
+
+
+register(Exercise(
+    id="6.27",
+    title="Write a g2o pose graph",
+    name="write_g2o",
+    kind="code",
+    points=2,
+    cases=cases_write_g2o,
+    hints=WRITE_HINTS,
+    fallback=gt_write_g2o,
+    arg_names=("path", "graph"),
 ))

@@ -73,7 +73,12 @@ def read_g2o(path: str | Path) -> dict:
 
 
 def write_g2o(path: str | Path, graph: dict) -> None:
-    """Write `graph` (read_g2o's dict) as g2o text: information back to g2o's order, upper triangle row by row."""
+    """Exercise 6.27: write `graph` (read_g2o's dict) as g2o text.
+
+    Vertex n is written under its id graph["ids"][n] (0..N-1 if absent), each edge as the ids of its rows;
+    SE(3) quaternions as qx qy qz qw; information back to g2o's order (translation first for SE(3)), upper
+    triangle row by row; every number with repr, so the round trip loses nothing.
+    """
     T, ids = graph["T"], graph.get("ids", np.arange(len(graph["T"])))
     d = T.shape[-1] - 1
 
