@@ -80,7 +80,10 @@ CHAPTERS: tuple[Chapter, ...] = (
             "semi-global matching (graded on the Middlebury motorcycle pair against OpenCV), plane-sweep MVS, "
             "depth-map fusion with geometric consistency, NeRF volume rendering and sampling, 3D Gaussian "
             "projection, tiled compositing and a differentiable splatting fit"),
-    Chapter(9, "flow", "Optical flow and tracking", ready=False),
+    Chapter(9, "flow", "Optical flow and tracking",
+            "flow tools (.flo, warping, EPE/Fl), vectorised Lucas-Kanade with the eigenvalue test, pyramidal LK "
+            "(against OpenCV), Horn-Schunck, a coarse-to-fine dense flow graded on FlyingChairs against Farneback, "
+            "occlusion by forward-backward consistency, joint point tracking, scene flow, a tiny RAFT-style model"),
     Chapter(10, "large_scale", "Large-scale and learned 3D", ready=False),
     Chapter(11, "capstone", "Capstone: cascading pipeline failures", ready=False),
 )

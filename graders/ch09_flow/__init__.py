@@ -1,0 +1,28 @@
+"""Chapter 9 — optical flow and point tracking: exercise specifications, oracles and stand-ins.
+
+Oracles: cv2.calcOpticalFlowPyrLK, cv2.calcOpticalFlowFarneback and DIS side by side; synthetic pairs
+with exact flow (textured planes under known homographies, `pairs`); the real FlyingChairs pair with its
+exact ground truth ($COURSE_DATA/flow).
+
+Modules (part A): `pairs` (data), `tools` (9.9), `lk` (9.10-9.11), `dense` (9.12-9.13), `questions`
+(9.1-9.4, 9.21-9.23), `debug` (9.17-9.18), `demo` (the notebook's pictures).
+Part B: `occlusion` (9.14), `tracking` (9.15), `scene_flow` (9.16), `frontier` (9.24), `questions_b`
+(9.5-9.8), and the DEBUG 9.19-9.20. Importing the package registers the chapter; the names below are
+the API of the notebook, the tests and the benchmark.
+"""
+from __future__ import annotations
+
+from . import tools  # noqa: F401 (registers 9.9)
+from .pairs import (FLO_MAGIC, chairs_flo_bytes, gt_read_flo, gt_write_flo, homography_flow, load_chairs,
+                    plane_pair, real_available, small_homography)
+from .tools import cv_flow_tools, cv_warp, gt_epe, gt_epe_map, gt_fl, gt_warp
+
+# ---- part A (9.10-9.13, 9.1-9.4, 9.17-9.18, 9.21-9.23) ----
+
+# ---- part B (9.5-9.8, 9.14-9.16, 9.19-9.20, 9.24, widget) ----
+
+__all__ = [
+    "FLO_MAGIC", "chairs_flo_bytes", "cv_flow_tools", "cv_warp", "gt_epe", "gt_epe_map", "gt_fl", "gt_read_flo",
+    "gt_warp", "gt_write_flo", "homography_flow", "load_chairs", "plane_pair", "real_available", "small_homography",
+]
+# part B: __all__ += [...]

@@ -1,0 +1,116 @@
+"""Image pairs with exact flow: the real FlyingChairs pair and textured planes under known homographies.
+
+Conventions (docs/CONVENTIONS.md): images are float64 (H, W) grey levels in [0, 255]; a flow is
+(H, W, 2) with flow[y, x] = (u, v) in pixels, (x, y) = (column, row), pixel centres at integers;
+frame 1 pixel x moves to x + flow(x) in frame 2, so I2(x + flow(x)) = I1(x) (brightness constancy).
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import cv2
+import numpy as np
+
+from graders import datasets, scene
+
+FLO_MAGIC = 202021.25       # Middlebury .flo: float32 magic, int32 width, int32 height, then (H, W, 2) float32
+TEXTURES = ("astronaut", "coffee", "chelsea", "rocket", "hubble_deep_field", "immunohistochemistry")
+
+
+def gt_read_flo(data: bytes) -> np.ndarray:
+    """The grader's .flo decoder (little-endian, as every .flo file on disk): (H, W, 2) float32."""
+    head = np.frombuffer(data[:12], dtype="<f4", count=1)
+    if head.size < 1 or head[0] != np.float32(FLO_MAGIC):
+        raise ValueError(f"not a .flo file: magic {head[:1]} != {FLO_MAGIC} (byte order?)")
+    W, H = (int(n) for n in np.frombuffer(data[4:12], dtype="<i4"))
+    if len(data) != 12 + 8 * W * H:
+        raise ValueError(f".flo of {len(data)} bytes cannot hold W x H = {W} x {H} flow vectors")
+    return np.frombuffer(data[12:], dtype="<f4").reshape(H, W, 2).copy()
+
+
+def gt_write_flo(flow: np.ndarray) -> bytes:
+    """The grader's .flo encoder (struct-free: three headers built as arrays)."""
+    flow = np.asarray(flow, "<f4")
+    H, W = flow.shape[:2]
+    return np.float32(FLO_MAGIC).astype("<f4").tobytes() + np.array([W, H], "<i4").tobytes() + flow.tobytes()
+
+
+def real_available() -> bool:
+    return datasets.available("flow")
+
+
+@lru_cache(maxsize=1)
+def _chairs() -> tuple[np.ndarray, np.ndarray, np.ndarray, bytes]:
+    read = lambda n: cv2.imread(str(datasets.path("flow", f"flyingchairs-0000000-{n}")), cv2.IMREAD_GRAYSCALE)  # noqa: E731
+    raw = datasets.path("flow", "flyingchairs-0000000-gt.flo").read_bytes()
+    out = (read("img0.ppm").astype(float), read("img1.ppm").astype(float), gt_read_flo(raw).astype(float), raw)
+    for a in out[:3]:
+        a.setflags(write=False)
+    return out
+
+
+def load_chairs() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The real FlyingChairs pair 0000000: (I1, I2: (384, 512) grey float64 in [0, 255], flow_gt: (384, 512, 2)).
+    Mean |flow| 6.05 px, 90th percentile 20 px, largest 78 px (the chairs move a lot, the background little)."""
+    I1, I2, F, _ = _chairs()
+    return I1.copy(), I2.copy(), F.copy()
+
+
+def chairs_flo_bytes() -> bytes:
+    """The ground truth's .flo file, as stored (1.5 MB)."""
+    return _chairs()[3]
+
+
+def _texture(rng, width: int, height: int, blur: float) -> np.ndarray:
+    """A grey texture (skimage.data) resampled to a random scale, cropped to (height, width), blurred by
+    `blur` px so bilinear/cubic resampling is accurate (the exact flow then really is exact), in [0, 255]."""
+    name = TEXTURES[rng.integers(len(TEXTURES))]
+    base = scene.texture(name).astype(float)
+    s = rng.uniform(1.0, 1.6) * max(width / base.shape[1], height / base.shape[0])
+    big = cv2.resize(base, (int(np.ceil(base.shape[1] * s)) + 2, int(np.ceil(base.shape[0] * s)) + 2),
+                     interpolation=cv2.INTER_LINEAR)
+    y0, x0 = rng.integers(0, big.shape[0] - height + 1), rng.integers(0, big.shape[1] - width + 1)
+    img = big[y0:y0 + height, x0:x0 + width]
+    img = (img - img.min()) / max(np.ptp(img), 1e-9)
+    return 255.0 * cv2.GaussianBlur(img, (0, 0), blur)
+
+
+def small_homography(rng, width: int, height: int, shift: float, warp: float = 0.02) -> np.ndarray:
+    """A homography near a translation of length `shift` px (random direction), with a small rotation,
+    scale, shear and perspective (`warp` sets their size), about the image centre. x2 ~ H x1."""
+    c = np.array([(width - 1) / 2, (height - 1) / 2])
+    a = rng.uniform(-1, 1) * warp
+    A = (1 + rng.uniform(-1, 1) * warp) * np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    A = A + rng.uniform(-0.5, 0.5, (2, 2)) * warp
+    d = rng.normal(size=2)
+    d *= shift / np.linalg.norm(d)
+    H = np.eye(3)
+    H[:2, :2], H[:2, 2] = A, c + d - A @ c
+    H[2, :2] = rng.uniform(-1, 1, 2) * warp * 0.2 / max(width, height)
+    H[2, 2] = 1.0 - H[2, :2] @ c       # keeps the centre's depth at 1
+    return H / H[2, 2]
+
+
+def homography_flow(H: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Exact flow of every pixel centre under x2 ~ H x1: (height, width, 2)."""
+    xs, ys = np.meshgrid(np.arange(width, dtype=float), np.arange(height, dtype=float))
+    p = np.stack([xs, ys, np.ones_like(xs)], -1) @ np.asarray(H, float).T
+    return p[..., :2] / p[..., 2:] - np.stack([xs, ys], -1)
+
+
+def plane_pair(rng, width: int = 160, height: int = 120, shift: float = 2.0, warp: float = 0.02,
+               blur: float = 1.5, I1: np.ndarray | None = None) -> dict:
+    """A textured plane seen before and after a small homography: {"I1", "I2", "flow", "H"}.
+
+    I2 = I1 resampled (bicubic) at H⁻¹ x, so I2(H x) = I1(x) and flow(x) = H x − x exactly; pixels of I2
+    whose source lies outside I1 are filled by reflection, and `valid` marks frame-1 pixels that land
+    inside frame 2 (the others have no right answer)."""
+    if I1 is None:
+        I1 = _texture(rng, width, height, blur)
+    height, width = I1.shape
+    H = small_homography(rng, width, height, shift, warp)
+    I2 = cv2.warpPerspective(I1, H, (width, height), flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
+    flow = homography_flow(H, width, height)
+    end = flow + np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1)
+    valid = (end[..., 0] >= 0) & (end[..., 0] <= width - 1) & (end[..., 1] >= 0) & (end[..., 1] <= height - 1)
+    return {"I1": I1, "I2": I2, "flow": flow, "H": H, "valid": valid}
