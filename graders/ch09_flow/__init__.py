@@ -20,9 +20,15 @@ from .tools import cv_flow_tools, cv_warp, gt_epe, gt_epe_map, gt_fl, gt_warp
 # ---- part A (9.10-9.13, 9.1-9.4, 9.17-9.18, 9.21-9.23) ----
 
 # ---- part B (9.5-9.8, 9.14-9.16, 9.19-9.20, 9.24, widget) ----
+from . import questions_b  # noqa: F401,E402 (registers 9.5-9.8)
+from .occlusion import fb_margin, gt_occlusion_mask, occlusion_pair  # noqa: E402
+from .scene_flow import gt_scene_flow, scene_flow_scene  # noqa: E402
+from .tracking import (gt_joint_tracker, independent_tracker, occluded_error, tapvid_metrics,  # noqa: E402
+                       tracking_sequence)
 
 __all__ = [
     "FLO_MAGIC", "chairs_flo_bytes", "cv_flow_tools", "cv_warp", "gt_epe", "gt_epe_map", "gt_fl", "gt_read_flo",
     "gt_warp", "gt_write_flo", "homography_flow", "load_chairs", "plane_pair", "real_available", "small_homography",
 ]
-# part B: __all__ += [...]
+__all__ += ["fb_margin", "gt_joint_tracker", "gt_occlusion_mask", "gt_scene_flow", "independent_tracker",
+            "occluded_error", "occlusion_pair", "scene_flow_scene", "tapvid_metrics", "tracking_sequence"]

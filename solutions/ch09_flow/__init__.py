@@ -12,6 +12,11 @@ from .tools import bilinear, epe, epe_map, fl_rate, flow_tools, read_flo, warp_b
 # ---- part A (9.10-9.13, 9.1-9.4, 9.17-9.18, 9.21-9.23) ----
 
 # ---- part B (9.5-9.8, 9.14-9.16, 9.19-9.20, 9.24) ----
+from .occlusion import occlusion_mask  # noqa: E402
+from .questions_b import fb_verdicts, raft_sizes, scene_flow_errors_mm, tracker_choice  # noqa: E402
+from .scene_flow import scene_flow, unproject  # noqa: E402
+from .tracking import joint_tracker, similarity_fit  # noqa: E402
 
 __all__ = ["bilinear", "epe", "epe_map", "fl_rate", "flow_tools", "read_flo", "warp_backward", "write_flo"]
-# part B: __all__ += [...]
+__all__ += ["fb_verdicts", "joint_tracker", "occlusion_mask", "raft_sizes", "scene_flow", "scene_flow_errors_mm",
+            "similarity_fit", "tracker_choice", "unproject"]
