@@ -2,7 +2,11 @@
 left-right check (8.8), semi-global aggregation (8.9), and the full SGM matcher of the benchmark.
 
 Conventions: rectified grey images I_l, I_r: (H, W) floats; left pixel (x, y) matches right pixel
-(x - d, y), d >= 0; cost volumes are (H, W, D) with D = d_max + 1 candidates; NaN marks "no disparity".
+(x - d, y), d >= 0; the public cost volumes are (H, W, D) with D = d_max + 1 candidates; NaN marks "no
+disparity". Inside, volumes are stored as disparity planes, (H, D, W): every operation then works on
+contiguous rows of W pixels (a cost for all x at one d), which is what numpy vectorises well — the min
+over d is an element-wise min of D rows, a shift in d is a shift by one row, the right view's costs
+are the same rows shifted by d. The public functions return (H, W, D) views of those arrays.
 """
 from __future__ import annotations
 
@@ -12,24 +16,29 @@ __all__ = ["block_matching", "sgm", "sad_volume", "census_volume", "sgm_stereo"]
 
 
 def _box_sum(a: np.ndarray, r: int) -> np.ndarray:
-    """Sum over a (2r+1)^2 window (edge-replicated) with an integral image: a: (H, W, ...)."""
-    p = np.pad(a, [(r, r), (r, r)] + [(0, 0)] * (a.ndim - 2), mode="edge")
-    ii = np.pad(p.cumsum(0).cumsum(1), [(1, 0), (1, 0)] + [(0, 0)] * (a.ndim - 2))
+    """Sum over a (2r+1)^2 window of axes 0 and 2 (edge-replicated) with an integral image: a: (H, D, W)."""
+    p = np.pad(a, [(r, r), (0, 0), (r, r)], mode="edge")
+    ii = np.pad(p.cumsum(0).cumsum(2), [(1, 0), (0, 0), (1, 0)])
     k = 2 * r + 1
-    return ii[k:, k:] - ii[:-k, k:] - ii[k:, :-k] + ii[:-k, :-k]
+    return ii[k:, :, k:] - ii[:-k, :, k:] - ii[k:, :, :-k] + ii[:-k, :, :-k]
+
+
+def _sad_planes(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int) -> np.ndarray:
+    """C: (H, D, W), C[y, d, x] = sum_window |I_l(x) - I_r(x - d)|; inf where x - d < 0."""
+    H, W = I_l.shape
+    diff = np.zeros((H, d_max + 1, W))
+    for d in range(d_max + 1):
+        diff[:, d, d:] = np.abs(I_l[:, d:] - I_r[:, :W - d])
+    # The columns without a partner count 0 in the box sum (so it stays finite), then are marked.
+    C = _box_sum(diff, r)
+    for d in range(1, d_max + 1):
+        C[:, d, :d] = np.inf                                 # columns x < d
+    return C
 
 
 def sad_volume(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int) -> np.ndarray:
     """C: (H, W, d_max + 1), C[y, x, d] = sum_window |I_l(x) - I_r(x - d)|; inf where x - d < 0."""
-    H, W = I_l.shape
-    diff = np.full((H, W, d_max + 1), np.nan)
-    for d in range(d_max + 1):
-        diff[:, d:, d] = np.abs(I_l[:, d:] - I_r[:, :W - d])
-    # Fill the columns without a partner with their neighbour so the box sum stays finite, then mark them.
-    invalid = np.isnan(diff)
-    C = _box_sum(np.where(invalid, 0.0, diff), r)
-    C[np.broadcast_to(invalid.any(axis=0, keepdims=True), C.shape)] = np.inf   # columns x < d
-    return C
+    return _sad_planes(np.asarray(I_l, float), np.asarray(I_r, float), int(d_max), int(r)).transpose(0, 2, 1)
 
 
 def _worst(C: np.ndarray):
@@ -37,25 +46,34 @@ def _worst(C: np.ndarray):
     return np.inf if C.dtype.kind == "f" else np.iinfo(C.dtype).max
 
 
-def _right_volume(C: np.ndarray) -> np.ndarray:
-    """The right view's costs from the left volume: C_r[y, x_r, d] = C[y, x_r + d, d]."""
-    H, W, n = C.shape
-    C_r = np.full_like(C, _worst(C))
-    for d in range(n):
-        C_r[:, :W - d, d] = C[:, d:, d]
-    return C_r
+def _argmin_planes(C: np.ndarray, right: bool = False) -> np.ndarray:
+    """Winner per pixel of C: (H, D, W) by a running minimum over the D rows (ties: the smallest d, as
+    argmin). right=True: the right view's winners, from C_r[y, d, x_r] = C[y, d, x_r + d] (plane d
+    shifted left by d); x_r with no partner at d sees the worst cost there."""
+    H, D, W = C.shape
+    best = np.full((H, W), _worst(C), C.dtype)
+    idx = np.zeros((H, W), np.intp)
+    less = np.empty((H, W), bool)
+    for d in range(D):
+        n = W - d if right else W
+        plane = C[:, d, d:] if right else C[:, d]
+        np.less(plane, best[:, :n], out=less[:, :n])
+        np.copyto(idx[:, :n], d, where=less[:, :n])
+        np.minimum(best[:, :n], plane, out=best[:, :n])
+    return idx
 
 
 def _wta_subpixel_lr(C: np.ndarray, max_lr_diff: float) -> np.ndarray:
-    H, W, n = C.shape
-    d_l = C.argmin(axis=2)                                   # (H, W) integer winners
-    d_r = _right_volume(C).argmin(axis=2)
+    """WTA + parabola + left-right check on C: (H, D, W). Returns D: (H, W), NaN = rejected."""
+    H, n, W = C.shape
+    d_l = _argmin_planes(C)                                   # (H, W) integer winners
+    d_r = _argmin_planes(C, right=True)
     x_r = np.arange(W)[None, :] - d_l
     partner = np.take_along_axis(d_r, np.maximum(x_r, 0), axis=1)
     keep = (x_r >= 0) & (np.abs(d_l - partner) <= max_lr_diff)
     # Parabola through (d-1, d, d+1): vertex offset (C- - C+) / (2 (C- - 2 C0 + C+)), inner winners only.
-    i = np.clip(d_l, 1, n - 2)[..., None]
-    cm, c0, cp = (np.take_along_axis(C, i + o, axis=2)[..., 0].astype(float) for o in (-1, 0, 1))
+    i = np.clip(d_l, 1, n - 2)[:, None, :]
+    cm, c0, cp = (np.take_along_axis(C, i + o, axis=1)[:, 0].astype(float) for o in (-1, 0, 1))
     with np.errstate(invalid="ignore", divide="ignore"):
         curv = cm - 2.0 * c0 + cp
         delta = np.where((d_l > 0) & (d_l < n - 1) & (curv > 0), (cm - cp) / (2.0 * curv), 0.0)
@@ -70,48 +88,71 @@ def block_matching(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3, max
     I_l, I_r: (H, W) rectified grey images; d_max: the largest disparity searched (0..d_max);
     r: window radius ((2r+1)^2 pixels); max_lr_diff: the largest |d_l(x) - d_r(x - d_l(x))| kept.
     Returns D: (H, W) float disparities, NaN where the check fails or no partner exists."""
-    C = sad_volume(np.asarray(I_l, float), np.asarray(I_r, float), int(d_max), int(r))
+    C = _sad_planes(np.asarray(I_l, float), np.asarray(I_r, float), int(d_max), int(r))
     return _wta_subpixel_lr(C, max_lr_diff)
 
 
-def _sweep(C: np.ndarray, P1: float, P2: float, dirs: list[tuple[int, int]], S: np.ndarray) -> None:
-    """Adds sum_r L_r to S for paths that all travel along axis 0 of C: (N, M, D), forwards (dy = +1)
-    or backwards (dy = -1), with dx in {-1, 0, 1} along axis 1. All paths advance in one loop, stacked
-    (k, M, D), so numpy's per-call overhead is paid once per step, not once per path.
+def _sweep(C: np.ndarray, P1, P2, dirs: list[tuple[int, int]], S: np.ndarray) -> None:
+    """Adds sum_r L_r to S for paths that all travel along axis 0 of C: (N, D, M), forwards (dy = +1)
+    or backwards (dy = -1), with dx in {-1, 0, 1} along axis 2. All paths advance in one loop, stacked
+    (k, D, M): one step updates a whole scanline of every path with a few numpy calls on two
+    alternating preallocated buffers (no allocation inside the loop).
 
     L_r(p, d) = C(p, d) + min(L(p-r, d), L(p-r, d±1) + P1, min_k L(p-r, k) + P2) - min_k L(p-r, k);
     a pixel whose predecessor p - r leaves the volume starts its path: L_r = C (a zero predecessor
     gives exactly that)."""
-    N, M, D = C.shape
+    N, D, M = C.shape
     k = len(dirs)
-    prev = np.zeros((k, M, D), C.dtype)
-    pred = np.zeros_like(prev)
+    straight = all(dx == 0 for _, dx in dirs)
+    prev, cur = np.empty((k, D, M), C.dtype), np.empty((k, D, M), C.dtype)
+    pred = prev if straight else np.zeros((k, D, M), C.dtype)
+    best, jump, tmp = np.empty((k, 1, M), C.dtype), np.empty((k, 1, M), C.dtype), np.empty((k, D - 1, M), C.dtype)
     for i in range(N):
         rows = [i if dy > 0 else N - 1 - i for dy, _ in dirs]
-        cost = C[rows]                                       # (k, M, D): each path's current row
         if i == 0:
-            cur = cost.copy()
-        elif all(dx == 0 for _, dx in dirs):
-            pred = prev                                      # straight paths: the predecessor is the previous row
+            np.take(C, rows, axis=0, out=cur)
         else:
-            pred[:] = 0.0
-            for j, (_, dx) in enumerate(dirs):              # predecessor column x - dx
-                if dx == 0:
-                    pred[j] = prev[j]
-                elif dx > 0:
-                    pred[j, 1:] = prev[j, :-1]
-                else:
-                    pred[j, :-1] = prev[j, 1:]
-        if i > 0:
-            best = pred.min(axis=2, keepdims=True)
-            step = np.minimum(pred, best + P2)
-            np.minimum(step[..., 1:], pred[..., :-1] + P1, out=step[..., 1:])
-            np.minimum(step[..., :-1], pred[..., 1:] + P1, out=step[..., :-1])
-            step -= best
-            cur = cost + step
+            if not straight:
+                for j, (_, dx) in enumerate(dirs):              # predecessor column x - dx (0 outside)
+                    if dx == 0:
+                        pred[j] = prev[j]
+                    elif dx > 0:
+                        pred[j, :, 1:] = prev[j, :, :-1]
+                    else:
+                        pred[j, :, :-1] = prev[j, :, 1:]
+            np.min(pred, axis=1, keepdims=True, out=best)
+            np.add(best, P2, out=jump)                           # cur <- min(pred, best + P2)
+            np.minimum(pred, jump, out=cur)
+            np.add(pred[:, :-1], P1, out=tmp)                    # d - 1 -> d
+            np.minimum(cur[:, 1:], tmp, out=cur[:, 1:])
+            np.add(pred[:, 1:], P1, out=tmp)                     # d + 1 -> d
+            np.minimum(cur[:, :-1], tmp, out=cur[:, :-1])
+            cur -= best
+            np.take(C, rows, axis=0, out=prev)                   # prev is free now: this step's costs
+            cur += prev
         for j, r in enumerate(rows):
             S[r] += cur[j]
-        prev = cur
+        prev, cur = cur, prev
+        if straight:
+            pred = prev
+
+
+def _aggregate(C: np.ndarray, P1, P2, paths: int) -> np.ndarray:
+    """S: (H, D, W) = sum over 4 or 8 paths of L_r, for C: (H, D, W) contiguous."""
+    S = np.zeros_like(C)
+    vertical = [(1, 0), (-1, 0)] + ([(1, 1), (1, -1), (-1, 1), (-1, -1)] if int(paths) == 8 else [])
+    _sweep(C, P1, P2, vertical, S)                          # rows: down, up and the diagonals
+    # Left and right paths are swept as the rows of the volume transposed to (W, D, H), accumulated in
+    # their own contiguous array (column-wise writes into S would be strided and slow). The transposes
+    # go plane by plane: a 2D (H, W) transpose stays in cache, a 3D one reads with a stride of D·W.
+    H, D, W = C.shape
+    C_t, S_h = np.empty((W, D, H), C.dtype), np.zeros((W, D, H), C.dtype)
+    for d in range(D):
+        C_t[:, d] = C[:, d].T
+    _sweep(C_t, P1, P2, [(1, 0), (-1, 0)], S_h)
+    for d in range(D):
+        S[:, d] += S_h[:, d].T
+    return S
 
 
 def sgm(C: np.ndarray, P1: float, P2: float, paths: int = 8) -> np.ndarray:
@@ -121,42 +162,35 @@ def sgm(C: np.ndarray, P1: float, P2: float, paths: int = 8) -> np.ndarray:
     int16 (small integer costs such as census, whose 8-path sums stay below 2^15)."""
     C = np.asarray(C)
     C = C if C.dtype in (np.float32, np.float64, np.int16) else C.astype(float)
-    S = np.zeros_like(C)
-    vertical = [(1, 0), (-1, 0)] + ([(1, 1), (1, -1), (-1, 1), (-1, -1)] if int(paths) == 8 else [])
-    _sweep(C, P1, P2, vertical, S)                          # rows: down, up and the diagonals
-    # Columns are swept as the rows of the transposed volume, accumulated in their own contiguous array
-    # (writing row by row into a transposed view of S would be strided and slow).
-    S_h = np.zeros((C.shape[1], C.shape[0], C.shape[2]), C.dtype)
-    _sweep(np.ascontiguousarray(C.transpose(1, 0, 2)), P1, P2, [(1, 0), (-1, 0)], S_h)
-    S += S_h.transpose(1, 0, 2)
-    return S
+    planes = np.ascontiguousarray(C.transpose(0, 2, 1))
+    return _aggregate(planes, C.dtype.type(P1), C.dtype.type(P2), paths).transpose(0, 2, 1)
 
 
-def census_volume(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3) -> np.ndarray:
-    """Census cost: Hamming distance between (2r+1)^2 - 1 bit signatures (is a neighbour darker than the
-    centre?), packed in uint64 (r <= 3); robust to gain and bias between the cameras.
-    Returns C: (H, W, d_max + 1) int16, the worst cost (all bits differ) where x - d < 0."""
+def _census_planes(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3) -> np.ndarray:
+    """Census costs as planes, C: (H, D, W) int16: the Hamming distance between (2r+1)^2 - 1 bit
+    signatures (is a neighbour darker than the centre?), packed in one uint64 (r <= 3); robust to gain and
+    bias between the cameras. The worst cost (all bits differ) where x - d < 0."""
     def signature(I):
         P = np.pad(I, r, mode="edge")
         H, W = I.shape
-        bits = np.zeros((H, W, 64), bool)                  # one byte per bit, packed into a uint64 below
-        k = 0
+        s, bit = np.zeros((H, W), np.uint64), np.uint64(0)
         for i in range(-r, r + 1):
             for j in range(-r, r + 1):
                 if i or j:
-                    np.less(P[r + i:r + i + H, r + j:r + j + W], I, out=bits[..., k])
-                    k += 1
-        return np.packbits(bits, axis=-1).view(np.uint64)[..., 0]
+                    s |= (P[r + i:r + i + H, r + j:r + j + W] < I).astype(np.uint64) << bit
+                    bit += np.uint64(1)
+        return s
     s_l, s_r = signature(I_l), signature(I_r)
     H, W = I_l.shape
-    C = np.empty((H, W, d_max + 1), dtype=np.int16)
-    for y0 in range(0, H, 32):      # blocks of rows: d-first writes, then one cache-sized transpose
-        a, b = s_l[y0:y0 + 32], s_r[y0:y0 + 32]
-        blk = np.full((d_max + 1,) + a.shape, (2 * r + 1) ** 2 - 1, dtype=np.int16)
-        for d in range(d_max + 1):
-            blk[d, :, d:] = np.bitwise_count(a[:, d:] ^ b[:, :W - d])
-        C[y0:y0 + 32] = blk.transpose(1, 2, 0)
+    C = np.full((H, d_max + 1, W), (2 * r + 1) ** 2 - 1, dtype=np.int16)
+    for d in range(d_max + 1):                             # plane d: contiguous rows, no transpose
+        C[:, d, d:] = np.bitwise_count(s_l[:, d:] ^ s_r[:, :W - d])
     return C
+
+
+def census_volume(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3) -> np.ndarray:
+    """Census cost C: (H, W, d_max + 1) int16 (a view of the planes), the worst cost where x - d < 0."""
+    return _census_planes(np.asarray(I_l, float), np.asarray(I_r, float), int(d_max), r).transpose(0, 2, 1)
 
 
 def sgm_stereo(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3, P1: float = 6.0, P2: float = 48.0,
@@ -164,10 +198,10 @@ def sgm_stereo(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3, P1: flo
     """The full matcher of the benchmark: 7×7 census costs, SGM (int16), WTA + sub-pixel + left-right
     check, then a 3×3 median filter of the kept disparities. Returns D: (H, W), NaN = none."""
     from scipy import ndimage
-    C = census_volume(np.asarray(I_l, float), np.asarray(I_r, float), int(d_max), r)
-    S = sgm(C, np.int16(P1), np.int16(P2), paths)      # int16: sums <= 8 (48 + P2) < 2^15
+    C = _census_planes(np.asarray(I_l, float), np.asarray(I_r, float), int(d_max), r)
+    S = _aggregate(C, np.int16(P1), np.int16(P2), paths)   # int16: sums <= 8 (48 + P2) < 2^15
     for d in range(1, d_max + 1):
-        S[:, :d, d] = _worst(S)                                # x < d: no partner in the right view
+        S[:, d, :d] = _worst(S)                                # x < d: no partner in the right view
     D = _wta_subpixel_lr(S, max_lr_diff)
     if median:
         D = np.where(np.isnan(D), D, ndimage.median_filter(np.nan_to_num(D, nan=0.0), size=median))
