@@ -25,10 +25,15 @@ from .occlusion import fb_margin, gt_occlusion_mask, occlusion_pair  # noqa: E40
 from .scene_flow import gt_scene_flow, scene_flow_scene  # noqa: E402
 from .tracking import (gt_joint_tracker, independent_tracker, occluded_error, tapvid_metrics,  # noqa: E402
                        tracking_sequence)
+from .debug_b import debug_case_b  # noqa: E402 (registers 9.19-9.20)
+from .frontier import gt_corr_lookup  # noqa: E402 (registers 9.24)
+from .tiny_raft import lookup_experiment, synthetic_warps  # noqa: E402
+from .demo_b import draw_tracks  # noqa: E402
 
 __all__ = [
     "FLO_MAGIC", "chairs_flo_bytes", "cv_flow_tools", "cv_warp", "gt_epe", "gt_epe_map", "gt_fl", "gt_read_flo",
     "gt_warp", "gt_write_flo", "homography_flow", "load_chairs", "plane_pair", "real_available", "small_homography",
 ]
 __all__ += ["fb_margin", "gt_joint_tracker", "gt_occlusion_mask", "gt_scene_flow", "independent_tracker",
-            "occluded_error", "occlusion_pair", "scene_flow_scene", "tapvid_metrics", "tracking_sequence"]
+            "occluded_error", "occlusion_pair", "scene_flow_scene", "tapvid_metrics", "tracking_sequence",
+            "debug_case_b", "gt_corr_lookup", "lookup_experiment", "synthetic_warps", "draw_tracks"]

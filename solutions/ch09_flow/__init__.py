@@ -16,7 +16,9 @@ from .occlusion import occlusion_mask  # noqa: E402
 from .questions_b import fb_verdicts, raft_sizes, scene_flow_errors_mm, tracker_choice  # noqa: E402
 from .scene_flow import scene_flow, unproject  # noqa: E402
 from .tracking import joint_tracker, similarity_fit  # noqa: E402
+from .debug_b import fix_lost_tracks, fix_noisy_scene_flow  # noqa: E402
+from .frontier import corr_lookup  # noqa: E402
 
 __all__ = ["bilinear", "epe", "epe_map", "fl_rate", "flow_tools", "read_flo", "warp_backward", "write_flo"]
 __all__ += ["fb_verdicts", "joint_tracker", "occlusion_mask", "raft_sizes", "scene_flow", "scene_flow_errors_mm",
-            "similarity_fit", "tracker_choice", "unproject"]
+            "similarity_fit", "tracker_choice", "unproject", "fix_lost_tracks", "fix_noisy_scene_flow", "corr_lookup"]
