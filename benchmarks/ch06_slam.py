@@ -3,7 +3,8 @@
 and front-end's trajectory metrics against evo (trajectory_table).
 
 - reference: `solutions.ch06_slam.optimize_pose_graph` (numpy/scipy: analytic Jacobians on the manifold,
-  sparse normal equations, SuperLU in symmetric mode, LM with Gauss-Newton steps, first pose held).
+  sparse normal equations summed straight into a CSC pattern worked out once, SuperLU in symmetric mode, LM
+  with Gauss-Newton steps, first pose held).
 - GTSAM 4.3.0: GaussNewtonOptimizer and LevenbergMarquardtOptimizer on BetweenFactorPose2/3 + a constrained
   prior on pose 0 (the graders' `to_gtsam`), relative and absolute error tolerances 1e-10 like the reference.
 

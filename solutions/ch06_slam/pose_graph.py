@@ -150,16 +150,47 @@ def _block_pattern(edges: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _normal_equations(T, edges, Z, info, w, pattern=None):
     """H = J^T W J (sparse, all poses, the first included) and g = J^T W r of the weighted system."""
+    Hb, gb, k, n = _edge_blocks(T, edges, Z, info, w)
+    rows, cols = pattern if pattern is not None else _block_pattern(edges, k)
+    H = sp.coo_matrix((Hb.ravel(), (rows, cols)), shape=(n, n)).tocsc()
+    g = np.bincount((k * np.asarray(edges)[:, :, None] + np.arange(k)).ravel(), gb.ravel(), minlength=n)
+    return H, g
+
+
+def _edge_blocks(T, edges, Z, info, w):
+    """Every edge's four blocks J_p^T W J_q (M, 2, 2, k, k) and its two gradient blocks J_p^T W r (M, 2, k)."""
     r, Ji, Jj = between_residuals(T, edges, Z)
     k, n = r.shape[1], r.shape[1] * len(T)
     J = np.stack([Ji, Jj], 1)                                          # (M, 2, k, k)
     JtW = np.swapaxes(J, -1, -2) @ (w[:, None, None] * info)[:, None]  # (M, 2, k, k): J_p^T W
     Hb = JtW[:, :, None] @ J[:, None]                                  # (M, 2, 2, k, k)
     gb = (JtW @ r[:, None, :, None])[..., 0]                           # (M, 2, k)
-    rows, cols = pattern if pattern is not None else _block_pattern(edges, k)
-    H = sp.coo_matrix((Hb.ravel(), (rows, cols)), shape=(n, n)).tocsc()
-    g = np.bincount((k * np.asarray(edges)[:, :, None] + np.arange(k)).ravel(), gb.ravel(), minlength=n)
-    return H, g
+    return Hb, gb, k, n
+
+
+class _GaugeFixedAssembly:
+    """The sparsity of H without the first pose's rows and columns, worked out once: each iteration then sums
+    the edge blocks into the CSC data array with one bincount (no COO -> CSC conversion, no sort, no slicing)."""
+
+    def __init__(self, edges: np.ndarray, k: int, n: int):
+        rows, cols = _block_pattern(edges, k)
+        keep = (rows >= k) & (cols >= k)                              # the first pose is held: its block goes
+        m = n - k
+        key = (cols[keep] - k) * m + (rows[keep] - k)                  # column-major: CSC order
+        uniq, self.slot = np.unique(key, return_inverse=True)
+        self.keep, self.size, self.m = keep, len(uniq), m
+        self.indices = (uniq % m).astype(np.int32)
+        self.indptr = np.r_[0, np.cumsum(np.bincount(uniq // m, minlength=m))].astype(np.int32)
+        self.diag = np.searchsorted(uniq, np.arange(m) * m + np.arange(m))   # where H_ii sits in the data
+        self.g_index = (k * np.asarray(edges)[:, :, None] + np.arange(k)).ravel()
+
+    def __call__(self, Hb: np.ndarray, gb: np.ndarray, lam: float = 0.0) -> tuple[sp.csc_matrix, np.ndarray]:
+        """(H + lam diag(H), g) without the first pose."""
+        data = np.bincount(self.slot, Hb.ravel()[self.keep], minlength=self.size)
+        if lam:
+            data[self.diag] += lam * np.maximum(data[self.diag], 1e-12)
+        g = np.bincount(self.g_index, gb.ravel(), minlength=self.m + len(gb[0, 0]))
+        return sp.csc_matrix((data, self.indices, self.indptr), shape=(self.m, self.m)), g[len(gb[0, 0]):]
 
 
 def _solve_spd(A: sp.csc_matrix, b: np.ndarray) -> np.ndarray:
@@ -175,14 +206,13 @@ def _optimize(T, edges, Z, info, kernel, c, max_iter, rel_tol):
     cost = lambda P: _kernel(chi2_terms(P, edges, Z, info), kernel, c)   # noqa: E731
     rho, w = cost(T)
     f, lam = rho.sum(), 0.0    # pure Gauss-Newton until a step fails (Marquardt damping slows the weak directions)
-    pattern = _block_pattern(edges, k)
+    assemble = _GaugeFixedAssembly(edges, k, k * len(T))              # gauge: the first pose is held
     for _ in range(max_iter):
-        H, g = _normal_equations(T, edges, Z, info, w, pattern)
-        H, g = H[k:, k:], g[k:]                                        # gauge: the first pose is held
+        Hb, gb, _, _ = _edge_blocks(T, edges, Z, info, w)
         while True:
-            D = sp.diags(lam * np.maximum(H.diagonal(), 1e-12))
+            H, g = assemble(Hb, gb, lam)
             try:
-                delta = _solve_spd((H + D).tocsc(), -g)
+                delta = _solve_spd(H, -g)
             except RuntimeError:                        # singular (a pose left unconstrained): damp and retry
                 lam = max(10 * lam, 1e-6)
                 continue
