@@ -83,3 +83,111 @@ MUTANTS = [
     ("9.9", "Fl with OR", _tools(fl=_fl_or), "OR counts too many"),
     ("9.9", "Fl in percent", _tools(fl=_fl_percent), "not a percentage"),
 ]
+
+
+# ----------------------------------------------------------------- 9.10 lucas_kanade, 9.11 pyramidal_lk
+
+from scipy.ndimage import correlate  # noqa: E402
+
+from solutions.ch09_flow import lk as ref_lk  # noqa: E402
+
+SOBEL = np.array([[-1.0, 0.0, 1.0], [-2.0, 0.0, 2.0], [-1.0, 0.0, 1.0]])
+
+
+def _lk_with(gradients=None, sign=1.0, test="eig", swap=False, iters=None):
+    """The reference LK with one piece replaced: the gradient operator, the sign of I_t, the trackability
+    test ("eig", "none", "det" as in the seed's sketch), (x, y) swapped, the iteration count."""
+    def lucas_kanade(I1, I2, pts, win=9, iters_=20, eps=0.01, min_eig=1.0):
+        pts = np.asarray(pts, float)
+        P = pts[:, ::-1] if swap else pts
+        Ix, Iy = (gradients or ref_lk.gradients)(I1)
+        I2s = np.asarray(I1, float) + sign * (np.asarray(I2, float) - np.asarray(I1, float))
+        d, ok = ref_lk._track_level(np.asarray(I1, float), I2s, Ix, Iy, P, np.zeros_like(P), win,
+                                    iters if iters is not None else iters_, eps, -np.inf if test != "eig" else min_eig)
+        if test == "det":
+            ox, oy = ref_lk._window(win)
+            X, Y = P[:, :1] + ox, P[:, 1:] + oy
+            gx, gy = ref_tools.bilinear(Ix, X, Y), ref_tools.bilinear(Iy, X, Y)
+            ok = (gx * gx).sum(1) * (gy * gy).sum(1) - (gx * gy).sum(1) ** 2 >= 1e-6
+        out = P + d
+        return (out[:, ::-1] if swap else out), ok
+    return lucas_kanade
+
+
+def _np_gradient_sobel(I):
+    """Sobel without its 1/8: gradients 8x too large (the eigenvalues 64x)."""
+    I = np.asarray(I, float)
+    return correlate(I, SOBEL, mode="mirror"), correlate(I, SOBEL.T, mode="mirror")
+
+
+def _np_gradient(I):
+    gy, gx = np.gradient(np.asarray(I, float))
+    return gx, gy
+
+
+def pyr_no_doubling(I1, I2, pts, win=21, max_level=3, iters=30, eps=0.01, min_eig=1.0):
+    """The guess passed down a level is not doubled (g_{L-1} = g_L + d_L, in the coarse level's pixels)."""
+    P1, P2 = ref_lk.pyramid(I1, max_level), ref_lk.pyramid(I2, max_level)
+    pts = np.asarray(pts, float)
+    g = np.zeros_like(pts)
+    for L in range(max_level, -1, -1):
+        Ix, Iy = ref_lk.gradients(P1[L])
+        d, ok = ref_lk._track_level(P1[L], P2[L], Ix, Iy, pts / 2 ** L, g, win, iters, eps, min_eig)
+        g = np.where(ok[:, None], d, g)
+    return pts + g, ok
+
+
+def pyr_single_level(I1, I2, pts, win=21, max_level=3, iters=30, eps=0.01, min_eig=1.0):
+    """maxLevel ignored: no pyramid (the seed's LK), large motions are out of reach."""
+    return ref_lk.lucas_kanade(I1, I2, pts, win, iters, eps, min_eig)
+
+
+def pyr_points_not_scaled(I1, I2, pts, win=21, max_level=3, iters=30, eps=0.01, min_eig=1.0):
+    """The points are not divided by 2^L: every coarse level tracks the wrong place."""
+    P1, P2 = ref_lk.pyramid(I1, max_level), ref_lk.pyramid(I2, max_level)
+    pts = np.asarray(pts, float)
+    g = np.zeros_like(pts)
+    for L in range(max_level, -1, -1):
+        Ix, Iy = ref_lk.gradients(P1[L])
+        d, ok = ref_lk._track_level(P1[L], P2[L], Ix, Iy, np.minimum(pts, np.array(P1[L].shape[::-1]) - 1), g, win,
+                                    iters, eps, min_eig)
+        g = np.where(ok[:, None], d, g) * (2 if L else 1)
+    return pts + g, ok
+
+
+def pyr_flipped_it(I1, I2, pts, win=21, max_level=3, iters=30, eps=0.01, min_eig=1.0):
+    """I_t with the wrong sign at every level: the result points away from the motion."""
+    p2, ok = ref_lk.pyramidal_lk(I2, I1, pts, win, max_level, iters, eps, min_eig)
+    return p2, ok
+
+
+def pyr_no_eig_test(I1, I2, pts, win=21, max_level=3, iters=30, eps=0.01, min_eig=1.0):
+    p2, ok = ref_lk.pyramidal_lk(I1, I2, pts, win, max_level, iters, eps, -np.inf)
+    return p2, np.ones(len(p2), bool)
+
+
+def pyr_swapped(I1, I2, pts, win=21, max_level=3, iters=30, eps=0.01, min_eig=1.0):
+    """The displacement stacked as (dy, dx)."""
+    p2, ok = ref_lk.pyramidal_lk(I1, I2, pts, win, max_level, iters, eps, min_eig)
+    return pts + (p2 - pts)[:, ::-1], ok
+
+
+def lk_swapped(I1, I2, pts, win=9, iters=20, eps=0.01, min_eig=1.0):
+    """The displacement stacked as (dy, dx)."""
+    p2, ok = ref_lk.lucas_kanade(I1, I2, pts, win, iters, eps, min_eig)
+    return pts + (p2 - pts)[:, ::-1], ok
+
+
+MUTANTS += [
+    ("9.10", "Sobel without 1/8", _lk_with(gradients=_np_gradient_sobel), "wrong scale"),
+    ("9.10", "sign of I_t flipped", _lk_with(sign=-1.0), None),
+    ("9.10", "(dy, dx) stacked", lk_swapped, "swapped"),
+    ("9.10", "no eigenvalue test", _lk_with(test="none"), "no eigenvalue test"),
+    ("9.10", "determinant test (the seed's)", _lk_with(test="det", gradients=_np_gradient), "determinant"),
+    ("9.11", "guess not doubled going down", pyr_no_doubling, "guess down doubled"),
+    ("9.11", "no pyramid", pyr_single_level, "guess down doubled"),
+    ("9.11", "points not scaled by 2^L", pyr_points_not_scaled, None),
+    ("9.11", "I_t flipped (frames swapped)", pyr_flipped_it, None),
+    ("9.11", "no eigenvalue test", pyr_no_eig_test, "no eigenvalue test"),
+    ("9.11", "(dy, dx) stacked", pyr_swapped, "swapped"),
+]

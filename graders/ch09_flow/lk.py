@@ -1,0 +1,209 @@
+"""9.10-9.11 — Lucas-Kanade: single level, vectorised, with the eigenvalue test; pyramidal with iterative
+refinement, as cv2.calcOpticalFlowPyrLK defines it.
+
+Oracles: the exact flow of synthetic textured planes under known homographies (pairs.lk_scene), with
+flat squares and straight-edge squares pasted in whose windows are untrackable by construction; the
+grader's own structure tensor (central differences) decides which points are clearly trackable (smallest
+mean eigenvalue ≥ 20 × min_eig) and only those are judged for position. cv2.calcOpticalFlowPyrLK is the
+library-backed implementation (minEigThreshold = min_eig / 1024: OpenCV's Scharr derivatives are 32× the
+gradient and it scales the tensor by 2⁻²⁰).
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from graders.convert import OutputError
+from graders.engine import Case, Exercise, Hint, like, register, shared_run
+
+from .pairs import lk_scene
+from .tools import gt_bilinear
+
+TRACKABLE = 20.0     # judged for position where the grader's λ_min ≥ 20 × min_eig (far from the threshold)
+
+
+def cv_lucas_kanade(I1, I2, pts, win=9, iters=20, eps=0.01, min_eig=1.0, max_level=0):
+    """cv2.calcOpticalFlowPyrLK on the images rounded to 8 bits (what it accepts): (pts2 (N, 2), status (N,))."""
+    u8 = lambda I: np.clip(np.rint(I), 0, 255).astype(np.uint8)   # noqa: E731
+    p2, st, _ = cv2.calcOpticalFlowPyrLK(u8(I1), u8(I2), np.asarray(pts, np.float32).reshape(-1, 1, 2), None,
+                                         winSize=(win, win), maxLevel=max_level,
+                                         criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iters, eps),
+                                         minEigThreshold=min_eig / 1024)
+    return p2.reshape(-1, 2).astype(float), st.ravel().astype(bool)
+
+
+def cv_pyramidal_lk(I1, I2, pts, win=21, max_level=3, iters=30, eps=0.01, min_eig=1.0):
+    return cv_lucas_kanade(I1, I2, pts, win, iters, eps, min_eig, max_level)
+
+
+def gt_min_eig(I: np.ndarray, pts: np.ndarray, win: int) -> np.ndarray:
+    """The grader's λ_min of the mean structure tensor (np.gradient's central differences) at each point."""
+    gy, gx = np.gradient(np.asarray(I, float))
+    h = (win - 1) / 2
+    oy, ox = np.mgrid[-h:h + 1, -h:h + 1]
+    X, Y = pts[:, :1] + ox.ravel(), pts[:, 1:] + oy.ravel()
+    a, b, c = (gt_bilinear(g, X, Y).mean(1) for g in (gx * gx, gx * gy, gy * gy))
+    return (a + c - np.sqrt((a - c) ** 2 + 4 * b * b)) / 2
+
+
+def _draw(rng, width, height, shift, warp, win, min_eig, max_level=0):
+    """A scene and the points to track: a jittered grid (trackable where λ_min is high, the rest not
+    judged), the flat and the edge centres (untrackable). Returns (args, truth)."""
+    p = lk_scene(rng, width, height, shift, warp, win)
+    m = (win - 1) / 2 + shift + 4
+    step = 6.0 if width * height < 50000 else 9.0
+    ys, xs = np.mgrid[m:height - m:step, m:width - m:step]
+    grid = np.c_[xs.ravel(), ys.ravel()] + rng.uniform(-0.5, 0.5, (xs.size, 2))
+    bad = np.vstack([p["flat"], p["edge"]])
+    pts = np.vstack([grid, bad])
+    order = rng.permutation(len(pts))
+    pts = pts[order]
+    lam = gt_min_eig(p["I1"], pts, win)
+    exact = pts + np.stack([gt_bilinear(p["flow"][..., k], pts[:, 0], pts[:, 1]) for k in (0, 1)], 1)
+    untrack = np.isin(order, np.arange(len(grid), len(pts)))
+    is_flat = np.isin(order, np.arange(len(grid), len(grid) + len(p["flat"])))
+    # Judged positions keep away from the border by the window at the second-coarsest level: nearer, the
+    # coarse windows hang over the border and every tracker (OpenCV's too) may start too far off to recover.
+    inner = (win - 1) / 2 + 2 + (((win - 1) / 2 + 2) * 2 ** (max_level - 1) if max_level else 0) + shift
+    inside = ((pts >= inner) & (pts <= np.array([width, height]) - 1 - inner)).all(1)
+    truth = {"exact": exact, "pts": pts, "good": (lam >= TRACKABLE * min_eig) & ~untrack & inside,
+             "untrack": untrack, "flat": is_flat}
+    return (p["I1"], p["I2"], pts), truth
+
+
+def _convert(out, case):
+    n = len(case.args[2])
+    try:
+        p2, st = out
+        p2, st = np.asarray(p2, float).reshape(-1, 2), np.asarray(st).reshape(-1)
+    except Exception:
+        raise OutputError("expected (pts2: (N, 2), status: (N,) bool)") from None
+    if len(p2) != n or len(st) != n:
+        raise OutputError(f"expected {n} points and {n} status flags, got {len(p2)} and {len(st)}")
+    if not np.isfinite(p2[st.astype(bool)]).all():
+        raise OutputError("non-finite positions on points flagged trackable")
+    return p2, st.astype(bool)
+
+
+def _p90(out, truth):
+    """90th percentile of the position error (px) over the clearly trackable points."""
+    g = truth["good"]
+    return float(np.percentile(np.linalg.norm(out[0][g] - truth["exact"][g], axis=1), 90))
+
+
+def _status_wrong(out, truth):
+    """Wrong flags: clearly trackable points flagged False plus flat/edge points flagged True."""
+    st = out[1]
+    return float((~st[truth["good"]]).sum() + st[truth["untrack"]].sum())
+
+
+def _cases(label, draws, arg_names):
+    def cases(rng):
+        for i, kw in enumerate(draws(rng)):
+            call_kw = {k: kw[k] for k in arg_names if k in kw}
+            args, truth = _draw(rng, kw["width"], kw["height"], kw["shift"], kw["warp"], kw["win"], kw["min_eig"],
+                                kw.get("max_level", 0))
+            run = shared_run(lambda fn, a=args, k=call_kw: fn(*a, **k))
+            info = {"shift": kw["shift"], **call_kw}
+            # 0.2 px at the 90th percentile: the reference reaches 0.03-0.08 (the 0.5-grey noise, bilinear
+            # interpolation's pixel locking, the window's deformation under the homography); a flipped I_t
+            # errs by 2|d|, swapped axes by ~|d| √2, a missing pyramid level by most of |d| (|d| ≥ 0.5 px).
+            yield Case(f"{label} {i + 1}: positions (shift {kw['shift']:.1f} px)", args, truth, _p90, 0.2,
+                       "px (90th pct)", kwargs=call_kw, call=run, convert=_convert, info=info,
+                       key=f"{label}-{i + 1}-positions", tags=("positions",))
+            # Every clear point must be right: trackable texture has λ_min ≥ 20 × min_eig, flat and edge
+            # windows ~0.06 (the noise), so a correct test has no borderline points here.
+            yield Case(f"{label} {i + 1}: status flags", args, truth, _status_wrong, 0, "wrong flags", kwargs=call_kw,
+                       call=run, convert=_convert, info=info, key=f"{label}-{i + 1}-status", tags=("status",))
+    return cases
+
+
+def _single_draws(rng):
+    return [dict(width=200, height=150, shift=rng.uniform(0.5, 1.5), warp=0.005, win=9, min_eig=1.0),
+            dict(width=180, height=140, shift=rng.uniform(0.5, 1.5), warp=0.005, win=int(rng.choice([7, 11])),
+                 min_eig=float(rng.choice([0.5, 2.0])))]
+
+
+def _pyr_draws(rng):
+    # Motions beyond one level's reach (a win-px window captures ~win/2 px), and beyond what the finest
+    # level can make up when the guess is not doubled (half the motion left for level 0): 20-30 px with
+    # 13 px windows, 30-42 px with 21 px windows, three levels (a 30-42 px motion is 4-5 px at level 3).
+    return [dict(width=320, height=240, shift=rng.uniform(20.0, 30.0), warp=0.003, win=13, max_level=3,
+                 min_eig=float(rng.choice([0.5, 1.0, 2.0]))),
+            dict(width=400, height=300, shift=rng.uniform(30.0, 42.0), warp=0.003, win=21, max_level=3, min_eig=1.0)]
+
+
+def _status_hint(c, out):
+    st, t = out[1], c.expected
+    if st[t["untrack"]].all():
+        return ("every flat and edge window is flagged trackable: no eigenvalue test, a determinant test with an "
+                "absolute threshold (det grows with the window and the contrast), or gradients on the wrong "
+                "scale (Sobel's 3x3 kernel sums to 8, Scharr's to 32: divide so a unit ramp has I_x = 1)? Flag "
+                "status = λ_min(G) / window pixels ≥ min_eig.")
+    if st[t["untrack"] & ~t["flat"]].any() and not st[t["flat"]].any():
+        return ("straight-edge windows pass your test but flat ones do not: a determinant or trace test lets an "
+                "edge through (λ_max huge, λ_min ~ 0); test the smallest eigenvalue (the aperture problem).")
+    if st[t["flat"]].any():
+        return ("flat windows (only noise) pass the test: check the gradient's scale (Sobel's 3x3 kernel "
+                "sums to 8, Scharr's to 32: divide, so a unit ramp has gradient 1) and the division by the "
+                "window's pixel count.")
+    if (~st[t["good"]]).any():
+        return "well-textured windows are rejected: λ_min is of the *mean* tensor (divide by the pixel count), ≥ min_eig."
+    return ""
+
+
+def _ratio(c, out):
+    t = c.expected
+    d_true = t["exact"][t["good"]] - t["pts"][t["good"]]
+    d_out = out[0][t["good"]] - t["pts"][t["good"]]
+    return float(np.median(np.sum(d_out * d_true, 1) / np.maximum(np.sum(d_true ** 2, 1), 1e-9)))
+
+
+def _far(c, out) -> float:
+    """Fraction of the judged points more than 1 px from the truth."""
+    t = c.expected
+    return float(np.mean(np.linalg.norm(out[0][t["good"]] - t["exact"][t["good"]], axis=1) > 1.0))
+
+
+def _near(bug):
+    """The output's positions match the mistake `bug(truth) -> pts2` on the judged points (within 0.2 px + 5 %
+    of the motion: a mistake like a reversed motion is only the forward flow's mirror to first order)."""
+    def when(c, out):
+        t = c.expected
+        g = t["good"]
+        d = np.linalg.norm(t["exact"][g] - t["pts"][g], axis=1)
+        return "positions" in c.tags and float(np.median(np.linalg.norm(out[0][g] - bug(t)[g], axis=1) - 0.05 * d)) <= 0.2
+    return when
+
+
+def _pos_hints(pyramidal: bool):
+    hints = [
+        Hint("the points move the wrong way: I_t = I2 − I1 and the system is G d = −Σ ∇I I_t "
+             "(with e = I1 − I2(x + d): G d = Σ ∇I e).", _near(lambda t: 2 * t["pts"] - t["exact"])),
+        Hint("the displacement's components are swapped: d = (u, v) = (dx, dy); pts are (x, y) = (column, row), "
+             "I[y, x], and I_x is the derivative along columns.",
+             _near(lambda t: t["pts"] + (t["exact"] - t["pts"])[:, ::-1])),
+        Hint(lambda c, out: _status_hint(c, out), lambda c, out: "status" in c.tags and bool(_status_hint(c, out))),
+    ]
+    if pyramidal:
+        hints.append(Hint(lambda c, out: f"{100 * _far(c, out):.0f} % of the well-textured points end > 1 px off on a "
+                          f"{c.info['shift']:.0f} px motion: beyond one level's reach. Track pts / 2^L at level L and "
+                          "pass the guess down doubled: g_(L-1) = 2 (g_L + d_L).",
+                          lambda c, out: "positions" in c.tags and _far(c, out) > 0.02))
+    else:
+        hints.append(Hint(lambda c, out: f"your displacements are {_ratio(c, out):.2f} of the true ones: check "
+                          "the gradient's scale (a unit ramp must give I_x = 1) and iterate (warp I2 by the current "
+                          "d, solve again) until the step is below eps.",
+                          lambda c, out: "positions" in c.tags and 0.05 < _ratio(c, out) < 0.9))
+    return hints
+
+
+register(
+    Exercise(id="9.10", title="Single-level Lucas-Kanade with the eigenvalue test", name="lucas_kanade", kind="code",
+             points=3, cases=_cases("single level", _single_draws, ("win", "min_eig")), hints=_pos_hints(False),
+             fallback=cv_lucas_kanade, timeout=20.0, arg_names=("I1", "I2", "pts", "win", "iters", "eps", "min_eig")),
+    Exercise(id="9.11", title="Pyramidal Lucas-Kanade (as cv2.calcOpticalFlowPyrLK)", name="pyramidal_lk", kind="code",
+             points=4, cases=_cases("pyramid", _pyr_draws, ("win", "max_level", "min_eig")), hints=_pos_hints(True),
+             fallback=cv_pyramidal_lk, timeout=30.0,
+             arg_names=("I1", "I2", "pts", "win", "max_level", "iters", "eps", "min_eig")),
+)
