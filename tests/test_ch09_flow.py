@@ -29,6 +29,9 @@ def reference(ex) -> object:
 # Library-backed implementations (OpenCV): exercise id -> (function, cases it cannot answer and why).
 LIBRARY = {
     "9.9": (ch9.cv_flow_tools, {}),
+    "9.10": (ch9.cv_lucas_kanade, {}),
+    "9.11": (ch9.cv_pyramidal_lk, {}),
+    "9.13": (ch9.cv_dense_flow, {}),
 }
 
 

@@ -12,12 +12,13 @@ the API of the notebook, the tests and the benchmark.
 """
 from __future__ import annotations
 
-from . import lk, tools  # noqa: F401 (register 9.9-9.11)
+from . import dense, lk, tools  # noqa: F401 (register 9.9-9.13)
 from .pairs import (FLO_MAGIC, chairs_flo_bytes, gt_read_flo, gt_write_flo, homography_flow, load_chairs,
                     plane_pair, real_available, small_homography)
 from .tools import cv_flow_tools, cv_warp, gt_epe, gt_epe_map, gt_fl, gt_warp
 
 # ---- part A (9.10-9.13, 9.1-9.4, 9.17-9.18, 9.21-9.23) ----
+from .dense import cv_dense_flow, cv_dis, cv_farneback, gt_horn_schunck
 from .lk import cv_lucas_kanade, cv_pyramidal_lk, gt_min_eig
 from .pairs import lk_scene
 
@@ -33,7 +34,7 @@ from .tiny_raft import lookup_experiment, synthetic_warps  # noqa: E402
 from .demo_b import draw_tracks  # noqa: E402
 
 __all__ = [
-    "FLO_MAGIC", "chairs_flo_bytes", "cv_lucas_kanade", "cv_pyramidal_lk", "gt_min_eig", "lk_scene", "cv_flow_tools", "cv_warp", "gt_epe", "gt_epe_map", "gt_fl", "gt_read_flo",
+    "FLO_MAGIC", "chairs_flo_bytes", "cv_dense_flow", "cv_dis", "cv_farneback", "gt_horn_schunck", "cv_lucas_kanade", "cv_pyramidal_lk", "gt_min_eig", "lk_scene", "cv_flow_tools", "cv_warp", "gt_epe", "gt_epe_map", "gt_fl", "gt_read_flo",
     "gt_warp", "gt_write_flo", "homography_flow", "load_chairs", "plane_pair", "real_available", "small_homography",
 ]
 __all__ += ["fb_margin", "gt_joint_tracker", "gt_occlusion_mask", "gt_scene_flow", "independent_tracker",

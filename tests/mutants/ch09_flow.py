@@ -191,3 +191,100 @@ MUTANTS += [
     ("9.11", "no eigenvalue test", pyr_no_eig_test, "no eigenvalue test"),
     ("9.11", "(dy, dx) stacked", pyr_swapped, "swapped"),
 ]
+
+
+# ----------------------------------------------------------------- 9.12 horn_schunck, 9.13 dense_flow
+
+from scipy.ndimage import gaussian_filter, median_filter  # noqa: E402
+
+from solutions.ch09_flow import dense as ref_dense  # noqa: E402
+
+
+def _hs(I1, I2, alpha, iters, kernel=None, sign=1.0, alpha2=True, grad=None):
+    I1, I2 = np.asarray(I1, float), np.asarray(I2, float)
+    Ix, Iy = grad(I1) if grad else np.gradient(I1)[::-1]
+    It = sign * (I2 - I1)
+    den = (alpha ** 2 if alpha2 else alpha) + Ix ** 2 + Iy ** 2
+    k = ref_dense.HS_AVERAGE if kernel is None else kernel
+    u = np.zeros_like(I1)
+    v = np.zeros_like(I1)
+    for _ in range(iters):
+        ub, vb = correlate(u, k, mode="nearest"), correlate(v, k, mode="nearest")
+        r = (Ix * ub + Iy * vb + It) / den
+        u, v = ub - Ix * r, vb - Iy * r
+    return np.stack([u, v], -1)
+
+
+def hs_four_neighbours(I1, I2, alpha=10.0, iters=100):
+    return _hs(I1, I2, alpha, iters, kernel=np.array([[0, 0.25, 0], [0.25, 0, 0.25], [0, 0.25, 0]]))
+
+
+def hs_with_centre(I1, I2, alpha=10.0, iters=100):
+    return _hs(I1, I2, alpha, iters, kernel=np.full((3, 3), 1 / 9))
+
+
+def hs_it_flipped(I1, I2, alpha=10.0, iters=100):
+    return _hs(I1, I2, alpha, iters, sign=-1.0)
+
+
+def hs_alpha_not_squared(I1, I2, alpha=10.0, iters=100):
+    return _hs(I1, I2, alpha, iters, alpha2=False)
+
+
+def hs_sobel(I1, I2, alpha=10.0, iters=100):
+    """Sobel/8 gradients instead of the specified central differences."""
+    return _hs(I1, I2, alpha, iters, grad=lambda I: (correlate(I, SOBEL / 8, mode="nearest"),
+                                                     correlate(I, SOBEL.T / 8, mode="nearest")))
+
+
+def _c2f(I1, I2, double=True, levels=True, fuse=True):
+    """The reference coarse-to-fine flow with one piece missing."""
+    I1, I2 = np.asarray(I1, float), np.asarray(I2, float)
+    P1, P2 = [gaussian_filter(I1, 1.0)], [gaussian_filter(I2, 1.0)]
+    while levels and min(P1[-1].shape) > 40:
+        P1.append(gaussian_filter(P1[-1], 1.0)[::2, ::2])
+        P2.append(gaussian_filter(P2[-1], 1.0)[::2, ::2])
+    f = np.zeros(P1[-1].shape + (2,))
+    for L in range(len(P1) - 1, -1, -1):
+        if f.shape[:2] != P1[L].shape:
+            f = ref_dense._resize_flow(f, P1[L].shape) / (1 if double else 2)
+        f = ref_dense._dense_lk_level(P1[L], P2[L], f, 2.0, 5, 1.0)
+    if not fuse:
+        return f
+    T = np.broadcast_to(np.median(f.reshape(-1, 2), 0), f.shape).copy()
+    e_f, e_T = (gaussian_filter(np.abs(ref_tools.warp_backward(I2, g) - I1), 2.0) for g in (f, T))
+    f = np.where((e_f < 0.5 * e_T)[..., None], f, T)
+    return np.stack([median_filter(f[..., k], 5, mode="nearest") for k in (0, 1)], -1)
+
+
+def dense_no_fusion(I1, I2):
+    """Coarse-to-fine dense LK alone: right on the planes, but on FlyingChairs the chairs' motion bleeds into
+    the flat background (EPE ~11 px, worse than zero flow)."""
+    return _c2f(I1, I2, fuse=False)
+
+
+def dense_no_pyramid(I1, I2):
+    """One level only: large motions (and the chairs) are out of reach."""
+    return _c2f(I1, I2, levels=False)
+
+
+def dense_frames_swapped(I1, I2):
+    """I1 and I2 swapped: the flow 2 -> 1 (≈ minus the answer)."""
+    return ref_dense.dense_flow(I2, I1)
+
+
+def dense_uv_swapped(I1, I2):
+    return ref_dense.dense_flow(I1, I2)[..., ::-1]
+
+
+MUTANTS += [
+    ("9.12", "4-neighbour average", hs_four_neighbours, "4-neighbour average"),
+    ("9.12", "3x3 mean with the centre", hs_with_centre, "includes the centre"),
+    ("9.12", "sign of I_t flipped", hs_it_flipped, "wrong way"),
+    ("9.12", "alpha not squared", hs_alpha_not_squared, "α squared"),
+    ("9.12", "Sobel gradients", hs_sobel, None),
+    ("9.13", "no fusion with the dominant motion", dense_no_fusion, "your flow's EPE"),
+    ("9.13", "no pyramid", dense_no_pyramid, None),
+    ("9.13", "frames swapped", dense_frames_swapped, "sign and (u, v) order"),
+    ("9.13", "(v, u) order", dense_uv_swapped, "sign and (u, v) order"),
+]
