@@ -145,7 +145,8 @@ def focal_from_fundamental(F: np.ndarray, K1: np.ndarray, K2: np.ndarray,
 
 
 def _essential_cost(F: np.ndarray, Ka: np.ndarray, Kb: np.ndarray) -> np.ndarray:
-    """Mendonça–Cipolla cost (s1 − s2) / (s1 + s2) of E = Kbᵀ F Ka for stacks Ka, Kb: (n, 3, 3) -> (n,)."""
+    """Mendonça–Cipolla cost (s1 − s2) / (s1 + s2) of E = Kbᵀ F Ka for stacks Ka, Kb: (n, 3, 3) -> (n,);
+    F: (3, 3), or (n, 3, 3) for one F per row."""
     S = np.linalg.svd(np.swapaxes(Kb, 1, 2) @ F @ Ka, compute_uv=False)
     return (S[:, 0] - S[:, 1]) / (S[:, 0] + S[:, 1])
 
@@ -204,4 +205,41 @@ def self_calibrate(K: np.ndarray, keypoints: list, matches: dict, min_matches: i
                 Kb[:, 0, 0] = Kb[:, 1, 1] = prior[b] * (grid if groups[b] == g else factor[b])
                 cost += w * _essential_cost(F, Ka, Kb)
             factor[members[g]] = grid[np.argmin(cost)]
+    factor = _polish_focals(pairs, K, prior, factor, groups, [g for g in members if logs[g]], grid[[0, -1]])
     K[:, 0, 0] = K[:, 1, 1] = prior * factor
+
+
+def _polish_focals(pairs: list, K: np.ndarray, prior: np.ndarray, factor: np.ndarray, groups: np.ndarray,
+                   free: list, bounds: np.ndarray) -> np.ndarray:
+    """Minimise the inlier-weighted Mendonça–Cipolla cost over the focal factors of the `free` camera groups
+    jointly (Powell in log f, within `bounds`), from the coordinate-descent result and from the prior; the lower
+    of the two wins. (n,) factors of the prior.
+
+    Why: the cost's valley is curved (one pair pins (f1, f2) along a curve) and moving one camera at a time
+    on a grid stalls in it. On a K-unknown draw of 4.14 (seed 4132363027) the sweeps stopped at 2.5-3.0x every
+    true f with a cost of 45, where the joint minimum (0.88x, cost 17; the keypoints' radial distortion biases
+    F) lies one joint move away; the run that followed never recovered its lost points (0.35° rotations)."""
+    from scipy.optimize import minimize
+
+    if not pairs or not free:
+        return factor
+    a_idx, b_idx = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+    Fs, w = np.array([p[2] for p in pairs]), np.array([p[3] for p in pairs])
+    slot = {g: s for s, g in enumerate(free)}
+    cam_slot = np.array([slot.get(g, -1) for g in groups])
+
+    def factors_of(x):
+        return np.where(cam_slot >= 0, np.exp(x[np.maximum(cam_slot, 0)]), factor)
+
+    def cost(x):
+        f = prior * factors_of(x)
+        Ka, Kb = K[a_idx].copy(), K[b_idx].copy()
+        Ka[:, 0, 0] = Ka[:, 1, 1] = f[a_idx]
+        Kb[:, 0, 0] = Kb[:, 1, 1] = f[b_idx]
+        return float(w @ _essential_cost(Fs, Ka, Kb))
+
+    first = np.array([np.log(factor[groups == g][0]) for g in free])
+    lo, hi = np.log(bounds)
+    best = min((minimize(cost, x0, method="Powell", bounds=[(lo, hi)] * len(free), options={"xtol": 1e-4})
+                for x0 in (first, np.zeros(len(free)))), key=lambda r: r.fun)
+    return factors_of(best.x) if best.fun < cost(first) else factor
