@@ -1,0 +1,305 @@
+"""10.10 — a map/reduce feature pipeline on Dask: extraction per image, matching and verification per pair.
+
+The three stages are given (`PipelineStages`: tiny, deterministic, pure numpy — Harris corners with 5x5
+patch descriptors, mutual nearest neighbours, a translation RANSAC that tries every match), so the
+exercise is the distributed part: one task per image and per pair with their dependencies, retries of
+failed tasks, one row per unordered pair in a fixed order, and a result file replaced atomically.
+
+A run is judged three ways on one draw (`shared_run`): its rows against the grader's serial pipeline
+(exactly: the stages are deterministic, so a distributed run must agree bit for bit); with stages that
+fail transiently (an extraction and a verification raise `TransientTaskError` the first time, and where
+the task runs on a Dask worker that worker is closed too: "a worker lost mid-run"); and the result file,
+which must end complete at `out_path` while a reader that opened the previous version keeps reading it
+whole (write a temporary file beside it, then `os.replace`).
+
+The judge prepares the folder of `out_path` (in graded mode, inside the learner process's own writable
+folder) and holds the previous file open; stages sleep 0-12 ms per task so that completion order is not
+submission order.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+import time
+import zlib
+
+import numpy as np
+
+from graders import scene
+from graders.convert import OutputError
+from graders.engine import Case, Exercise, Hint, raised, register, shared_run
+
+STALE = {"pairs": [[0, 1, -1]], "note": "the previous run's result"}
+
+
+class TransientTaskError(RuntimeError):
+    """A task that fails once and succeeds when retried (a pre-empted node, a network blip)."""
+
+
+class PipelineStages:
+    """The pipeline's three stages (not callable itself: its methods are the tasks).
+
+    extract(image (H, W)) -> (kp (K, 2) float, desc (K, 25) float); match(f1, f2) -> (M, 2) int indices;
+    verify(f1, f2, matches) -> int, the inliers of the best translation (within 1.5 px).
+    flaky: task keys (`task_key`: the stage's name and a checksum of its inputs) that fail the first time
+    they run (marker files in `scratch` make "first" exact across threads and processes).
+    """
+
+    def __init__(self, n_corners: int = 40, flaky: tuple[str, ...] = (), scratch: str | None = None,
+                 latency_s: float = 0.012):
+        self.n_corners, self.flaky, self.scratch, self.latency_s = n_corners, tuple(flaky), scratch, latency_s
+
+    def reliable(self) -> "PipelineStages":
+        return PipelineStages(self.n_corners, (), None, 0.0)
+
+    # -- failure injection and scrambled latencies
+    def _task(self, kind: str, *inputs) -> None:
+        key = task_key(kind, *inputs)
+        if self.latency_s:
+            time.sleep(self.latency_s * (zlib.crc32(key.encode()) % 97) / 96)
+        if key not in self.flaky or self.scratch is None:
+            return
+        try:   # first call only: O_EXCL makes "first" exact across threads and processes
+            os.close(os.open(os.path.join(self.scratch, f".failed-{key}"), os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+        except FileExistsError:
+            return
+        _lose_this_worker()
+        raise TransientTaskError(f"task {key} failed transiently (simulated: its worker was lost); retry it")
+
+    # -- the stages
+    def extract(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        self._task("extract", image)
+        img = np.asarray(image, float)
+        gy, gx = np.gradient(img)
+        box = lambda a: sum(np.roll(np.roll(a, dy, 0), dx, 1) for dy in (-1, 0, 1) for dx in (-1, 0, 1))
+        Sxx, Syy, Sxy = box(gx * gx), box(gy * gy), box(gx * gy)
+        H = Sxx * Syy - Sxy ** 2 - 0.05 * (Sxx + Syy) ** 2           # Harris response
+        H[:4], H[-4:], H[:, :4], H[:, -4:] = -np.inf, -np.inf, -np.inf, -np.inf
+        peak = H == np.max([np.roll(np.roll(H, dy, 0), dx, 1) for dy in (-2, -1, 0, 1, 2) for dx in (-2, -1, 0, 1, 2)], 0)
+        ys, xs = np.nonzero(peak & np.isfinite(H))
+        order = np.lexsort((xs, ys, -H[ys, xs]))[:self.n_corners]  # strongest first, ties by position
+        ys, xs = ys[order], xs[order]
+        patches = np.array([img[y - 2:y + 3, x - 2:x + 3].ravel() for y, x in zip(ys, xs)]).reshape(-1, 25)
+        patches = patches - patches.mean(1, keepdims=True)
+        desc = patches / np.maximum(np.linalg.norm(patches, axis=1, keepdims=True), 1e-12)
+        return np.c_[xs, ys].astype(float), desc
+
+    def match(self, f1, f2) -> np.ndarray:
+        self._task("match", f1[0], f2[0])
+        d = 2 - 2 * f1[1] @ f2[1].T                                    # squared distance of unit descriptors
+        if d.size == 0:
+            return np.zeros((0, 2), int)
+        a, b = np.argmin(d, 1), np.argmin(d, 0)
+        i = np.flatnonzero(b[a] == np.arange(len(a)))                  # mutual nearest neighbours
+        return np.c_[i, a[i]].astype(int)
+
+    def verify(self, f1, f2, matches) -> int:
+        self._task("verify", f1[0], f2[0])
+        m = np.asarray(matches, int).reshape(-1, 2)
+        if len(m) == 0:
+            return 0
+        shift = f2[0][m[:, 1]] - f1[0][m[:, 0]]                        # each match's translation
+        close = np.linalg.norm(shift[:, None] - shift[None], axis=2) <= 1.5
+        return int(close.sum(1).max())                                 # every match tried as the hypothesis
+
+
+def task_key(kind: str, *inputs) -> str:
+    """A task's identity from its inputs (what a content-addressed cache would use)."""
+    crc = 0
+    for a in inputs:
+        crc = zlib.crc32(np.ascontiguousarray(a, float).tobytes(), crc)
+    return f"{kind}-{crc:08x}"
+
+
+def _lose_this_worker() -> None:
+    """If this task runs on a Dask worker and another worker of this process is still running, close this
+    one (the scheduler then reruns its tasks elsewhere). The last worker is never closed: the run would
+    wait forever for a worker, which is a test of patience, not of retries."""
+    try:
+        from distributed import Worker, get_worker
+        from distributed.core import Status
+        worker = get_worker()
+        running = [w for w in list(Worker._instances) if w.status == Status.running]
+    except Exception:        # not on a Dask worker (serial fallback, threads scheduler): just fail
+        return
+    if len(running) >= 2:
+        worker.loop.add_callback(worker.close, timeout=2)
+
+
+# ----------------------------------------------------------------- the data and the serial oracle
+
+def pipeline_images(rng: np.random.Generator, n_images: int = 6, size: int = 48) -> tuple[list[np.ndarray], list]:
+    """n crops of a texture along a walk (neighbours overlap by ~70 %), and candidate pairs as retrieval
+    returns them: both orders, repeats and one self-pair."""
+    tex = scene.texture(str(rng.choice(["astronaut", "camera", "coffee", "brick"])), (160, 160)).astype(float)
+    x0, y0 = rng.integers(0, 160 - size - 15 * n_images), rng.integers(0, 160 - size - 15)
+    images = []
+    for k in range(n_images):
+        x, y = x0 + 12 * k + int(rng.integers(0, 3)), y0 + int(rng.integers(0, 12))
+        images.append(np.clip(tex[y:y + size, x:x + size] + rng.normal(0, 0.01, (size, size)), 0, 1))
+    pairs = [(i, j) for i in range(n_images) for j in range(i + 1, min(i + 3, n_images))]
+    candidates = pairs + [(j, i) for i, j in pairs[::3]] + pairs[:2] + [(1, 1)]
+    order = rng.permutation(len(candidates))
+    return images, [tuple(int(v) for v in candidates[k]) for k in order]
+
+
+def gt_serial_pipeline(images, pairs, stages: PipelineStages) -> np.ndarray:
+    """The serial pipeline: rows (i, j, inliers) for every unordered pair i < j once, sorted: (M, 3) int."""
+    stages = stages.reliable()
+    feats = [stages.extract(img) for img in images]
+    unique = sorted({(min(i, j), max(i, j)) for i, j in pairs if i != j})
+    return np.array([(i, j, stages.verify(feats[i], feats[j], stages.match(feats[i], feats[j]))) for i, j in unique],
+                    int).reshape(-1, 3)
+
+
+def gt_run_pipeline(images, pairs, stages, out_path, address=None, n_workers=2, retries=3) -> np.ndarray:
+    """Stand-in: the serial pipeline with a retry loop per task, the result replaced atomically."""
+    def attempt(fn, *args):
+        for k in range(retries + 1):
+            try:
+                return fn(*args)
+            except TransientTaskError:
+                if k == retries:
+                    raise
+    feats = [attempt(stages.extract, img) for img in images]
+    rows = []
+    for i, j in sorted({(min(i, j), max(i, j)) for i, j in pairs if i != j}):
+        m = attempt(stages.match, feats[i], feats[j])
+        rows.append((i, j, attempt(stages.verify, feats[i], feats[j], m)))
+    rows = np.array(rows, int).reshape(-1, 3)
+    folder = os.path.dirname(os.path.abspath(out_path))
+    fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
+    with os.fdopen(fd, "w") as f:
+        json.dump({"pairs": rows.tolist()}, f)
+    os.replace(tmp, out_path)
+    return rows
+
+
+# ----------------------------------------------------------------- judging
+
+def _folder_for(fn) -> str:
+    """Where the learner's process may write: its private folder in graded mode (the judge sees the same
+    path), a fresh temporary folder otherwise."""
+    learner = getattr(fn, "learner", None) or getattr(getattr(fn, "parent", None), "learner", None)
+    base = getattr(learner, "private", None)
+    return tempfile.mkdtemp(prefix="cv3d-10.10-", dir=base)
+
+
+def _run_and_inspect(fn, images, pairs, flaky_kinds: tuple[str, ...]) -> dict:
+    """Run the learner's pipeline once with flaky stages and a stale result file held open; report what
+    came back and what the file system shows afterwards."""
+    folder = _folder_for(fn)
+    try:
+        out_path = os.path.join(folder, "matches.json")
+        with open(out_path, "w") as f:
+            json.dump(STALE, f)
+        inode = os.stat(out_path).st_ino
+        reference = PipelineStages().reliable()
+        feats = [reference.extract(img) for img in images]
+        keys = {"extract": task_key("extract", images[len(images) // 2]),
+                "verify": task_key("verify", feats[0][0], feats[2][0])}
+        stages = PipelineStages(flaky=tuple(keys[k] for k in flaky_kinds), scratch=folder)
+        with open(out_path) as reader:                       # a reader of the previous version
+            rows = fn(images, list(pairs), stages, out_path)
+            old_text = reader.read()
+        try:
+            with open(out_path) as f:
+                written = json.load(f)
+        except (OSError, ValueError) as exc:
+            written = f"unreadable ({type(exc).__name__}: {exc})"
+        leftovers = sorted(n for n in os.listdir(folder) if n != "matches.json" and not n.startswith(".failed-"))
+        return {"rows": rows, "written": written, "old_intact": old_text == json.dumps(STALE),
+                "replaced": os.stat(out_path).st_ino != inode if os.path.exists(out_path) else False,
+                "leftovers": leftovers}
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def _convert_rows(out, case: Case) -> np.ndarray:
+    rows = out["rows"] if isinstance(out, dict) else out
+    try:
+        rows = np.asarray(rows)
+    except Exception:
+        raise OutputError("expected the rows (i, j, inliers) as an (M, 3) integer array") from None
+    if rows.ndim != 2 or rows.shape[1:] != (3,) or not np.issubdtype(rows.dtype, np.number):
+        raise OutputError(f"expected an (M, 3) integer array of rows (i, j, inliers), got shape {rows.shape}")
+    if not np.array_equal(rows, np.round(rows)):
+        raise OutputError("rows must be integers (i, j, inliers)")
+    return rows.astype(int)
+
+
+def _rows_differ(rows: np.ndarray, expected: np.ndarray) -> float:
+    """Rows that differ from the serial pipeline's, position by position (+ the difference in count)."""
+    n = min(len(rows), len(expected))
+    return float((rows[:n] != expected[:n]).any(1).sum() + abs(len(rows) - len(expected)))
+
+
+def _file_problems(out, expected: np.ndarray) -> float:
+    """0 if the file holds exactly the rows, was replaced (new inode) while the old version stayed whole for
+    its reader, and no temporary file is left; else the number of those that fail."""
+    written = out["written"]
+    ok_content = isinstance(written, dict) and np.array_equal(np.asarray(written.get("pairs"), int).reshape(-1, 3),
+                                                              expected)
+    return float((not ok_content) + (not out["old_intact"]) + (not out["replaced"]) + bool(out["leftovers"]))
+
+
+def _convert_file(out, case: Case) -> dict:
+    if not isinstance(out, dict) or "written" not in out:
+        raise OutputError("the pipeline returned nothing to inspect")
+    return out
+
+
+def _same_rows_other_order(case: Case, rows: np.ndarray) -> bool:
+    e = case.expected
+    return len(rows) == len(e) and not np.array_equal(rows, e) and np.array_equal(
+        rows[np.lexsort((rows[:, 1], rows[:, 0]))], e)
+
+
+def _duplicates(case: Case, rows: np.ndarray) -> bool:
+    return len(rows) > len(case.expected) or bool((rows[:, 0] >= rows[:, 1]).any())
+
+
+def _file_text(case: Case, out: dict) -> str:
+    why = []
+    if not out["old_intact"] or not out["replaced"]:
+        why.append("the file was rewritten in place (a reader of the previous version saw it change; a crash "
+                   "mid-write leaves a torn file): write a temporary file in the same folder, then os.replace it")
+    if out["leftovers"]:
+        why.append(f"temporary files left behind: {', '.join(out['leftovers'][:3])}")
+    if not isinstance(out["written"], dict):
+        why.append(f"the result file is {out['written']}")
+    return "; ".join(why) or "the file's rows are not the returned rows"
+
+
+PIPELINE_HINTS = [
+    raised("TransientTaskError", "a task failed once and the run gave up: pass retries= to client.submit/map "
+           "(and retry in your serial fallback too); transient failures are normal on a cluster."),
+    Hint("the right rows in another order: gather the results in submission order (or sort by (i, j)), never "
+         "in completion order (as_completed).", _same_rows_other_order),
+    Hint("duplicated pairs: retrieval returns (i, j) and (j, i) and repeats; match each unordered pair i < j once "
+         "(and never an image with itself).", _duplicates),
+    Hint(_file_text, lambda c, out: isinstance(out, dict) and "written" in out and _file_problems(out, c.expected) > 0),
+]
+
+
+def _cases(rng: np.random.Generator):
+    images, pairs = pipeline_images(rng)
+    expected = gt_serial_pipeline(images, pairs, PipelineStages())
+    runs = {kinds: shared_run(lambda fn, kinds=kinds: _run_and_inspect(fn, images, pairs, kinds))
+            for kinds in ((), ("extract", "verify"))}
+    label = f"{len(images)} images, {len(pairs)} candidate pairs"
+    # Exact: the stages are deterministic, so every row must equal the serial pipeline's.
+    yield Case(f"{label}: rows as the serial pipeline", (), expected, _rows_differ, 0, "rows differ",
+               convert=_convert_rows, call=runs[()], key="serial")
+    yield Case(f"{label}, an extraction and a verification fail once (worker lost)", (), expected, _rows_differ, 0,
+               "rows differ", convert=_convert_rows, call=runs[("extract", "verify")], key="transient")
+    yield Case(f"{label}: result file replaced atomically", (), expected, _file_problems, 0, "problems",
+               convert=_convert_file, call=runs[()], key="atomic")
+
+
+register(Exercise(
+    id="10.10", title="A map/reduce matching pipeline on Dask", name="run_pipeline", kind="code", points=3,
+    cases=_cases, hints=PIPELINE_HINTS, fallback=gt_run_pipeline, timeout=60.0,
+    arg_names=("images", "pairs", "stages", "out_path")))

@@ -1,0 +1,192 @@
+"""Chapter 10 (learned and distributed part) mutant catalogue: realistic wrong implementations.
+
+Each entry is (exercise id, short name, function, hint fragment or None). 10.9's are the classic slips of
+writing DUSt3R's global alignment (one scale for every pair, confidences ignored, no spanning-tree start,
+a spanning tree over the wrong weights, camera-to-world poses returned); 10.10's those of a first
+distributed pipeline (no retries, results in completion order, duplicated pairs, a result file written in
+place); the DEBUG ones the wrong fixes of 10.12-10.13. Building blocks that are not the point of a mutant
+come from the reference solution, so each mutant differs from a correct implementation in one mistake.
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from solutions.ch10_large_scale import pointmaps as ref_pm
+from solutions.geometry import umeyama
+
+# ----------------------------------------------------------------- 10.9 global_alignment
+
+
+def _descend(pairs, n_views, Rcw0, c0, chi0, sigma0, steps=300, lr=0.01, weights=True, scales=True):
+    """The reference's Adam loop with switches for the mistakes."""
+    first = torch.tensor([p["i"] for p in pairs])
+    views = torch.tensor([[p["i"], p["j"]] for p in pairs])
+    X = torch.tensor(np.array([[p["X_i"], p["X_j"]] for p in pairs]))
+    C = torch.tensor(np.array([[p["C_i"], p["C_j"]] for p in pairs]))
+    if not weights:
+        C = torch.ones_like(C)
+    with ref_pm._one_thread():
+        R0 = torch.tensor(Rcw0)
+        w = torch.zeros(n_views, 3, dtype=torch.float64, requires_grad=True)
+        centres = torch.tensor(c0, requires_grad=True)
+        chi = torch.tensor(chi0, requires_grad=True)
+        log_s = torch.tensor(np.log(sigma0), requires_grad=scales)
+        opt = torch.optim.Adam([w, centres, chi] + ([log_s] if scales else []), lr=lr)
+        for _ in range(steps):
+            opt.zero_grad()
+            Rcw = ref_pm._exp_so3(w) @ R0
+            sigma = torch.exp(log_s - log_s.mean())
+            pred = sigma[:, None, None, None] * torch.einsum("eab,ekpb->ekpa", Rcw[first], X) + centres[first][:, None, None]
+            loss = (C * torch.sqrt(((chi[views] - pred) ** 2).sum(-1) + 1e-12)).sum() / C.sum()
+            loss.backward()
+            opt.step()
+        Rcw = (ref_pm._exp_so3(w) @ R0).detach().numpy()
+        sigma = torch.exp(log_s - log_s.mean()).detach().numpy()
+        C_n = centres.detach().numpy()
+    Rs = np.transpose(Rcw, (0, 2, 1))
+    return Rs, -np.einsum("nab,nb->na", Rs, C_n), sigma
+
+
+def alignment_one_scale(pairs, n_views):
+    """Every pair at scale 1: rigid fits in the tree and no sigma_e in the loss."""
+    index = {(p["i"], p["j"]): e for e, p in enumerate(pairs)}
+    weight = np.zeros((n_views, n_views))
+    for p in pairs:
+        weight[p["i"], p["j"]] += p["C_i"].mean() + p["C_j"].mean()
+        weight[p["j"], p["i"]] += p["C_i"].mean() + p["C_j"].mean()
+    tree = ref_pm.max_spanning_tree(weight)
+    Rcw, centres = np.tile(np.eye(3), (n_views, 1, 1)), np.zeros((n_views, 3))
+    chi = {tree[0][0]: pairs[index[(tree[0][0], tree[0][1])]]["X_i"]}
+    for a, b in tree:
+        p = pairs[index[(b, a)]]
+        _, R, t = umeyama(p["X_j"], chi[a], with_scale=False)
+        Rcw[b], centres[b] = R, t
+        chi[b] = p["X_i"] @ R.T + t
+    chi0 = np.array([chi[v] for v in range(n_views)])
+    return _descend(pairs, n_views, Rcw, centres, chi0, np.ones(len(pairs)), scales=False)
+
+
+def alignment_ignores_confidence(pairs, n_views):
+    """Unit weights everywhere: the tree and the loss treat the network's flagged pairs like the others."""
+    flat = [dict(p, C_i=np.ones_like(p["C_i"]), C_j=np.ones_like(p["C_j"])) for p in pairs]
+    return ref_pm.global_alignment(flat, n_views)
+
+
+def alignment_identity_start(pairs, n_views):
+    """No spanning-tree start: every camera at the origin, unrotated; each view's pointmap from its first pair."""
+    chi0 = np.zeros((n_views,) + pairs[0]["X_i"].shape)
+    for p in pairs[::-1]:
+        chi0[p["i"]] = p["X_i"]
+    return _descend(pairs, n_views, np.tile(np.eye(3), (n_views, 1, 1)), np.zeros((n_views, 3)), chi0,
+                    np.ones(len(pairs)))
+
+
+def alignment_min_spanning_tree(pairs, n_views):
+    """A MINIMUM spanning tree of confidence (scipy's default sense): the start chains the worst pairs."""
+    inverted = [dict(p, C_i=1.0 / p["C_i"], C_j=1.0 / p["C_j"]) for p in pairs]
+    Rcw, centres, chi, sigma = ref_pm._initialise(inverted, n_views)
+    return _descend(pairs, n_views, Rcw, centres, chi, sigma)
+
+
+def alignment_camera_to_world(pairs, n_views):
+    """Returns (Rcw, C) — the camera-to-world pose — where world-to-camera was asked for."""
+    Rs, ts, sigma = ref_pm.global_alignment(pairs, n_views)
+    return np.transpose(Rs, (0, 2, 1)), -np.einsum("nba,nb->na", Rs, ts), sigma
+
+
+MUTANTS = [
+    ("10.9", "one scale for every pair", alignment_one_scale, "each pair needs its own sigma"),
+    ("10.9", "confidences ignored", alignment_ignores_confidence, "weight every point's residual by its confidence"),
+    ("10.9", "no spanning-tree start", alignment_identity_start, "poor local minimum"),
+    ("10.9", "camera-to-world returned", alignment_camera_to_world, "your poses are camera-to-world"),
+]
+
+
+# ----------------------------------------------------------------- 10.10 run_pipeline
+
+from solutions.ch10_large_scale import distributed as ref_dist  # noqa: E402
+
+
+def _cluster_map(images, todo, stages, retries):
+    """Extraction, matching and verification on an in-process LocalCluster; returns futures of verify."""
+    import logging
+
+    from distributed import Client, LocalCluster
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None,
+                           silence_logs=logging.CRITICAL)
+    client = Client(cluster)
+    kw = {"retries": retries} if retries else {}
+    feats = client.map(stages.extract, images, key=[f"extract-{k}" for k in range(len(images))], **kw)
+    matches = [client.submit(stages.match, feats[i], feats[j], key=f"match-{i}-{j}", **kw) for i, j in todo]
+    verified = [client.submit(stages.verify, feats[i], feats[j], m, key=f"verify-{i}-{j}", **kw)
+                for (i, j), m in zip(todo, matches)]
+    return client, cluster, verified
+
+
+def pipeline_no_retries(images, pairs, stages, out_path, address=None, n_workers=2, retries=3):
+    """No retries=: the first transient failure ends the run."""
+    todo = ref_dist.unique_pairs(pairs)
+    client, cluster, verified = _cluster_map(images, todo, stages, 0)
+    try:
+        counts = client.gather(verified)
+    finally:
+        client.close()
+        cluster.close()
+    rows = np.array([(i, j, n) for (i, j), n in zip(todo, counts)], int).reshape(-1, 3)
+    ref_dist.write_atomically(out_path, {"pairs": rows.tolist()})
+    return rows
+
+
+def pipeline_completion_order(images, pairs, stages, out_path, address=None, n_workers=2, retries=3):
+    """Rows appended as tasks finish (as_completed): the right rows, in whatever order the cluster chose."""
+    from distributed import as_completed
+    todo = ref_dist.unique_pairs(pairs)
+    client, cluster, verified = _cluster_map(images, todo, stages, retries)
+    which = {f.key: ij for f, ij in zip(verified, todo)}
+    try:
+        rows = [(*which[f.key], int(f.result())) for f in as_completed(verified)]
+    finally:
+        client.close()
+        cluster.close()
+    rows = np.array(rows, int).reshape(-1, 3)
+    ref_dist.write_atomically(out_path, {"pairs": rows.tolist()})
+    return rows
+
+
+def pipeline_duplicate_pairs(images, pairs, stages, out_path, address=None, n_workers=2, retries=3):
+    """Every candidate as retrieval returned it: (j, i) next to (i, j), repeats, (i, i)."""
+    todo = [(int(i), int(j)) for i, j in pairs]
+    client, cluster, verified = _cluster_map(images, todo, stages, retries)
+    try:
+        counts = client.gather(verified)
+    finally:
+        client.close()
+        cluster.close()
+    rows = np.array([(i, j, n) for (i, j), n in zip(todo, counts)], int).reshape(-1, 3)
+    ref_dist.write_atomically(out_path, {"pairs": rows.tolist()})
+    return rows
+
+
+def pipeline_writes_in_place(images, pairs, stages, out_path, address=None, n_workers=2, retries=3):
+    """The result file opened with "w" and written where it is: a crash mid-write leaves a torn file."""
+    import json
+    todo = ref_dist.unique_pairs(pairs)
+    client, cluster, verified = _cluster_map(images, todo, stages, retries)
+    try:
+        counts = client.gather(verified)
+    finally:
+        client.close()
+        cluster.close()
+    rows = np.array([(i, j, n) for (i, j), n in zip(todo, counts)], int).reshape(-1, 3)
+    with open(out_path, "w") as f:
+        json.dump({"pairs": rows.tolist()}, f)
+    return rows
+
+
+MUTANTS += [
+    ("10.10", "no retries", pipeline_no_retries, "pass retries="),
+    ("10.10", "completion order", pipeline_completion_order, "in another order"),
+    ("10.10", "duplicated pairs", pipeline_duplicate_pairs, "duplicated pairs"),
+    ("10.10", "written in place", pipeline_writes_in_place, "os.replace"),
+]
