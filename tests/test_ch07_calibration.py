@@ -30,6 +30,7 @@ LIBRARY = {
     "7.8": (ch7.cv_refine_calibration, {}),
     "7.9": (ch7.cv_stereo_extrinsics, {}),
     "7.10": (ch7.cv_stereo_rectify, {}),
+    "7.21": (ch7.cv_fix_mount_shift, {}),
 }
 
 

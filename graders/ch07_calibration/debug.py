@@ -1,4 +1,5 @@
-"""7.18-7.19 — DEBUG: repair a drifted stereo rig and a camera whose clock lags the IMU.
+"""7.18-7.19 — DEBUG: repair a drifted stereo rig and a camera whose clock lags the IMU (7.21-7.22, the field
+cases, live in `field_debug`; `debug_case` serves all four).
 
 Each generator returns (the case shown to the learner, the hidden truth); a fix is judged by what it
 produces on data it never saw: 7.18 by the vertical disparity of held-out board views rectified with
@@ -15,6 +16,7 @@ from graders.geometry import so3_exp
 from . import boards
 from .stereo import _convert_rig, boards_seen_by_both, cv_stereo_calibrate, cv_stereo_rectify, synthetic_stereo, vertical_disparity
 from .timesync import gt_time_offset, imu_camera_rates
+from .field_debug import debug_mount_shift, debug_rolling_shutter  # 7.21-7.22 (registered there)
 
 
 def debug_stereo_drift(rng) -> tuple[dict, dict]:
@@ -114,4 +116,5 @@ register(
              hints=TIME_FIX_HINTS, fallback=cv_fix_time_offset, timeout=30.0),
 )
 
-debug_case = debug_practice({"7.18": debug_stereo_drift, "7.19": debug_time_offset})
+debug_case = debug_practice({"7.18": debug_stereo_drift, "7.19": debug_time_offset,
+                             "7.21": debug_mount_shift, "7.22": debug_rolling_shutter})

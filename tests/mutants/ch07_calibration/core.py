@@ -1,4 +1,4 @@
-"""Chapter 7 mutant catalogue: realistic wrong implementations, one per known mistake.
+"""Chapter 7 mutants, 7.5-7.19 (see the package docstring; 7.21-7.22 are in `field`).
 
 Each entry is (exercise id, short name, function, hint fragment or None). The grader must take points
 off every one; where a hint exists for the mistake it must fire. The mistakes are the classic slips of
