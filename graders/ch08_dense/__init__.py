@@ -35,6 +35,9 @@ from . import fit2d  # noqa: F401,E402 (register 8.16)
 from .fit2d import gt_fit_splats, initial_gaussians, psnr, render_splats, target_image  # noqa: E402
 __all__ += ["gt_fit_splats", "initial_gaussians", "psnr", "render_splats", "target_image", "single_thread"]
 from .nerf import single_thread  # noqa: E402
+from . import tiny_nerf  # noqa: F401,E402 (register 8.13)
+from .tiny_nerf import gt_train_tiny_nerf, nerf_scene, render_field  # noqa: E402
+__all__ += ["gt_train_tiny_nerf", "nerf_scene", "render_field"]
 from . import neural_questions  # noqa: F401,E402 (register 8.4-8.7, 8.22-8.23)
 from . import neural_debug  # noqa: F401,E402 (register 8.21)
 from .neural_debug import debug_blurry, neural_debug_case  # noqa: E402

@@ -1,13 +1,14 @@
-"""NeRF from scratch in torch (CPU): volume rendering and inverse-CDF hierarchical sampling (8.12).
+"""NeRF from scratch in torch (CPU): volume rendering and inverse-CDF hierarchical sampling (8.12), a tiny NeRF (8.13).
 
 Conventions: rays carry sorted sample depths t (R, S); the last interval ends at t_far; σ is constant
 on each interval, so the quadrature below is exact for it (Mildenhall et al., ECCV 2020, eq. 3).
 """
 from __future__ import annotations
 
+import numpy as np
 import torch
 
-__all__ = ["volume_render"]
+__all__ = ["volume_render", "positional_encoding", "TinyField", "train_tiny_nerf"]
 
 
 def _t(x) -> torch.Tensor:
@@ -38,3 +39,59 @@ def volume_render(sigma, rgb, t, t_far, u):
     e0, e1 = edges.detach().gather(1, i), edges.detach().gather(1, i + 1)
     t_fine = e0 + (u - c0) / (c1 - c0).clamp_min(1e-12) * (e1 - e0)
     return w, C, depth, acc, t_fine
+
+
+# ----------------------------------------------------------------- 8.13 a tiny NeRF
+
+def positional_encoding(x: torch.Tensor, L: int) -> torch.Tensor:
+    """γ(x) for x: (..., 3) -> (..., 3 + 6L): x, then sin(2^k π x) and cos(2^k π x) for k < L (NeRF eq. 4,
+    with the input kept as the released code does). L = 0 gives x itself."""
+    freqs = torch.pi * 2.0 ** torch.arange(L, dtype=x.dtype)                # (L,)
+    xb = x[..., None, :] * freqs[:, None]                                    # (..., L, 3)
+    return torch.cat([x, torch.sin(xb).flatten(-2), torch.cos(xb).flatten(-2)], -1)
+
+
+class TinyField(torch.nn.Module):
+    """F(X) = (σ ≥ 0 by softplus, rgb ∈ (0, 1) by sigmoid) from γ(X): (3 + 6L) → width → width → 4."""
+
+    def __init__(self, L: int = 4, width: int = 48, sigma_bias: float = -2.0):
+        super().__init__()
+        self.L = L
+        self.mlp = torch.nn.Sequential(torch.nn.Linear(3 + 6 * L, width), torch.nn.ReLU(),
+                                       torch.nn.Linear(width, width), torch.nn.ReLU(), torch.nn.Linear(width, 4))
+        with torch.no_grad():   # start almost empty (σ ≈ 0.13 /m): a fog of σ = 0.7 /m takes many steps to clear
+            self.mlp[-1].bias[0] = sigma_bias
+
+    def forward(self, X: torch.Tensor):
+        h = self.mlp(positional_encoding(X, self.L))
+        return torch.nn.functional.softplus(h[..., 0]), torch.sigmoid(h[..., 1:])
+
+
+def train_tiny_nerf(rays_o, rays_d, rgb, near: float, far: float, steps: int = 400, seed: int = 0, L: int = 4,
+                    n_samples: int = 24, batch: int = 128, lr: float = 1e-2):
+    """Exercise 8.13: fit a TinyField to training rays rays_o, rays_d: (R, 3), rgb: (R, 3) with `steps` Adam steps,
+    each on `batch` random rays × `n_samples` stratified depths in [near, far] (one uniform draw per bin, so the
+    field is asked everywhere along the ray, not at fixed depths), rendered with volume_render (8.12) and
+    an MSE loss. Returns field(X: (N, 3)) -> (σ (N,), rgb (N, 3)) as numpy arrays."""
+    g = torch.Generator().manual_seed(int(seed))
+    torch.manual_seed(int(seed))
+    o, d, c = (torch.as_tensor(np.asarray(a), dtype=torch.float32) for a in (rays_o, rays_d, rgb))
+    net = TinyField(L)
+    opt = torch.optim.Adam(net.parameters(), lr=lr)
+    bins = torch.linspace(float(near), float(far), n_samples + 1)
+    u_mid = torch.full((batch, 1), 0.5)                                      # volume_render's t_fine, unused here
+    for _ in range(int(steps)):
+        i = torch.randint(0, len(o), (batch,), generator=g)
+        t = bins[:-1] + torch.rand(batch, n_samples, generator=g) * (bins[1] - bins[0])    # (B, S)
+        sigma, col = net(o[i, None] + t[..., None] * d[i, None])                            # (B, S), (B, S, 3)
+        C = volume_render(sigma, col, t, float(far), u_mid)[1]
+        loss = ((C - c[i]) ** 2).mean()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+
+    def field(X):
+        with torch.no_grad():
+            s, col = net(torch.as_tensor(np.asarray(X), dtype=torch.float32))
+        return s.numpy(), col.numpy()
+    return field

@@ -588,3 +588,7 @@ MUTANTS += [
     ("8.21", "more steps, no densification", blurry_more_steps, "no more Gaussians than the initialisation"),
     ("8.21", "unchanged", blurry_unchanged, "no more Gaussians than the initialisation"),
 ]
+
+# ----------------------------------------------------------------- 8.13 tiny NeRF (its own module: size)
+from mutants.ch08_dense_nerf import MUTANTS as _NERF_MUTANTS  # noqa: E402
+MUTANTS += _NERF_MUTANTS
