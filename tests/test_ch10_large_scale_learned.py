@@ -8,6 +8,11 @@ from __future__ import annotations
 
 import pytest
 
+from graders.chapters import by_number
+
+if not by_number(10).ready:   # a planned chapter: its graders are work in progress, not yet held to the tests
+    pytest.skip("chapter 10 is planned (ready=False in graders/chapters.py)", allow_module_level=True)
+
 import grader_checks as checks
 from graders.ch10_large_scale import distributed, pointmaps, questions_b  # noqa: F401 (register 10.4-10.5, 10.9-10.10)
 from graders.engine import _REGISTRY

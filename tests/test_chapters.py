@@ -29,9 +29,12 @@ def test_no_stray_chapter_files():
     stems = {c.prefix for c in CHAPTERS}
     found = {p.stem if p.is_file() else p.name for d in ("graders", "solutions", "benchmarks", "tests/mutants")
              for p in (ROOT / d).iterdir() if p.name.startswith("ch") and p.name[2:4].isdigit()}
-    assert found <= stems, found - stems
+    # A chapter's mutants may be split by part: tests/mutants/chNN_<stem>_<part>.py, like its test files.
+    stray = {f for f in found if not any(f == s or f.startswith(s + "_") for s in stems)}
+    assert not stray, stray
+    # Every ready chapter has its notebook; a planned chapter may have one in progress (not run by the tests).
     notebooks = {p.name for p in (ROOT / "notebooks").glob("[0-9][0-9]_*.ipynb")}
-    assert notebooks == {c.notebook.split("/")[1] for c in READY}
+    assert {c.notebook.split("/")[1] for c in READY} <= notebooks <= {c.notebook.split("/")[1] for c in CHAPTERS}
 
 
 def test_by_number_accepts_the_usual_spellings():

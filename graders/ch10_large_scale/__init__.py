@@ -21,12 +21,14 @@ from . import questions  # noqa: F401 (registers 10.1-10.3, 10.14-10.16)
 # ---- part A
 from .retrieval import (average_precision, brute_force_scores, cv_vocab_tree_retrieve, mean_ap, place_images,
                         place_problem, recall_at_k, sift_descriptors, structured_problem, tfidf_scores)
+from .debug import DEBUG_GENERATORS as _DEBUG_A
+from .debug import components, components_after, cv_fix_components, top_k_pairs
 from .merge import apply_sim3, gauge_errors, gt_merge_reconstructions, merge_problem
-from .sim3 import cv_sim3_ransac, held_rms, sim3_problem
+from .sim3 import cv_sim3_ransac, exact_planar_problem, gt_sim3_ransac, held_rms, sim3_problem
 
-DEBUG_GENERATORS: dict = {}
-__all__ = ["apply_sim3", "gauge_errors", "gt_merge_reconstructions", "merge_problem",
-           "average_precision", "brute_force_scores", "cv_sim3_ransac", "cv_vocab_tree_retrieve", "debug_case",
+DEBUG_GENERATORS: dict = dict(_DEBUG_A)
+__all__ = ["components", "components_after", "cv_fix_components", "top_k_pairs", "apply_sim3", "gauge_errors", "gt_merge_reconstructions", "merge_problem",
+           "average_precision", "brute_force_scores", "cv_sim3_ransac", "cv_vocab_tree_retrieve", "debug_case", "exact_planar_problem", "gt_sim3_ransac",
            "held_rms", "mean_ap", "place_images", "place_problem", "recall_at_k", "sift_descriptors", "sim3_problem",
            "structured_problem", "tfidf_scores"]
 

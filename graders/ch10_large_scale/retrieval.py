@@ -269,14 +269,14 @@ def _cases(rng):
 
 
 def _bug(**kw):
-    return lambda c: (None, tfidf_scores(c.info["db_words"], c.info["query_words"], c.info["n_words"], **kw))
+    return lambda c: tfidf_scores(c.info["db_words"], c.info["query_words"], c.info["n_words"], **kw)
 
 
 def _flat(c):
     """Scores if the tree stopped after its first level: k words, each the parent of the true ones."""
     k, L = c.info["branching"], c.info["depth"]
     up = lambda ws: [np.asarray(w) // k ** (L - 1) for w in ws]
-    return None, tfidf_scores(up(c.info["db_words"]), up(c.info["query_words"]), k)
+    return tfidf_scores(up(c.info["db_words"]), up(c.info["query_words"]), k)
 
 
 def _scores_metric_hint(bug, text):

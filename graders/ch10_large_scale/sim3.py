@@ -17,27 +17,33 @@ from graders.geometry import umeyama
 from graders.scene import random_rotation
 
 
+def _unfixed_det(X: np.ndarray, Y: np.ndarray) -> float:
+    """det(U Vᵀ) of the cross-covariance of centred Y and X: -1 where Umeyama needs its reflection fix."""
+    U, _, Vt = np.linalg.svd((Y - Y.mean(0)).T @ (X - X.mean(0)))
+    return float(np.linalg.det(U @ Vt))
+
+
 def sim3_problem(rng: np.random.Generator, n: int = 200, outliers: float = 0.3, planar: bool = False,
                  sigma: float = 0.02, n_held: int = 80) -> dict:
     """3D-3D pairs Y_i = s R X_i + t + noise, a fraction `outliers` of them replaced by random points.
 
-    X: landmarks of cluster B, a 10 m scene (planar=True: a façade, z = 0 up to 1 cm); s log-uniform in
-    [0.3, 0.7] or [1.5, 4] (never near 1, so a scale upside down shows); noise `sigma` x s per axis on
+    X: landmarks of cluster B, a 10 m scene (planar=True: a façade, z within ~1 mm); s log-uniform in [0.3, 0.7] or [1.5, 4] (never near 1, so a scale upside down shows); noise `sigma` x s per axis on
     Y. threshold: 3.5 noise sigmas (a 3D residual exceeds it with probability < 1e-3).
     Returns X, Y: (n, 3), threshold, is_outlier: (n,), truth (s, R, t), held-out inliers Xh, Yh: (n_held, 3)."""
     s = float(np.exp(rng.uniform(np.log(0.3), np.log(0.7)))) if rng.random() < 0.5 else \
         float(np.exp(rng.uniform(np.log(1.5), np.log(4.0))))
-    R, t = random_rotation(rng), rng.uniform(-20, 20, 3)
 
     def landmarks(m):
         P = rng.uniform(-5, 5, (m, 3))
         if planar:
-            P[:, 2] = rng.normal(0, 0.01, m)
+            P[:, 2] = rng.normal(0, 1e-3, m)            # a façade (1 mm rough): the cross-covariance is ~rank 2
         return P
     X, Xh = landmarks(n), landmarks(n_held)
     noise = sigma * s
-    Y = s * X @ R.T + t + rng.normal(0, noise, X.shape)
-    Yh = s * Xh @ R.T + t + rng.normal(0, noise, Xh.shape)
+    E, Eh = rng.normal(0, noise, X.shape), rng.normal(0, noise, Xh.shape)
+    R, t = random_rotation(rng), rng.uniform(-20, 20, 3)
+    Y = s * X @ R.T + t + E
+    Yh = s * Xh @ R.T + t + Eh
     bad = rng.permutation(n)[: int(round(outliers * n))]
     lo, hi = Y.min(0), Y.max(0)
     Y[bad] = rng.uniform(lo, hi, (len(bad), 3))
@@ -47,11 +53,42 @@ def sim3_problem(rng: np.random.Generator, n: int = 200, outliers: float = 0.3, 
             "Xh": Xh, "Yh": Yh}
 
 
+def exact_planar_problem(rng: np.random.Generator, n: int = 6) -> dict:
+    """n exact pairs of exactly coplanar landmarks (z = 0), no outliers, drawn where the SVD of the
+    cross-covariance without the fix gives a reflection (its third singular vectors have arbitrary signs:
+    half the draws), so the case tests the fix. threshold: 1e-6 of the scene size."""
+    X = np.c_[rng.uniform(-5, 5, (n, 2)), np.zeros(n)]
+    s = float(np.exp(rng.uniform(np.log(0.3), np.log(4.0))))
+    for _ in range(200):
+        R, t = random_rotation(rng), rng.uniform(-20, 20, 3)
+        Y = s * X @ R.T + t
+        if _unfixed_det(X, Y) < 0:
+            break
+    return {"X": X, "Y": Y, "threshold": 1e-6 * s * 10, "s": s, "R": R, "t": t}
+
+
+def gt_sim3_ransac(X: np.ndarray, Y: np.ndarray, threshold: float, iters: int = 300,
+                   seed: int = 0) -> tuple[float, np.ndarray, np.ndarray]:
+    """The grader's own stand-in (demos): RANSAC over 3-pair samples with graders.geometry.umeyama,
+    refit on the best sample's inliers. Unlike pycolmap it accepts exactly coplanar landmarks."""
+    X, Y = np.asarray(X, float), np.asarray(Y, float)
+    rng = np.random.default_rng(seed)
+    best, best_n = np.ones(len(X), bool), -1
+    for _ in range(iters):
+        idx = rng.choice(len(X), 3, replace=False)
+        s, R, t = umeyama(X[idx], Y[idx])
+        inl = np.sum((s * X @ R.T + t - Y) ** 2, 1) < threshold ** 2
+        if inl.sum() > best_n:
+            best, best_n = inl, int(inl.sum())
+    return umeyama(X[best], Y[best])
+
+
 def cv_sim3_ransac(X: np.ndarray, Y: np.ndarray, threshold: float, iters: int = 1000,
                    seed: int = 0) -> tuple[float, np.ndarray, np.ndarray]:
     """Stand-in: pycolmap.estimate_sim3d_robust (LO-RANSAC) with max_error = threshold picks the inliers,
     then one Umeyama refit on all of them (pycolmap's own final model was up to 16 % worse on held-out
-    pairs than that refit on a few of 50 draws). Returns (s, R, t) with Y ≈ s R X + t."""
+    pairs than that refit on a few of 50 draws). pycolmap refuses exactly coplanar landmarks (degenerate
+    for it): it cannot answer the exact façade case. Returns (s, R, t) with Y ≈ s R X + t."""
     import pycolmap
 
     opts = pycolmap.RANSACOptions()
@@ -74,6 +111,16 @@ def _rel_scale(sim, P) -> float:
 
 
 def _cases(rng):
+    E = exact_planar_problem(rng)
+    args = (E["X"], E["Y"], E["threshold"])
+    run = shared_run(lambda fn, a=args: fn(*a))
+    # Exact pairs: 1e-6° and 1e-9 relative cover float64 rounding of the SVD.
+    yield Case("6 exact pairs on a façade: rotation", args, E, lambda out, P: rotation_angle_deg(out[1], P["R"]), 1e-6,
+               "deg", convert=lambda out, case: as_sim3(out), call=run, key="exact-planar-R", info=E,
+               tags=("exact", "planar", "R"))
+    yield Case("6 exact pairs on a façade: scale", args, E, _rel_scale, 1e-9, "rel.",
+               convert=lambda out, case: as_sim3(out), call=run, key="exact-planar-scale", info=E,
+               tags=("exact", "planar", "scale"))
     # RANSAC's draws are the learner's own: the tolerances hold for any seed (2x pycolmap's error + floors).
     for key, label, kw in [("general", "30 % outliers", dict(outliers=0.3)),
                            ("heavy", "50 % outliers", dict(outliers=0.5)),
@@ -121,4 +168,4 @@ SIM3_HINTS = [
 
 register(Exercise(
     id="10.7", title="Sim(3) by Umeyama inside RANSAC", name="sim3_ransac", kind="code", points=3, cases=_cases,
-    hints=SIM3_HINTS, fallback=cv_sim3_ransac, timeout=30.0, arg_names=("X", "Y", "threshold")))
+    hints=SIM3_HINTS, fallback=gt_sim3_ransac, timeout=30.0, arg_names=("X", "Y", "threshold")))

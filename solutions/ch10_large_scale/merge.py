@@ -36,14 +36,17 @@ def _bundle_adjust(rec: dict, tracks: dict, fixed_image) -> dict:
                np.concatenate([rec["points"][p] for p in pids])]
     R_fix, t_fix = np.asarray(rec["cameras"][fixed_image]["R"]), np.asarray(rec["cameras"][fixed_image]["t"])
 
+    Kf = np.c_[K[:, 0, 0], K[:, 1, 1]]
+    Kc = np.c_[K[:, 0, 2], K[:, 1, 2]]
+
     def residuals(x):
         cam = x[:6 * nc].reshape(nc, 6)
         X = x[6 * nc:].reshape(-1, 3)[pt_of]
-        Rs = {k: rodrigues(cam[k, :3]) for k in range(nc)}
-        Xc = np.array([(Rs[k] @ Xj + cam[k, 3:]) if k >= 0 else (R_fix @ Xj + t_fix) for k, Xj in zip(cam_of, X)])
-        x_n = Xc[:, :2] / Xc[:, 2:]
-        pix = np.c_[K[:, 0, 0] * x_n[:, 0] + K[:, 0, 2], K[:, 1, 1] * x_n[:, 1] + K[:, 1, 2]]
-        return (pix - uv).ravel()
+        R = rodrigues(np.vstack([cam[:, :3], np.zeros(3)]))        # (nc + 1, 3, 3): the last slot unused
+        t = np.vstack([cam[:, 3:], np.zeros(3)])
+        R[-1], t[-1] = R_fix, t_fix                                # index -1: the gauge camera, held
+        Xc = np.einsum("nij,nj->ni", R[cam_of], X) + t[cam_of]     # (M, 3) in each observing camera
+        return (Kf * Xc[:, :2] / Xc[:, 2:] + Kc - uv).ravel()
 
     J = sp.lil_matrix((2 * len(obs), len(x0)), dtype=int)      # each residual: its camera's 6 and point's 3
     rows = np.arange(len(obs))
