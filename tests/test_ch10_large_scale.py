@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from graders.chapters import by_number
+from graders.chapters import READY
 
-if not by_number(10).ready:   # a planned chapter: its graders are work in progress, not yet held to the tests
+if 10 not in {c.number for c in READY}:   # a planned chapter: its graders are work in progress, not yet held to the tests
     pytest.skip("chapter 10 is planned (ready=False in graders/chapters.py)", allow_module_level=True)
 
 import grader_checks as checks
