@@ -1,6 +1,6 @@
 """Shared pytest set-up: a non-interactive matplotlib, and the notebook time budget.
 
-nbval runs every notebook under notebooks/ (see pyproject's addopts). Here we add up the time of
+nbval runs every ready chapter's notebook under notebooks/ (see pyproject's addopts). Here we add up the time of
 each notebook's cells, print a table at the end of the run, and fail the run if a notebook takes
 longer than NOTEBOOK_BUDGET_S on this machine (2 cores in CI).
 """
@@ -13,6 +13,16 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 NOTEBOOK_BUDGET_S = 60.0
 _notebook_seconds: dict[str, float] = defaultdict(float)
+
+
+def pytest_ignore_collect(collection_path, config):
+    """A planned chapter's notebook (ready=False in graders/chapters.py) is work in progress: nbval
+    skips it, as the chapter tests do, until its row says ready."""
+    if collection_path.suffix != ".ipynb":
+        return None
+    from graders.chapters import CHAPTERS
+    planned = {c.notebook.split("/")[-1] for c in CHAPTERS if not c.ready}
+    return True if collection_path.name in planned else None
 
 
 def pytest_runtest_logreport(report):
