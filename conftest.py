@@ -7,9 +7,15 @@ longer than NOTEBOOK_BUDGET_S on this machine (2 cores in CI).
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 from collections import defaultdict
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+# check() and drills append to a progress file in the user's data directory: the tests (and the notebook
+# kernels nbval starts, which inherit this environment) write into a throw-away folder instead, always.
+_PROGRESS_DIR = tempfile.mkdtemp(prefix="cv3d-progress-")
+os.environ["CV3D_PROGRESS"] = _PROGRESS_DIR
 
 NOTEBOOK_BUDGET_S = 60.0
 _notebook_seconds: dict[str, float] = defaultdict(float)
@@ -41,6 +47,7 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
 
 
 def pytest_sessionfinish(session, exitstatus):
+    shutil.rmtree(_PROGRESS_DIR, ignore_errors=True)
     over = [p for p, s in _notebook_seconds.items() if s > NOTEBOOK_BUDGET_S]
     if over and session.exitstatus == 0:
         session.exitstatus = 1

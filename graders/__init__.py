@@ -39,7 +39,18 @@ def check(exercise_id: str, attempt: Any, seed: int | None = None) -> ExerciseRe
     """
     result = grade(get(exercise_id), attempt, seed=seed)
     _last[exercise_id] = result
+    _record(result)
     return result
+
+
+def _record(result: ExerciseResult) -> None:
+    """Append this check to the learner's progress file (see graders.progress); never raises."""
+    try:
+        from .progress import record_result
+        record_result(result, source="check")
+    except Exception as exc:   # progress is a convenience: a check must never fail because of it
+        import warnings
+        warnings.warn(f"progress not recorded ({type(exc).__name__}: {exc})", RuntimeWarning, stacklevel=3)
 
 
 def use(exercise_id: str, attempt: Callable) -> Callable:

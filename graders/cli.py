@@ -141,7 +141,8 @@ def _worker(src: Path, ids: list[str], seed: int, scratch: Path, memory_gb: floa
     cmd = [sys.executable, "-m", "graders.worker", str(src), str(write_fd), "--ids", ",".join(ids)]
     cmd += ["--graded"] if graded else []
     env = dict(os.environ, MPLBACKEND="Agg", TMPDIR=str(scratch), TEMP=str(scratch), TMP=str(scratch),
-               CV3D_SEED=str(seed), CV3D_HIDDEN_SEEDS=json.dumps(hidden or {}))
+               CV3D_SEED=str(seed), CV3D_HIDDEN_SEEDS=json.dumps(hidden or {}),
+               CV3D_NO_PROGRESS="1")   # grading is not practice: only check() and drills record progress
     env.pop("CV3D_GRADING_SECRET", None)        # the worker needs the seeds, not the secret
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
                             cwd=scratch, env=env, start_new_session=True, pass_fds=(write_fd,),
@@ -263,6 +264,12 @@ def main(argv: list[str] | None = None) -> int:
     if argv[:1] == ["batch"]:
         from .batch import main as batch
         return batch(argv[1:])
+    if argv[:1] == ["progress"]:
+        from .progress import main as progress
+        return progress(argv[1:])
+    if argv[:1] == ["drill"]:
+        from .drill import main as drill
+        return drill(argv[1:])
     ap = argparse.ArgumentParser(prog="python -m graders")
     sub = ap.add_subparsers(dest="command", required=True)
     c = sub.add_parser("check", help="grade every exercise in a notebook (.ipynb) or module (.py)")
@@ -283,6 +290,8 @@ def main(argv: list[str] | None = None) -> int:
     sub.add_parser("release", help="write the student edition (no solutions) of some chapters")
     sub.add_parser("gradescope", help="build a Gradescope autograder zip for one chapter")
     sub.add_parser("batch", help="grade a folder of submissions into results.json files and a gradebook CSV")
+    sub.add_parser("progress", help="your attempts per chapter and dimension (from check() and drills)")
+    sub.add_parser("drill", help="timed drills, reference cards, what is due today, a mock interview")
     args = ap.parse_args(argv)
     message_box = [""]
 
