@@ -121,6 +121,7 @@ class Exercise:
       ground-truth model) that demo cells use until the learner's version passes.
     value: True if the learner gives a value (a numeric or choice answer), not a function.
     explanation: a model answer shown once the learner has attempted the exercise.
+    difficulty, target_minutes, stub, topics: what a timed drill of a CODE exercise needs (graders.drill).
     """
     id: str
     title: str
@@ -136,6 +137,13 @@ class Exercise:
     arg_names: tuple[str, ...] = ()
     libraries: tuple[str, ...] | None = None   # libraries graded work may call; None: by kind (below)
     hidden_cases: Callable[[np.random.Generator], Iterable[Case]] | None = None  # added in instructor grading
+    # Timed drills (graders.drill), as data: 1 warm-up, 2 core, 3 hard (0: from the points); a target time in
+    # minutes (0: from the difficulty); the drill's stub (signature + docstring; "": the notebook's stub cell);
+    # extra words `drill --topic` matches besides the title, the name and the chapter's title.
+    difficulty: int = 0
+    target_minutes: float = 0.0
+    stub: str = ""
+    topics: tuple[str, ...] = ()
 
     def __post_init__(self):
         assert self.kind in KINDS, f"{self.id}: kind {self.kind!r} is not one of {KINDS}"

@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED = ("__init__.py", "__main__.py", "batch.py", "chapters.py", "cli.py", "compare.py", "convert.py",
           "datasets.py", "engine.py", "extract.py", "fairness.py", "geometry.py", "isolation.py", "lab.py",
           "learner.py", "notebook_tools.py", "release.py", "report.py", "sandbox.py", "scene.py", "viz3d.py",
-          "worker.py", "progress.py", "drill.py", "cards.py", "reference.py", "srs.py")
+          "worker.py", "progress.py", "drill.py", "cards.py", "reference.py", "srs.py", "mock.py")
 RELEASED = "released.json"     # beside chapters.py in a release: the chapters it holds
 
 
