@@ -28,8 +28,9 @@ def gt_bilinear(I: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     x, y = np.clip(x, 0, W - 1), np.clip(y, 0, H - 1)
     x0, y0 = np.minimum(np.floor(x).astype(int), W - 2), np.minimum(np.floor(y).astype(int), H - 2)
     a, b = x - x0, y - y0
-    return ((1 - a) * (1 - b) * I[y0, x0] + a * (1 - b) * I[y0, x0 + 1]
-            + (1 - a) * b * I[y0 + 1, x0] + a * b * I[y0 + 1, x0 + 1])
+    f = np.ascontiguousarray(I).ravel()                  # flat gathers: several times faster than I[y0, x0]
+    i = y0 * W + x0
+    return ((1 - a) * (1 - b) * f[i] + a * (1 - b) * f[i + 1] + (1 - a) * b * f[i + W] + a * b * f[i + W + 1])
 
 
 def gt_warp(I: np.ndarray, flow: np.ndarray) -> np.ndarray:
