@@ -34,5 +34,17 @@ __all__ = ["components", "components_after", "cv_fix_components", "top_k_pairs",
 
 # ---- part B (pointmaps, distributed, debug_b, frontier, demo): add imports, DEBUG_GENERATORS entries
 # and __all__ names below this line.
+from . import questions_b  # noqa: F401,E402 (registers 10.4-10.5)
+from .distributed import (PipelineStages, TransientTaskError, gt_run_pipeline, gt_serial_pipeline,  # noqa: E402
+                          pipeline_images, task_key)
+from .pointmaps import (alignment_errors, alignment_loss, gt_global_alignment, pair_graph,  # noqa: E402
+                        pointmap_scene)
+
+from .debug_b import DEBUG_GENERATORS as _DEBUG_B  # noqa: E402
+from .debug_b import cv_choose_pipelines, cv_chunked_poses, pose_errors  # noqa: E402
+
+DEBUG_GENERATORS.update(_DEBUG_B)
+__all__ += ["cv_choose_pipelines", "cv_chunked_poses", "pose_errors", "PipelineStages", "TransientTaskError", "gt_run_pipeline", "gt_serial_pipeline", "pipeline_images",
+            "task_key", "alignment_errors", "alignment_loss", "gt_global_alignment", "pair_graph", "pointmap_scene"]
 
 debug_case = debug_practice(DEBUG_GENERATORS)   # every DEBUG exercise's practice case (10.11-10.13)

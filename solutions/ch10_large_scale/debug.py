@@ -1,7 +1,10 @@
-"""Exercise 10.11's reference fix: more retrieval candidates per image (k = 20)."""
+"""Chapter 10's DEBUG references: 10.11 (more retrieval candidates), 10.12 (a confidence test for the domain gap),
+10.13 (overlapping subsets merged by similarities)."""
 from __future__ import annotations
 
 import numpy as np
+
+from solutions.geometry import project_to_so3
 
 
 def fix_components(case: dict) -> np.ndarray:
@@ -16,3 +19,58 @@ def fix_components(case: dict) -> np.ndarray:
     nn = np.argsort(-S, axis=1)[:, :20]
     pairs = {(min(i, int(j)), max(i, int(j))) for i in range(len(S)) for j in nn[i]}
     return np.array(sorted(pairs), int)
+
+
+def choose_pipelines(case: dict) -> list[str]:
+    """Exercise 10.12: per scene, keep the learned result unless the network is out of its domain.
+
+    Diagnosis: outdoors the network's median confidence is a small fraction of its indoor (validation)
+    median, and exactly there its poses are wrong; classical SfM fails elsewhere (textureless rooms: views
+    left unregistered, NaN poses). Fix: a confidence test relative to the model's own indoor value (0.5:
+    in-domain scenes sit at 0.6-1.3 of it, out-of-domain ones far below), falling back to classical when
+    the classical run registered every view."""
+    choices = []
+    for s in case["scenes"]:
+        ratio = float(np.median(s["learned"]["confidence"])) / float(case["indoor_confidence"])
+        registered = bool(np.isfinite(s["classical"]["Rs"]).all())
+        choices.append("classical" if ratio < 0.5 and registered else "learned")
+    return choices
+
+
+def _centres(Rs: np.ndarray, ts: np.ndarray) -> np.ndarray:
+    return -np.einsum("nba,nb->na", Rs, ts)
+
+
+def chunked_poses(case: dict, overlap: int = 6) -> tuple[np.ndarray, np.ndarray]:
+    """Exercise 10.13: every view's world-to-camera pose from a model that holds max_views views at once.
+
+    Diagnosis: attention over all N views' tokens does not fit (10.16). Fix: subsets of max_views consecutive
+    views, each sharing `overlap` with the previous one; each subset comes in its own frame and scale, so
+    it is mapped onto the running result by the similarity its shared views give: the rotation from the
+    shared cameras' rotations (R = mean of R_a^T R_b, projected onto SO(3): better conditioned than the
+    centres of a few neighbouring views), then scale and translation from their centres. A camera (R_b, t_b)
+    maps to R_b R^T and centre s R C_b + t. Returns Rs (N, 3, 3), ts (N, 3)."""
+    n, m = int(case["n_views"]), int(case["max_views"])
+    overlap = min(overlap, m - 1)
+    Rs, Cs = np.zeros((n, 3, 3)), np.zeros((n, 3))
+    done, start = 0, 0
+    while done < n:
+        views = np.arange(start, min(start + m, n))
+        out = case["model"](views.tolist())
+        Rb, Cb = np.asarray(out["Rs"], float), _centres(np.asarray(out["Rs"], float), np.asarray(out["ts"], float))
+        shared = views < done
+        if done == 0:
+            Rs[views], Cs[views] = Rb, Cb
+        else:
+            a = views[shared]
+            R = project_to_so3(np.einsum("kba,kbc->ac", Rs[a], Rb[shared]))      # X_a = s R X_b + t
+            A, B = Cs[a], Cb[shared] @ R.T
+            Ac, Bc = A - A.mean(0), B - B.mean(0)
+            s = float(np.sum(Ac * Bc) / np.sum(Bc * Bc))
+            t = A.mean(0) - s * B.mean(0)
+            new = views[~shared]
+            Rs[new] = Rb[~shared] @ R.T
+            Cs[new] = s * Cb[~shared] @ R.T + t
+        done = views[-1] + 1
+        start = done - overlap
+    return Rs, -np.einsum("nab,nb->na", Rs, Cs)

@@ -1,4 +1,4 @@
-"""Chapter 10's answers to the CONCEPT (10.1-10.3) and DESIGN (10.14-10.16) questions."""
+"""Chapter 10's answers to the CONCEPT (10.1-10.5) and DESIGN (10.14-10.16) questions."""
 from __future__ import annotations
 
 import numpy as np
@@ -13,3 +13,9 @@ cluster_gpus = [1e6 / 100 / 3600, 1e6 * 50 * _H, np.ceil(_gpu_h / 24), np.ceil(_
 _T = 37 * 37 + 5
 attention_memory = [_T, (8 * _T) ** 2 * 16 * 2 / 1e9, (30 * _T) ** 2 * 16 * 2 / 1e9,
                     np.floor(np.sqrt(80e9 / 32) / _T)]
+
+# 10.4: two pointmaps (3 a pixel) and two confidence maps (1 a pixel) per pair at 512 x 384; a complete graph
+# of 50 images in both orders; MASt3R-SfM's ~10 retrieved pairs per image; all-pairs scores grow as N^2.
+pointmap_costs = [2 * (3 + 1) * 512 * 384, 50 * 49, 50 * 10, (60 / 30) ** 2]
+# 10.5: preview / survey / wide-baseline textureless / both needs / no GPU / out-of-domain confidence.
+pipeline_choices = ["learned", "classical", "learned", "hybrid", "classical", "classical"]

@@ -190,3 +190,95 @@ MUTANTS += [
     ("10.10", "duplicated pairs", pipeline_duplicate_pairs, "duplicated pairs"),
     ("10.10", "written in place", pipeline_writes_in_place, "os.replace"),
 ]
+
+
+# ----------------------------------------------------------------- 10.12 choose_pipelines (DEBUG)
+
+def choose_always_learned(case):
+    """The broken run kept: the pointmap network's poses everywhere."""
+    return ["learned"] * len(case["scenes"])
+
+
+def choose_always_classical(case):
+    """Over-correction: classical everywhere, unregistered views and all."""
+    return ["classical"] * len(case["scenes"])
+
+
+MUTANTS += [
+    ("10.12", "always learned", choose_always_learned, "out of its training domain"),
+    ("10.12", "always classical", choose_always_classical, "left views unregistered"),
+]
+
+
+# ----------------------------------------------------------------- 10.13 chunked_poses (DEBUG)
+
+def _pose_centres(Rs, ts):
+    return -np.einsum("nba,nb->na", Rs, ts)
+
+
+def chunks_all_at_once(case):
+    """The broken run: every view in one call."""
+    out = case["model"](list(range(case["n_views"])))
+    return out["Rs"], out["ts"]
+
+
+def chunks_concatenated(case):
+    """Disjoint subsets, their poses concatenated as returned (each in its own frame and scale)."""
+    n, m = case["n_views"], case["max_views"]
+    Rs, ts = [], []
+    for start in range(0, n, m):
+        views = list(range(start, min(start + m, n)))
+        if len(views) == 1:                      # the model needs two views: borrow the previous one
+            views = [views[0] - 1, views[0]]
+            out = case["model"](views)
+            Rs.append(out["Rs"][1:]), ts.append(out["ts"][1:])
+            continue
+        out = case["model"](views)
+        Rs.append(out["Rs"]), ts.append(out["ts"])
+    return np.concatenate(Rs), np.concatenate(ts)
+
+
+def _chain(case, with_scale=True, scale_translation=True, overlap=4):
+    """Overlapping subsets joined by Umeyama on the shared centres (rotation from the cameras' rotations)."""
+    n, m = case["n_views"], case["max_views"]
+    Rs, ts = np.zeros((n, 3, 3)), np.zeros((n, 3))
+    done, start = 0, 0
+    while done < n:
+        views = np.arange(start, min(start + m, n))
+        out = case["model"](views.tolist())
+        Rb, tb = np.asarray(out["Rs"]), np.asarray(out["ts"])
+        shared = views < done
+        if done == 0:
+            Rs[views], ts[views] = Rb, tb
+        else:
+            a = views[shared]
+            R = np.linalg.svd(np.einsum("kba,kbc->ac", Rs[a], Rb[shared]))
+            R = R[0] @ np.diag([1, 1, np.sign(np.linalg.det(R[0] @ R[2]))]) @ R[2]
+            s, _, _ = umeyama(_pose_centres(Rb[shared], tb[shared]) @ R.T, _pose_centres(Rs[a], ts[a]),
+                              with_scale=with_scale)
+            A, B = _pose_centres(Rs[a], ts[a]), s * _pose_centres(Rb[shared], tb[shared]) @ R.T
+            t = A.mean(0) - B.mean(0)
+            new = views[~shared]
+            Rs[new] = Rb[~shared] @ R.T
+            ts[new] = (s if scale_translation else 1.0) * tb[~shared] - np.einsum("nab,b->na", Rs[new], t)
+        done = views[-1] + 1
+        start = done - overlap
+    return Rs, ts
+
+
+def chunks_rigid(case):
+    """Overlapping subsets joined by a rigid transform: each subset's own scale is kept."""
+    return _chain(case, with_scale=False)
+
+
+def chunks_translation_unscaled(case):
+    """The similarity found, but the cameras' translations not scaled with it: t' = t_b - R' t."""
+    return _chain(case, scale_translation=False)
+
+
+MUTANTS += [
+    ("10.13", "all views at once", chunks_all_at_once, "overlapping subsets"),
+    ("10.13", "subsets concatenated", chunks_concatenated, "its own frame"),
+    ("10.13", "rigid joins", chunks_rigid, "its own scale"),
+    ("10.13", "translations not scaled", chunks_translation_unscaled, "its own scale"),
+]
