@@ -145,7 +145,7 @@ def summary(events: Iterable[dict] | None = None) -> dict[tuple[str, str], dict]
     return rows
 
 
-def _chapter_totals() -> dict[tuple[str, str], tuple[int, float]]:
+def chapter_totals() -> dict[tuple[str, str], tuple[int, float]]:
     """(chapter, kind) -> (exercises, points) in the course, for the ready chapters (best effort)."""
     from .chapters import READY
     from .engine import chapter
@@ -197,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
         print(progress_file())
         return 0
     events = read()
-    print(table(events, None if args.attempted_only else _chapter_totals()))
+    print(table(events, None if args.attempted_only else chapter_totals()))
     print(f"\n(progress file: {progress_file()})")
     return 0
 

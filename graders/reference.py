@@ -234,15 +234,17 @@ def _ransac() -> list[Card]:
             k, printed = ransac_iterations(w, s), lesson_number(row[j])
             note = "" if abs(printed - k) <= 0.02 * k else (
                 f"the lesson prints {row[j]}; log(0.01)/log(1 - {w:g}^{s}) = "
-                f"{math.log(0.01) / math.log(1 - w ** s):.1f}, so {k:,} (its rows fit no single confidence level)")
+                f"{math.log(0.01) / math.log(1 - w ** s):.1f}, so {k:,}")
             cards.append(Card(id=f"ransac-w{round(w * 100)}-s{s}", kind="numeric", answer=k, unit="iterations",
                               tol=0.02, prompt=f"RANSAC with a {s}-point solver, inlier ratio {w:.0%}: how many "
                               "iterations for 99% probability of one all-inlier sample?", note=note,
-                              explain="k = log(1 - p) / log(1 - w^s), rounded up.", source=_src("ransac", i),
+                              explain="k = log(1 - p) / log(1 - w^s), rounded up. (The lesson's table fits no "
+                              "single confidence level: its rows imply p between 0.92 and 0.99.)", source=_src("ransac", i),
                               chapter=2, dimension="design", table="ransac", row=i))
         k8, printed = ransac_iterations(w, 8), lesson_number(row[3])
         note = "" if abs(printed - k8) <= 0.05 * k8 else (
-            f"the lesson prints {row[3]} (its 8-point count at 1 ms); with {k8:,} iterations it is {k8 / 1e3:.3g} s")
+            f"the lesson prints {row[3]} (its 8-point count at 1 ms); with {k8:,} iterations it is "
+            + (f"{k8 / 1e3:.3g} s" if k8 < 120e3 else f"{k8 / 60e3:.0f} min"))
         cards.append(Card(id=f"ransac-time-w{round(w * 100)}", kind="magnitude", answer=k8 * 1e-3, unit="s", tol=0.3,
                           prompt=f"8-point RANSAC at 1 ms per iteration, inlier ratio {w:.0%}, 99% confidence: "
                           "how long (seconds, order of magnitude)?", note=note, source=_src("ransac", i),

@@ -31,7 +31,8 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED = ("__init__.py", "__main__.py", "batch.py", "chapters.py", "cli.py", "compare.py", "convert.py",
           "datasets.py", "engine.py", "extract.py", "fairness.py", "geometry.py", "isolation.py", "lab.py",
           "learner.py", "notebook_tools.py", "release.py", "report.py", "sandbox.py", "scene.py", "viz3d.py",
-          "worker.py", "progress.py", "drill.py", "cards.py", "reference.py", "srs.py", "mock.py")
+          "worker.py", "progress.py", "drill.py", "cards.py", "reference.py", "srs.py", "mock.py", "home.py")
+HOME_NOTEBOOK = "notebooks/00_start_here.ipynb"
 RELEASED = "released.json"     # beside chapters.py in a release: the chapters it holds
 
 
@@ -72,6 +73,8 @@ def student_release(out: str | Path, numbers: list[int] | None = None) -> Path:
     for n in numbers:
         nb = ROOT / by_number(n).notebook
         shutil.copy2(nb, out / "notebooks" / nb.name)
+    if (ROOT / HOME_NOTEBOOK).exists():     # the course home: map, progress, reference tables
+        shutil.copy2(ROOT / HOME_NOTEBOOK, out / HOME_NOTEBOOK)
     for name in ("README.md", "environment.txt", "Makefile", "conftest.py", ".gitignore"):
         shutil.copy2(ROOT / name, out / name)
     shutil.copytree(ROOT / "data", out / "data", ignore=_ignore)

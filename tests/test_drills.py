@@ -293,3 +293,15 @@ def test_mock_interview_runs_cards_a_debug_scenario_and_a_drill_then_reports(sto
     events = progress.read()
     assert [e["event"] for e in events].count("review") == 4                # 3 cards + the debug scenario
     assert events[-1]["event"] == "mock" and events[-1]["drill_status"] == "passed"
+
+
+def test_home_notebook_helpers_show_progress_and_the_tables():
+    from graders import home
+    events = [_attempt("1.5", 4, 4, "passed"), _attempt("1.6", 1, 4, "partial")]
+    chapters, kinds, grid = home.progress_grid(events, totals={("1", "code"): (6, 20.0), ("2", "code"): (12, 31.0)})
+    assert chapters[0] == "1" and kinds.index("code") == 1
+    assert grid[0][1] == pytest.approx(5 / 20) and grid[1][1] == 0 and np.isnan(grid[0][0])
+    ransac = home.reference_markdown("ransac")
+    assert "lines 59-62" in ransac and "| 448 |" in ransac and "| 7,025 |" in ransac   # the formula's columns
+    from graders.chapters import CHAPTERS
+    assert all(c.title in home.course_map() for c in CHAPTERS)
