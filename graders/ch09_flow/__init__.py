@@ -12,7 +12,7 @@ the API of the notebook, the tests and the benchmark.
 """
 from __future__ import annotations
 
-from . import dense, lk, tools  # noqa: F401 (register 9.9-9.13)
+from . import dense, lk, questions, tools  # noqa: F401 (register 9.1-9.4, 9.9-9.13, 9.21-9.23)
 from .pairs import (FLO_MAGIC, chairs_flo_bytes, gt_read_flo, gt_write_flo, homography_flow, load_chairs,
                     plane_pair, real_available, small_homography)
 from .tools import cv_flow_tools, cv_warp, gt_epe, gt_epe_map, gt_fl, gt_warp

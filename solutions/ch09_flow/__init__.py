@@ -11,6 +11,8 @@ from .tools import bilinear, epe, epe_map, fl_rate, flow_tools, read_flo, warp_b
 
 # ---- part A (9.10-9.13, 9.1-9.4, 9.17-9.18, 9.21-9.23) ----
 from .dense import HS_AVERAGE, dense_flow, horn_schunck
+from .questions import (application_trackers, budget_30hz, corr_memory, hs_update, normal_flow, pyramid_levels,
+                        window_kinds)
 from .lk import gradients, lucas_kanade, pyr_down, pyramid, pyramidal_lk
 
 # ---- part B (9.5-9.8, 9.14-9.16, 9.19-9.20, 9.24) ----
@@ -21,6 +23,7 @@ from .tracking import joint_tracker, similarity_fit  # noqa: E402
 from .debug_b import fix_lost_tracks, fix_noisy_scene_flow  # noqa: E402
 from .frontier import corr_lookup  # noqa: E402
 
-__all__ = ["HS_AVERAGE", "dense_flow", "horn_schunck", "gradients", "lucas_kanade", "pyr_down", "pyramid", "pyramidal_lk", "bilinear", "epe", "epe_map", "fl_rate", "flow_tools", "read_flo", "warp_backward", "write_flo"]
+__all__ = ["application_trackers", "budget_30hz", "corr_memory", "hs_update", "normal_flow", "pyramid_levels",
+           "window_kinds", "HS_AVERAGE", "dense_flow", "horn_schunck", "gradients", "lucas_kanade", "pyr_down", "pyramid", "pyramidal_lk", "bilinear", "epe", "epe_map", "fl_rate", "flow_tools", "read_flo", "warp_backward", "write_flo"]
 __all__ += ["fb_verdicts", "joint_tracker", "occlusion_mask", "raft_sizes", "scene_flow", "scene_flow_errors_mm",
             "similarity_fit", "tracker_choice", "unproject", "fix_lost_tracks", "fix_noisy_scene_flow", "corr_lookup"]
