@@ -305,3 +305,17 @@ def test_home_notebook_helpers_show_progress_and_the_tables():
     assert "lines 59-62" in ransac and "| 448 |" in ransac and "| 7,025 |" in ransac   # the formula's columns
     from graders.chapters import CHAPTERS
     assert all(c.title in home.course_map() for c in CHAPTERS)
+
+
+def test_a_chapter_adds_cards_as_data_in_its_own_package(monkeypatch):
+    import importlib
+    from graders.chapters import READY
+    module = importlib.import_module(READY[0].grader)
+    extra = Card(id="ch-own-card", prompt="a chapter's own question?", answer="42", kind="choice", options=("41", "42"),
+                 source="chapter 1 notebook", chapter=1)
+    monkeypatch.setattr(module, "CARDS", [extra], raising=False)
+    cards = deck()
+    assert extra in cards and len(cards) >= len(reference_cards()) + 1
+    monkeypatch.setattr(module, "CARDS", [extra, extra], raising=False)
+    with pytest.raises(ValueError, match="duplicate card ids: ch-own-card"):
+        deck()
