@@ -79,6 +79,9 @@ def plot_progress(ax=None, events: list[dict] | None = None, totals: dict | None
     im = ax.imshow(data, cmap=cmap, vmin=0, vmax=1, aspect="auto")
     ax.set_xticks(range(len(chapters)), [f"ch {c}" for c in chapters])
     ax.set_yticks(range(len(kinds)), [k.upper() for k in kinds])
+    for (k, c), value in np.ndenumerate(data.filled(np.nan)):
+        if np.isfinite(value) and value > 0:
+            ax.text(c, k, f"{value:.0%}", ha="center", va="center", fontsize=8)
     ax.set_title("your points per chapter and dimension (fraction earned)")
     ax.figure.colorbar(im, ax=ax, fraction=0.03)
     return ax
