@@ -226,8 +226,16 @@ def _symptoms() -> list[Card]:
     return cards
 
 
+def implied_confidence(w: float, s: int, k: float) -> float:
+    """The success probability p that k iterations actually give: 1 - (1 - w^s)^k."""
+    return 1 - (1 - w ** s) ** k
+
+
 def _ransac() -> list[Card]:
     cards, t = [], TABLES["ransac"]
+    implied = [implied_confidence(float(r[0].rstrip("%")) / 100, s, lesson_number(r[j]))
+               for r in t.rows for j, s in ((1, 5), (2, 8))]
+    lo, hi = min(implied), max(implied)
     for i, row in enumerate(t.rows):
         w = float(row[0].rstrip("%")) / 100
         for j, s in ((1, 5), (2, 8)):
@@ -239,7 +247,8 @@ def _ransac() -> list[Card]:
                               tol=0.02, prompt=f"RANSAC with a {s}-point solver, inlier ratio {w:.0%}: how many "
                               "iterations for 99% probability of one all-inlier sample?", note=note,
                               explain="k = log(1 - p) / log(1 - w^s), rounded up. (The lesson's table fits no "
-                              "single confidence level: its rows imply p between 0.92 and 0.99.)", source=_src("ransac", i),
+                              f"single confidence level: its counts imply p from {lo:.2f} to {hi:.2f}.)",
+                              source=_src("ransac", i),
                               chapter=2, dimension="design", table="ransac", row=i))
         k8, printed = ransac_iterations(w, 8), lesson_number(row[3])
         note = "" if abs(printed - k8) <= 0.05 * k8 else (

@@ -319,3 +319,9 @@ def test_a_chapter_adds_cards_as_data_in_its_own_package(monkeypatch):
     monkeypatch.setattr(module, "CARDS", [extra, extra], raising=False)
     with pytest.raises(ValueError, match="duplicate card ids: ch-own-card"):
         deck()
+
+
+def test_ransac_explanation_states_the_confidence_the_lessons_counts_imply():
+    card = next(c for c in reference_cards() if c.id == "ransac-w20-s8")
+    # 717K iterations at w = 0.2, s = 8: 1 - (1 - 0.2^8)^717000 = 0.84; 57 at w = 0.6, s = 5: 0.99
+    assert "from 0.84 to 0.99" in card.explain
