@@ -1,0 +1,24 @@
+"""Chapter 11 — the capstone: cascading failures, monitoring, graceful degradation (part A).
+
+Oracles: the rules the exercises state, applied to generated ground truth — metric streams built
+from scripted episodes (11.5), fault scenarios with known alert intervals (11.6), faulty runs with a
+known first deviating stage (11.7) — and the lesson's own figures (11.1-11.4).
+
+Modules: `questions` (11.1-11.4), `monitor` (11.5), `degradation` (11.6), `rootcause` (11.7), `demo`
+(the notebook's drawings). Part B (the pipeline of the course's own stages, the five cascade DEBUG rows,
+the hybrid switch, the widget) is not here yet. Importing the package registers the chapter; the names
+below are the API of the notebook and the tests.
+"""
+from __future__ import annotations
+
+from . import questions  # noqa: F401 (registers 11.1-11.4)
+from .degradation import COMPONENT_OF, MODES, fault_scenario, gt_degradation_modes
+from .demo import PIPELINE, alert_states, cascade_curves, draw_cascade
+from .monitor import MONITOR_TABLE, gt_health_monitor, metric_streams
+from .rootcause import STAGE_METRICS, STAGES, fault_run, gt_first_faulty_stage
+
+__all__ = [
+    "COMPONENT_OF", "MODES", "MONITOR_TABLE", "PIPELINE", "STAGES", "STAGE_METRICS", "alert_states",
+    "cascade_curves", "draw_cascade", "fault_run", "fault_scenario", "gt_degradation_modes", "gt_first_faulty_stage",
+    "gt_health_monitor", "metric_streams",
+]

@@ -1,0 +1,141 @@
+"""11.7 — root-cause isolation, upstream first, from the stage metrics of a faulty run.
+
+Each stage of the pipeline publishes a few metrics; a stored baseline holds them for R healthy runs.
+A stage has *left its baseline* when one of its metrics is more than `z_max` baseline standard
+deviations (ddof = 1) from the baseline mean; the root cause is the first such stage in pipeline
+order (None for a healthy run). The largest deviation is usually downstream — a cascade amplifies —
+and a noisy metric (RANSAC iterations) moves by tens of per cent on a healthy run, which is why the
+test is in units of the baseline's own spread.
+
+Generated runs: stages before the fault within 2.5 sigma of their baseline, the faulty stage 6-8 sigma
+off in one metric (not always its first), the stages after it mostly amplified (1.6-2.5x that),
+bounded where a metric cannot go below zero. The margins (2.5 and 6 against z_max = 4) keep the answer
+the same whether the spread is taken with ddof 0 or 1.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from graders.engine import Case, Exercise, OutputError, like, register
+
+# stage -> [(metric, baseline mean, relative spread, direction a fault pushes it: +1 up, -1 down)]
+STAGE_METRICS: dict[str, list[tuple[str, float, float, int]]] = {
+    "calibration": [("reprojection_px", 0.35, 0.10, +1)],
+    "undistortion": [("line_straightness_px", 0.20, 0.15, +1)],
+    "features": [("count", 480.0, 0.06, -1), ("coverage", 0.80, 0.04, -1)],
+    "matching": [("matches", 300.0, 0.08, -1), ("ratio_pass", 0.55, 0.05, -1)],
+    "ransac": [("inlier_ratio", 0.70, 0.04, -1), ("iterations", 120.0, 0.35, +1)],
+    "vo": [("rot_err_deg", 0.25, 0.20, +1), ("trans_err_pct", 1.0, 0.20, +1)],
+    "ba": [("rms_px", 0.60, 0.10, +1), ("iterations", 12.0, 0.30, +1)],
+    "map": [("landmarks", 8e4, 0.10, -1), ("loop_closures", 3.0, 0.30, -1)],
+}
+STAGES = list(STAGE_METRICS)
+N_BASELINE, NORMAL_Z, FAULT_Z = 20, 2.5, (6.0, 8.0)
+
+
+def gt_first_faulty_stage(stages, observed, baseline, z_max: float = 4.0):
+    """The grader's stand-in: the first stage with a metric more than z_max baseline sigmas off, or None."""
+    for s in stages:
+        b = np.asarray(baseline[s], float)
+        z = (np.asarray(observed[s], float) - b.mean(0)) / b.std(0, ddof=1)
+        if np.max(np.abs(z)) > z_max:
+            return s
+    return None
+
+
+def fault_run(rng: np.random.Generator, fault: str | None, *, metric: int | None = None,
+              noisy_upstream: bool = False) -> dict:
+    """A run with its baseline: `observed` stage -> (m,), `baseline` stage -> (R, m), `fault` (the truth).
+    metric: which of the faulty stage's metrics deviates (random if None); noisy_upstream: the noisy
+    metrics upstream of the fault sit 2.0-2.5 sigma off (tens of per cent), as healthy runs sometimes do."""
+    baseline, observed = {}, {}
+    j = STAGES.index(fault) if fault else len(STAGES)
+    for i, s in enumerate(STAGES):
+        spec = STAGE_METRICS[s]
+        mean, cv = np.array([m[1] for m in spec]), np.array([m[2] for m in spec])
+        b = mean * (1 + cv * rng.standard_normal((N_BASELINE, len(spec))))
+        mu, sd = b.mean(0), b.std(0, ddof=1)
+        u = rng.uniform(-NORMAL_Z, NORMAL_Z, len(spec))
+        if noisy_upstream and i < j:
+            u = np.where(cv >= 0.3, rng.choice([-1, 1], len(spec)) * rng.uniform(2.0, NORMAL_Z, len(spec)), u)
+        if i == j:
+            k = int(rng.integers(len(spec))) if metric is None else metric
+            u[k] = spec[k][3] * rng.uniform(*FAULT_Z)
+        elif i > j and fault and rng.random() < 0.8:      # the cascade: amplified downstream
+            k = int(np.argmax([m[3] for m in spec]))      # an 'up' metric if the stage has one
+            z = rng.uniform(1.6, 2.5) * FAULT_Z[1]
+            cap = 0.9 * mu[k] / sd[k] if spec[k][3] < 0 else np.inf   # a count cannot go below zero
+            if cap > 1.2 * FAULT_Z[1]:
+                u[k] = spec[k][3] * min(z, cap)
+        baseline[s], observed[s] = b, mu + sd * u
+    return {"stages": list(STAGES), "observed": observed, "baseline": baseline, "fault": fault}
+
+
+def _answer(out: Any, case: Case):
+    if out is None:
+        return None
+    if not isinstance(out, str) or out not in case.args[0]:
+        raise OutputError(f"expected a stage name (one of {case.args[0]}) or None, got {out!r}")
+    return out
+
+
+def _wrong(out, expected) -> float:
+    return float(out != expected)
+
+
+DRAWS = [("healthy run", None, {}), ("camera shifted: calibration", "calibration", {}),
+         ("dirty lens: features", "features", {"metric": 1}), ("VO fault behind noisy RANSAC", "vo",
+                                                               {"noisy_upstream": True}),
+         ("matching fault", "matching", {}), ("a random stage", "random", {})]
+
+
+def _cases(rng: np.random.Generator) -> list[Case]:
+    cases = []
+    for name, fault, kw in DRAWS:
+        fault = STAGES[int(rng.integers(len(STAGES)))] if fault == "random" else fault
+        d = fault_run(rng, fault, **kw)
+        args = (d["stages"], d["observed"], d["baseline"], 4.0)
+        expected = gt_first_faulty_stage(*args)
+        # Exact: a stage name. The draw's margins make the rule's answer the injected fault.
+        assert expected == fault, (name, expected, fault)
+        cases.append(Case(name, args, expected, _wrong, 0, "wrong stage", convert=_answer,
+                          key=name.split(":")[0].replace(" ", "-"), info={"fault": fault}))
+    return cases
+
+
+def _z(case):
+    stages, observed, baseline, _ = case.args
+    return {s: (observed[s] - baseline[s].mean(0)) / baseline[s].std(0, ddof=1) for s in stages}
+
+
+def _largest(case):
+    z = _z(case)
+    return max(z, key=lambda s: np.max(np.abs(z[s])))
+
+
+def _last(case):
+    z = _z(case)
+    out = [s for s in case.args[0] if np.max(np.abs(z[s])) > case.args[3]]
+    return out[-1] if out else None
+
+
+def _relative(case, limit=0.25):
+    stages, observed, baseline, _ = case.args
+    return next((s for s in stages if np.max(np.abs(observed[s] / baseline[s].mean(0) - 1)) > limit), None)
+
+
+ROOT_HINTS = [
+    like(_largest, "that is the stage with the largest deviation: a cascade amplifies downstream; the root cause "
+         "is the first stage (upstream) that left its baseline.", rel=0),
+    like(_last, "that is the last stage out of its baseline: walk the pipeline from the top and stop at the "
+         "first one.", rel=0),
+    like(_relative, "a relative change is not a deviation: a noisy metric (RANSAC iterations) moves 70 % on a "
+         "healthy run; measure in baseline standard deviations.", rel=0),
+]
+
+register(Exercise(
+    id="11.7", title="Root cause, upstream first", name="first_faulty_stage", kind="code", points=2,
+    cases=_cases, hints=ROOT_HINTS, fallback=gt_first_faulty_stage,
+    arg_names=("stages", "observed", "baseline", "z_max")))

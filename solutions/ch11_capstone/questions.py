@@ -1,0 +1,31 @@
+"""Chapter 11's answers to the CONCEPT questions of part A (11.1-11.4)."""
+from __future__ import annotations
+
+from math import erf, sqrt
+
+import numpy as np
+
+
+def _phi(x: float) -> float:
+    return 0.5 * (1 + erf(x / sqrt(2)))
+
+
+def _inliers(bias, correct=0.7, sigma=0.7, tau=1.5):
+    return correct * (_phi((tau - bias) / sigma) - _phi((-tau - bias) / sigma))
+
+
+def _samples(w, s=8, p=0.99):
+    return int(np.ceil(np.log(1 - p) / np.log(1 - w ** s)))
+
+
+_w0, _w1 = _inliers(0.0), _inliers(1.0)
+cascade_numbers = [_w0, _w1, _samples(_w0), _samples(_w1)]
+
+# sigma_Z = Z^2 sigma / (f B) with f = 800 px, B = 0.2 m; (d) solves it for Z; (e) the exact error of a 2 px bias.
+depth_errors_m = [25 * 2 / 160, 100 * 2 / 160, 25 * 2 / 320, sqrt(0.05 * 160 / 0.5), 5.0 - 160 / (160 / 5 + 2)]
+
+# 1280 x 960 pixels, 3 bytes (RGB8) or 1 byte (mono / Bayer raw), 6 cameras at 30 fps, decimal MB.
+data_flow = [1280 * 960 * 3 / 1e6, 6 * 30 * 1280 * 960 * 3 / 1e6, 6 * 30 * 1280 * 960 / 1e6, 6 * 5 // 2,
+             6 * 5 // 2 * 200]
+
+look_first = ["calibration", "features", "map", "time sync", "matching"]

@@ -1,0 +1,186 @@
+"""Chapter 11 mutant catalogue (part A): realistic wrong implementations, one per known mistake.
+
+Each entry of MUTANTS is (exercise id, short name, function, hint fragment or None). The grader must take
+points off every one; where a hint exists for the mistake it must fire. Each mutant is written out on its
+own (never on the grader's rule), differing from a correct answer in one mistake.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from solutions.ch11_capstone.monitor import COMPONENT, MODES, NEEDS
+
+MUTANTS: list[tuple] = []
+
+
+# ----------------------------------------------------------------- 11.5 health_monitor
+
+def _monitor(stream, table, k, *, k_raise=None, k_clear=None, clear_band="normal", all_high=False, total=False):
+    x = np.asarray(stream, float)
+    events = []
+    for j, row in enumerate(table):
+        v = x[:, j]
+        if row["bad"] == "high" or all_high:
+            past, normal = v > row["alert"], v < row["normal"]
+        else:
+            past, normal = v < row["alert"], v > row["normal"]
+        if clear_band == "not_past":
+            normal = ~past
+        on, run = False, 0
+        for t in range(len(v)):
+            if (normal[t] if on else past[t]):
+                run += 1
+            elif not total:
+                run = 0
+            if run >= ((k_clear or k) if on else (k_raise or k)):
+                on, run = not on, 0
+                events.append((t, row["metric"], row["action"] if on else "clear"))
+    return events
+
+
+def monitor_without_hysteresis(stream, table, k=3):
+    """Raises on the first bad frame and clears on the first normal one."""
+    return _monitor(stream, table, k, k_raise=1, k_clear=1)
+
+
+def monitor_raises_at_once(stream, table, k=3):
+    """Hysteresis on the way out only: one frame past the threshold raises the alert."""
+    return _monitor(stream, table, k, k_raise=1)
+
+
+def monitor_clears_on_first_good_frame(stream, table, k=3):
+    """Waits k frames to raise, but one normal frame clears the alert."""
+    return _monitor(stream, table, k, k_clear=1)
+
+
+def monitor_ignores_warning_band(stream, table, k=3):
+    """Clears after k frames that are no longer past the alert threshold (warning-band frames count as good)."""
+    return _monitor(stream, table, k, clear_band="not_past")
+
+
+def monitor_higher_is_always_bad(stream, table, k=3):
+    """`x > alert` for every metric: the "lower is bad" rows (features, inlier ratio, ...) read upside down."""
+    return _monitor(stream, table, k, all_high=True)
+
+
+def monitor_counts_total(stream, table, k=3):
+    """Counts bad frames since the last state change instead of consecutive ones."""
+    return _monitor(stream, table, k, total=True)
+
+
+def monitor_forgets_actions(stream, table, k=3):
+    """Right frames, but reports "alert" instead of the row's action."""
+    return [(t, m, a if a == "clear" else "alert") for t, m, a in _monitor(stream, table, k)]
+
+
+MUTANTS += [
+    ("11.5", "no hysteresis", monitor_without_hysteresis, "no hysteresis"),
+    ("11.5", "raises on the first bad frame", monitor_raises_at_once, "raised on the first frame"),
+    ("11.5", "clears on the first good frame", monitor_clears_on_first_good_frame, "clears on the first good frame"),
+    ("11.5", "warning band counts as recovered", monitor_ignores_warning_band, "no longer past the alert"),
+    ("11.5", "lower-is-bad read upside down", monitor_higher_is_always_bad, "read as 'higher is bad'"),
+    ("11.5", "bad frames counted in total", monitor_counts_total, "counted in total"),
+    ("11.5", "no actions", monitor_forgets_actions, "not the actions"),
+]
+
+
+# ----------------------------------------------------------------- 11.6 degradation_modes
+
+def _modes(alerts, names, hold, *, needs=NEEDS, component=COMPONENT, recover=True, hold_used=None):
+    alerts = np.asarray(alerts, bool)
+    failed = [{component[n] for j, n in enumerate(names) if n in component and a[j]} for a in alerts]
+    ok = [[not needs[m] & f for m in MODES] for f in failed]
+    hold = hold if hold_used is None else hold_used
+    streak, out, cur = np.zeros(len(MODES), int), [], None
+    for t, row in enumerate(ok):
+        streak = np.where(row, streak + 1, 0)
+        if cur is None or not row[cur]:
+            cur = row.index(True)
+        elif recover:
+            better = [m for m in range(cur) if streak[m] >= hold]
+            cur = better[0] if better else cur
+        out.append(MODES[cur])
+    return out
+
+
+def modes_upgrade_at_once(alerts, names, hold=10):
+    """Returns to the better mode on the first frame it is available again."""
+    return _modes(alerts, names, hold, hold_used=1)
+
+
+def modes_never_recover(alerts, names, hold=10):
+    """Falls back correctly but stays down for the rest of the run."""
+    return _modes(alerts, names, hold, recover=False)
+
+
+def modes_direct_vo_without_stereo(alerts, names, hold=10):
+    """The lesson's ladder read literally: direct VO is the next rung whatever failed (it needs nothing)."""
+    return _modes(alerts, names, hold, needs=dict(NEEDS, **{"direct VO": set()}))
+
+
+def modes_symptoms_are_failures(alerts, names, hold=10):
+    """Every alert counts against the features, VO error and loop closures included."""
+    component = {n: COMPONENT.get(n, "features") for n in names}
+    return _modes(alerts, names, hold, component=component)
+
+
+def modes_by_failure_count(alerts, names, hold=10):
+    """One rung down per failed component (0 -> stereo VIO, 1 -> direct VO, ...), no hold."""
+    alerts = np.asarray(alerts, bool)
+    failed = [len({COMPONENT[n] for j, n in enumerate(names) if n in COMPONENT and a[j]}) for a in alerts]
+    return [MODES[f if f < 3 else 4] for f in failed]
+
+
+MUTANTS += [
+    ("11.6", "upgrades at once", modes_upgrade_at_once, "upgrades as soon as"),
+    ("11.6", "never recovers", modes_never_recover, "never comes back"),
+    ("11.6", "direct VO without stereo", modes_direct_vo_without_stereo, "direct VO needs stereo"),
+    ("11.6", "symptoms switch the mode", modes_symptoms_are_failures, "downstream symptoms"),
+    ("11.6", "one rung per failure", modes_by_failure_count, None),
+]
+
+
+# ----------------------------------------------------------------- 11.7 first_faulty_stage
+
+def _z(observed, baseline, stage):
+    b = np.asarray(baseline[stage], float)
+    return np.abs(np.asarray(observed[stage], float) - b.mean(0)) / b.std(0, ddof=1)
+
+
+def blame_largest_deviation(stages, observed, baseline, z_max=4.0):
+    """The stage that moved most (in sigmas): the loudest symptom, usually downstream."""
+    return max(stages, key=lambda s: _z(observed, baseline, s).max())
+
+
+def blame_last_stage(stages, observed, baseline, z_max=4.0):
+    """Walks the pipeline and keeps the last stage out of its baseline."""
+    out = None
+    for s in stages:
+        if _z(observed, baseline, s).max() > z_max:
+            out = s
+    return out
+
+
+def blame_relative_change(stages, observed, baseline, z_max=4.0):
+    """Ignores the baseline's spread: a metric more than 25 % from its baseline mean is a deviation."""
+    for s in stages:
+        mean = np.asarray(baseline[s], float).mean(0)
+        if np.any(np.abs(np.asarray(observed[s], float) / mean - 1) > 0.25):
+            return s
+    return None
+
+
+def blame_first_metric_only(stages, observed, baseline, z_max=4.0):
+    """Looks at each stage's headline metric (the first) only."""
+    for s in stages:
+        if _z(observed, baseline, s)[0] > z_max:
+            return s
+    return None
+
+
+MUTANTS += [
+    ("11.7", "largest deviation", blame_largest_deviation, "largest deviation"),
+    ("11.7", "last stage", blame_last_stage, "last stage out of its baseline"),
+    ("11.7", "ignores the baseline spread", blame_relative_change, "relative change is not a deviation"),
+    ("11.7", "first metric only", blame_first_metric_only, None),
+]
