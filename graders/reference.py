@@ -6,6 +6,11 @@ against the lesson itself and every card's answer against its row (recomputed wh
 exists: RANSAC iterations, pairs, bytes per second). Where the lesson's number is wrong, the card's
 answer is the right one and its `note` says what the lesson printed and why that is wrong.
 
+The same holds for the lesson's advice that the course's chapters refute (`CORRECTIONS`: a cell of a
+table, what is right, why, and the chapter exercise that shows it). The transcribed rows stay as the
+lesson printed them — they are the source the tests compare with the lesson — and the cards are built
+from `corrected_row`, which puts the right cell in and says what the lesson printed.
+
 A chapter adds its own cards as data: a `CARDS` list of `graders.cards.Card` in its grader package.
 """
 from __future__ import annotations
@@ -177,6 +182,81 @@ PIPELINE = {"line": 17, "cameras": 6, "width": 1280, "height": 960, "channels": 
 ROLLING_SHUTTER = {"line": 26, "readout_s": 0.033, "deg_per_s": 90, "f_px": 800, "claims": {"skew_px": 42}}
 TRIANGULATION = {"line": 282, "Z": 5.0, "f": 800.0, "B": 0.2, "sigma_px": 2.0, "claims": {"sigma_3d_m": 0.31}}
 CONFIDENCE = 0.99                 # the lesson's "99% success probability" (P_fail = 0.01)
+MATCH_S = 0.030                   # one matched pair, "LightGlue, ~30ms/pair" (the lesson, line 268)
+
+
+class Correction(NamedTuple):
+    """A cell of a lesson table that a chapter of the course refutes."""
+    right: str                    # what the card teaches instead
+    why: str                      # why the lesson's cell is wrong
+    where: str                    # the chapter and exercise that show it
+
+
+def _exhaustive_1k() -> str:
+    n, k = 1_000, 50
+    pairs = n * (n - 1) // 2
+    return (f"exhaustive matching of {n:,} images is {pairs:,} pairs, {pairs * MATCH_S / 3600:.1f} GPU-hours at "
+            f"{MATCH_S * 1e3:.0f} ms a pair for the matching alone — over the row's ~2 hours end to end; top-{k} "
+            f"retrieval is at most {n * k:,} pairs ({n * k * MATCH_S / 60:.0f} min), the choice from about "
+            f"{n:,} images")
+
+
+# (table, row, column) -> the right cell. Only what a chapter shows to be wrong, not what it merely rephrases.
+CORRECTIONS: dict[tuple[str, int, int], Correction] = {
+    ("symptoms_2", 0, 2): Correction(
+        "Always normalise (Hartley: each image's points to centroid 0, mean distance √2); σ1/σ8 of A then drops "
+        "from 10^4–10^7 to single digits – a few tens",
+        "the condition number of the full A is infinite for exact data (its smallest singular value, the "
+        "solution's, is zero); the number that matters is σ1/σ8, and normalisation brings it to single digits – a "
+        "few tens (~4 for matches in one corner of a 12 MP image, 10–40 for whole-image matches), not ~1",
+        "chapter 2, section 3 and DEBUG 2.17, notebooks/02_epipolar.ipynb"),
+    ("symptoms_3", 0, 2): Correction(
+        "Relax (raise) the ratio threshold to 0.8 and match (nearly) every keypoint, not only the strongest few; "
+        "or a dense matcher (LoFTR)",
+        "Lowe's test keeps a match when d1/d2 < r, so a lower r keeps fewer matches; across a 2× zoom true pairs "
+        "have d1/d2 of 0.4–0.8 and a strict 0.6 rejects most of them, while 0.8 on every detection repairs the run "
+        "(keypoints outside the overlap still fail the test)",
+        "chapter 3, DEBUG 3.13, notebooks/03_features.ipynb"),
+    ("symptoms_3", 1, 2): Correction(
+        "Verify the geometry: keep the nearest neighbours (a permissive ratio, up to ~0.95) and fit RANSAC on a "
+        "homography (a planar shelf) or F, with a threshold well below the repeat period (~3 px); a tighter ratio "
+        "alone throws the repeated parts' true matches away",
+        "on repetitive texture a correct match's second-nearest neighbour is the same part one bay over, so "
+        "d1/d2 ≈ 0.8–1.0 whether the match is right or wrong: no ratio separates them, and 0.6–0.7 keeps only the "
+        "few unique features (too few, a fragile pose); what tells the bays apart is where a match lands, which "
+        "only geometric verification checks",
+        "chapter 3, DEBUG 3.14, notebooks/03_features.ipynb"),
+    ("symptoms_4", 1, 2): Correction(
+        "Register each image with its own camera's K; keep PnP thresholds scaled to the noise and the inlier "
+        "floor (≥ 30 inliers, ≥ 25 % of the matches); more features, more overlap",
+        "lower thresholds (a looser PnP error bound or a smaller inlier floor) make images with a wrong model — "
+        "e.g. another camera's intrinsics — 'register' degrees and metres off, which is worse than not registering: "
+        "new points are then triangulated from those poses, and the inlier floor is what keeps images of another "
+        "place out",
+        "chapter 4, DEBUG 4.19, notebooks/04_sfm.ipynb"),
+    ("symptoms_5", 3, 1): Correction(
+        "Under-constrained points (seen from one camera, or from two with almost no parallax) and a free gauge",
+        "being seen from two cameras is not enough: cameras 1–2 cm apart at 4–8 m give 0.1–0.2° of parallax, "
+        "the point's depth rests on a pixel or two of disparity and 0.5 px of noise moves it by metres — which is "
+        "why the fix keeps only points with ≥ 3 observations (or a large enough triangulation angle); and with "
+        "nothing fixing the gauge the whole reconstruction drifts while they move",
+        "chapter 5, DEBUG 5.18, notebooks/05_bundle_adjustment.ipynb"),
+    ("scaling", 1, 1): Correction("Retrieval (top-50)", _exhaustive_1k(),
+                                  "chapter 10, Question 10.14, notebooks/10_large_scale.ipynb"),
+}
+
+
+def corrected_row(key: str, i: int) -> tuple[tuple[str, ...], dict[int, str]]:
+    """Row i of table `key` with the cells the chapters correct replaced, and per corrected column the note:
+    what the lesson printed, why it is wrong, where the course shows it."""
+    t = TABLES[key]
+    row, notes = list(t.rows[i]), {}
+    for j, cell in enumerate(t.rows[i]):
+        fix = CORRECTIONS.get((key, i, j))
+        if fix is not None:
+            notes[j] = f"the lesson prints “{cell}” ({t.header[j].lower()}); {fix.why} ({fix.where})"
+            row[j] = fix.right
+    return tuple(row), notes
 
 
 def ransac_iterations(w: float, s: int, p: float = CONFIDENCE) -> int:
@@ -219,10 +299,12 @@ def _symptoms() -> list[Card]:
     for key, t in TABLES.items():
         if not key.startswith("symptoms_"):
             continue
-        cards += [Card(id=f"symptom-{t.chapter}-{_slug(row[0])}", dimension="debug", chapter=t.chapter,
-                       prompt=f"Chapter {t.chapter} symptom: “{row[0]}”. What is the diagnosis, and the fix?",
-                       answer=f"Diagnosis: {row[1]}.\nFix: {row[2]}.", source=_src(key, i), table=key, row=i)
-                  for i, row in enumerate(t.rows)]
+        for i in range(len(t.rows)):
+            row, notes = corrected_row(key, i)
+            cards.append(Card(id=f"symptom-{t.chapter}-{_slug(row[0])}", dimension="debug", chapter=t.chapter,
+                              prompt=f"Chapter {t.chapter} symptom: “{row[0]}”. What is the diagnosis, and the fix?",
+                              answer=f"Diagnosis: {row[1]}.\nFix: {row[2]}.", note="; ".join(notes.values()),
+                              source=_src(key, i), table=key, row=i))
     return cards
 
 
@@ -272,21 +354,22 @@ def _ransac() -> list[Card]:
 def _scaling() -> list[Card]:
     t, cards = TABLES["scaling"], []
     bare = lambda cell: re.sub(r"\s*\((\d+K pairs|COLMAP)\)", "", cell)   # noqa: E731 — "(5K pairs)" is not a strategy
-    strategies, approaches = sorted({bare(r[1]) for r in t.rows}), sorted({bare(r[2]) for r in t.rows})
-    for i, row in enumerate(t.rows):
+    rows = [corrected_row("scaling", i) for i in range(len(t.rows))]
+    strategies, approaches = sorted({bare(r[1]) for r, _ in rows}), sorted({bare(r[2]) for r, _ in rows})
+    for i, (row, notes) in enumerate(rows):
         size = row[0].replace(" images", "")
         row = (row[0], bare(row[1]), bare(row[2]), *row[3:])
         cards += [
             Card(id=f"scale-{_slug(size)}-matching", kind="choice", answer=row[1], options=tuple(strategies),
-                 prompt=f"SfM on {row[0]}: which matching strategy?", source=_src("scaling", i), chapter=10,
-                 dimension="design", table="scaling", row=i),
+                 prompt=f"SfM on {row[0]}: which matching strategy?", note=notes.get(1, ""),
+                 source=_src("scaling", i), chapter=10, dimension="design", table="scaling", row=i),
             Card(id=f"scale-{_slug(size)}-sfm", kind="choice", answer=row[2], options=tuple(approaches),
-                 prompt=f"SfM on {row[0]}: which SfM approach?", source=_src("scaling", i), chapter=10,
-                 dimension="design", table="scaling", row=i),
+                 prompt=f"SfM on {row[0]}: which SfM approach?", note=notes.get(2, ""), source=_src("scaling", i),
+                 chapter=10, dimension="design", table="scaling", row=i),
             Card(id=f"scale-{_slug(size)}-time", kind="magnitude", answer=lesson_number(row[3]) / 3600, unit="hours",
                  tol=0.5, prompt=f"SfM on {row[0]} ({row[2].lower()}): expected time, in hours (order of magnitude)?",
-                 explain=f"Expected output quality: {row[4]}.", source=_src("scaling", i), chapter=10,
-                 dimension="design", table="scaling", row=i)]
+                 explain=f"Expected output quality: {row[4]}.", note=notes.get(3, ""), source=_src("scaling", i),
+                 chapter=10, dimension="design", table="scaling", row=i)]
     n = int(lesson_number(t.rows[0][0]))
     cards.append(Card(id="scale-exhaustive-pairs-100", kind="numeric", answer=n * (n - 1) // 2, unit="pairs",
                       tol=0.02, prompt=f"Exhaustive matching of {n} images: how many image pairs?",
@@ -411,6 +494,12 @@ def _computed() -> list[Card]:
 
 
 def reference_cards() -> list[Card]:
-    """The shared deck: every cross-chapter table of the lesson, as cards."""
-    return (_conventions() + _ransac() + _timing() + _monitoring() + _scaling() + _computed() + _symptoms()
-            + _text_tables())
+    """The shared deck: every cross-chapter table of the lesson, as cards. Every correction is carried by a
+    card of its row (a builder that ignored `CORRECTIONS` would teach the lesson's cell: refused here)."""
+    cards = (_conventions() + _ransac() + _timing() + _monitoring() + _scaling() + _computed() + _symptoms()
+             + _text_tables())
+    for key, i, j in CORRECTIONS:
+        cell = TABLES[key].rows[i][j]
+        if not any(c.table == key and c.row == i and f"“{cell}”" in c.note for c in cards):
+            raise ValueError(f"the correction of table {key!r}, row {i}, column {j} is carried by no card")
+    return cards

@@ -17,7 +17,7 @@ import pytest
 from graders import Case, Exercise, drill, progress, srs
 from graders.cards import Card, deck, export_anki, grade
 from graders.compare import max_abs
-from graders.reference import TABLES, pipeline_numbers, reference_cards
+from graders.reference import CORRECTIONS, TABLES, pipeline_numbers, reference_cards
 
 SEED_LESSON = Path("/work/shared/seed/000_222a4a16e5d953e6.txt")   # the course's source text, outside the repo
 
@@ -189,6 +189,9 @@ HOURS = {"min": 1 / 60, "hour": 1, "hours": 1, "days": 24, "week": 168}
 def _check_card_against_source(c: Card) -> None:
     t = TABLES.get(c.table)
     row = t.rows[c.row] if t is not None and c.row >= 0 else None
+    if row is not None:     # the lesson's row, with the cells the chapters refute replaced (pinned further down)
+        row = tuple(CORRECTIONS[(c.table, c.row, j)].right if (c.table, c.row, j) in CORRECTIONS else cell
+                    for j, cell in enumerate(row))
     if c.table == "ransac":
         w = float(row[0].rstrip("%")) / 100
         if c.id.startswith("ransac-time"):
@@ -243,6 +246,57 @@ def test_wrong_lesson_numbers_are_corrected_and_said_so():
     for c in by_id.values():
         if c.note:
             assert "Correction:" in c.back()
+
+
+# The lesson's advice that the course's chapters refute: card id -> (the lesson's cell, a phrase the right answer
+# carries, the chapter exercise that shows it). Written out here, apart from graders.reference.CORRECTIONS, so a
+# regeneration of the tables or the cards cannot drop one of these corrections without this test failing.
+CHAPTER_CORRECTIONS = {
+    # 02_epipolar, section 3: "'about 1' is not what normalisation achieves; single digits to a few tens is"
+    "symptom-2-f-estimation-gives-garbage": ("Always normalize; condition number of A should be ~1", "σ1/σ8",
+                                             "DEBUG 2.17"),
+    # 03_features 3.13: a strict 0.6 rejects most true pairs across a 2x zoom; the repair is ratio 0.8, more keypoints
+    "symptom-3-too-few-matches-50": ("Lower ratio threshold to 0.8; use more keypoints; try LoFTR",
+                                     "relax (raise) the ratio threshold to 0.8", "DEBUG 3.13"),
+    # 03_features 3.14: on repetitive texture no ratio separates right from wrong; 0.7 throws the repeated parts away
+    "symptom-3-many-wrong-matches": ("Tighten ratio test to 0.6; use geometric verification (RANSAC on F)",
+                                     "a tighter ratio alone throws the repeated parts' true matches away", "DEBUG 3.14"),
+    # 04_sfm 4.19: loosened thresholds "register" wrongly modelled images degrees and metres off; use each camera's K
+    "symptom-4-many-images-fail-to-register": ("Lower matching thresholds; add more features; ensure overlap",
+                                               "its own camera's K", "DEBUG 4.19"),
+    # 05_bundle_adjustment 5.18: two cameras with ~0.1-0.2 deg of parallax fly away too (hence >= 3 observations)
+    "symptom-5-points-fly-to-infinity-after-ba": ("Under-constrained points (seen from <2 cameras)", "almost no parallax",
+                                                  "DEBUG 5.18"),
+    # 10_large_scale 10.14: 1 K images exhaustively is 4.2 GPU-hours of matching alone; retrieval from ~1,000 images
+    "scale-1k-matching": ("Exhaustive or retrieval (top-50)", "Retrieval (top-50)", "Question 10.14"),
+}
+
+
+def test_lesson_advice_the_chapters_refute_is_corrected_on_its_card():
+    by_id = {c.id: c for c in reference_cards()}
+    assert len(CORRECTIONS) == len(CHAPTER_CORRECTIONS)          # every correction is pinned here, and only those
+    for card_id, (lesson_cell, right, where) in CHAPTER_CORRECTIONS.items():
+        c = by_id[card_id]
+        assert lesson_cell in TABLES[c.table].rows[c.row], card_id      # the source row stays as the lesson printed it
+        assert lesson_cell not in str(c.answer) and right.lower() in str(c.answer).lower(), (card_id, c.answer)
+        assert f"the lesson prints “{lesson_cell}”" in c.note and where in c.note, (card_id, c.note)
+        assert "Correction: the lesson prints" in c.back()
+    refuted = [cell for cell, _, _ in CHAPTER_CORRECTIONS.values()]
+    for c in reference_cards():                                     # no other card teaches a refuted cell either
+        assert not any(cell in str(c.answer) or cell in c.explain for cell in refuted), c.id
+    # a refuted choice is no longer offered as an option
+    assert "Exhaustive or retrieval (top-50)" not in by_id["scale-1k-matching"].options
+    # the 1 K note's figures, recomputed: 1000·999/2 pairs at 30 ms (the lesson's LightGlue figure) = 4.2 h
+    assert f"{1000 * 999 // 2:,} pairs, {1000 * 999 / 2 * 0.030 / 3600:.1f} GPU-hours" in by_id["scale-1k-matching"].note
+
+
+def test_a_correction_no_card_carries_is_refused(monkeypatch):
+    from graders import reference
+    from graders.reference import Correction
+    # a correction of the monitoring table: its builder does not read CORRECTIONS, so the deck must refuse it
+    monkeypatch.setitem(reference.CORRECTIONS, ("monitoring", 2, 3), Correction("x", "y", "chapter 99"))
+    with pytest.raises(ValueError, match="carried by no card"):
+        reference_cards()
 
 
 @pytest.mark.skipif(not SEED_LESSON.exists(), reason="the seed lesson is not on this machine")
