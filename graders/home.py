@@ -89,9 +89,15 @@ def plot_progress(ax=None, events: list[dict] | None = None, totals: dict | None
 
 def reference_markdown(key: str) -> str:
     """One of the lesson's tables, readable, with its source lines (and, for RANSAC, the formula's values)."""
-    from .reference import TABLES, ransac_iterations
+    from .reference import TABLES, corrected_row, ransac_iterations
     t = TABLES[key]
-    header, rows = list(t.header), [list(r) for r in t.rows]
+    header, rows, notes = list(t.header), [], []
+    for i in range(len(t.rows)):     # cells the chapters refute are shown corrected, the lesson's cell in a note
+        row, fixes = corrected_row(key, i)
+        rows.append(list(row))
+        for j, note in fixes.items():
+            notes.append(note)
+            rows[-1][j] += f" [{len(notes)}]"
     if key == "ransac":
         header += ["5-point by the formula", "8-point by the formula"]
         for r in rows:
@@ -100,4 +106,6 @@ def reference_markdown(key: str) -> str:
     out = [f"**{t.title}** (seed lesson, lines {t.line}-{t.line + len(t.rows) - 1})", "",
            "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     out += ["| " + " | ".join(c.replace("|", "\\|") for c in r) + " |" for r in rows]
+    if notes:
+        out += [""] + [f"[{k}] Corrected: {note}." for k, note in enumerate(notes, 1)]
     return "\n".join(out)
