@@ -1,4 +1,4 @@
-"""Chapter 10, part B graders (10.4-10.5, 10.9-10.10, 10.12-10.13): the reference and the stand-ins pass;
+"""Chapter 10, part B graders (10.4-10.5, 10.9-10.10, 10.12-10.13, 10.17): the reference and the stand-ins pass;
 every mutant fails and its hint fires.
 
 Seeds are fixed; 10.9 uses two seeds per mutant (each grade runs two Adam alignments, ~2-5 s on the
@@ -20,14 +20,14 @@ from graders import get
 from mutants.ch10_large_scale_learned import MUTANTS
 from solutions import ch10_large_scale as ref
 
-IDS = ("10.4", "10.5", "10.9", "10.10", "10.12", "10.13")
+IDS = ("10.4", "10.5", "10.9", "10.10", "10.12", "10.13", "10.17")
 EXERCISES = {i: get(i) for i in IDS}
 REFERENCE = {"10.9": ref.global_alignment, "10.10": ref.run_pipeline, "10.12": ref.choose_pipelines,
-             "10.13": ref.chunked_poses,
+             "10.13": ref.chunked_poses, "10.17": ref.focal_from_pointmap,
              "10.4": [2 * 4 * 512 * 384, 50 * 49, 500, 4.0],
              "10.5": ["learned", "classical", "learned", "hybrid", "classical", "classical"]}
-SEEDS = {"10.9": [0, 1], "10.10": [0, 1, 2], "10.12": [0, 1, 2], "10.13": [0, 1, 2]}
-CODED = ("10.9", "10.10", "10.12", "10.13")
+SEEDS = {"10.9": [0, 1], "10.10": [0, 1, 2], "10.12": [0, 1, 2], "10.13": [0, 1, 2], "10.17": [0, 1, 2]}
+CODED = ("10.9", "10.10", "10.12", "10.13", "10.17")
 
 
 @pytest.mark.parametrize("exercise_id", CODED)
@@ -75,3 +75,17 @@ def test_out_of_domain_scenes_show_low_confidence_and_textureless_ones_lose_view
         ratios = [np.median(s["learned"]["confidence"]) / case["indoor_confidence"] for s in case["scenes"]]
         lost = [not np.isfinite(s["classical"]["Rs"]).all() for s in case["scenes"]]
         assert min(ratios) < 0.3 and max(ratios) > 0.5 and any(lost)
+
+
+def test_the_race_scores_both_routes_on_one_scene():
+    # The experiment's two rows: with 120 keypoints a view classical SfM registers every view and is the more
+    # accurate route; with 30 (textureless) too few are shared between views and it registers none, while the
+    # pointmaps (the grader's alignment) place all six within 1 degree either way.
+    for keypoints, registered in ((120, 6), (30, 0)):
+        sc = ch10.race_scene(np.random.default_rng(7), n_views=6, keypoints=keypoints)
+        res = ch10.race(sc, ch10.gt_global_alignment)
+        assert res["classical"]["registered"] == registered and res["pointmaps"]["registered"] == 6
+        assert res["pointmaps"]["rot_deg"] < 1.0
+    sc = ch10.race_scene(np.random.default_rng(7), n_views=6, keypoints=120)
+    res = ch10.race(sc, ch10.gt_global_alignment)
+    assert res["classical"]["rot_deg"] < res["pointmaps"]["rot_deg"]

@@ -7,8 +7,8 @@ ground truth (textured-plane renders of known places, sub-reconstructions with k
 
 Modules (part A): `questions` (10.1-10.3, 10.14-10.16), `retrieval` (10.6), `sim3` (10.7),
 `merge` (10.8), `debug` (10.11).
-Modules (part B): `pointmaps` (10.4-10.5, 10.9), `distributed` (10.10), `debug_b` (10.12-10.13),
-`frontier` (10.17), `demo` (the widget).
+Modules (part B): `questions_b` (10.4-10.5), `pointmaps` (10.9), `distributed` (10.10), `debug_b` (10.12-10.13),
+`frontier` (10.17 and the classical-vs-pointmaps race of the widget).
 Importing the package registers the chapter; the names below are the API of the notebook, the tests
 and the benchmark.
 """
@@ -43,8 +43,10 @@ from .pointmaps import (alignment_errors, alignment_loss, gt_global_alignment, p
 from .debug_b import DEBUG_GENERATORS as _DEBUG_B  # noqa: E402
 from .debug_b import cv_choose_pipelines, cv_chunked_poses, pose_errors  # noqa: E402
 
+from .frontier import gt_focal_from_pointmap, pointmap_view, race, race_scene  # noqa: E402
+
 DEBUG_GENERATORS.update(_DEBUG_B)
-__all__ += ["cv_choose_pipelines", "cv_chunked_poses", "pose_errors", "PipelineStages", "TransientTaskError", "gt_run_pipeline", "gt_serial_pipeline", "pipeline_images",
+__all__ += ["gt_focal_from_pointmap", "pointmap_view", "race", "race_scene", "cv_choose_pipelines", "cv_chunked_poses", "pose_errors", "PipelineStages", "TransientTaskError", "gt_run_pipeline", "gt_serial_pipeline", "pipeline_images",
             "task_key", "alignment_errors", "alignment_loss", "gt_global_alignment", "pair_graph", "pointmap_scene"]
 
 debug_case = debug_practice(DEBUG_GENERATORS)   # every DEBUG exercise's practice case (10.11-10.13)

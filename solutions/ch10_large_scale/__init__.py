@@ -16,7 +16,8 @@ __all__ = ["attention_memory", "cluster_gpus", "merge_verdicts", "pairs_10k", "s
 
 # ---- part B: add imports and extend __all__ below this line.
 from .distributed import run_pipeline  # noqa: E402
+from .frontier import focal_from_pointmap  # noqa: E402
 from .pointmaps import global_alignment  # noqa: E402
 from .questions import pipeline_choices, pointmap_costs  # noqa: E402
 
-__all__ += ["pointmap_costs", "pipeline_choices", "global_alignment", "run_pipeline"]
+__all__ += ["pointmap_costs", "pipeline_choices", "global_alignment", "run_pipeline", "focal_from_pointmap"]

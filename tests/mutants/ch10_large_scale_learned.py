@@ -282,3 +282,47 @@ MUTANTS += [
     ("10.13", "rigid joins", chunks_rigid, "its own scale"),
     ("10.13", "translations not scaled", chunks_translation_unscaled, "its own scale"),
 ]
+
+
+# ----------------------------------------------------------------- 10.17 focal_from_pointmap (FRONTIER)
+
+def _focal_lsq(p, q, w):
+    return float(np.sum(w[:, None] * p * q) / np.sum(w[:, None] * q * q))
+
+
+def focal_uncentred(X, C):
+    """Pixels counted from the top-left corner: u = f x / z without the principal point."""
+    H, W = C.shape
+    u, v = np.meshgrid(np.arange(W, dtype=float), np.arange(H, dtype=float))
+    p, q = np.stack([u, v], -1).reshape(-1, 2), (X[..., :2] / X[..., 2:]).reshape(-1, 2)
+    w = C.ravel()
+    f = _focal_lsq(p, q, w)
+    for _ in range(20):
+        f = _focal_lsq(p, q, C.ravel() / np.maximum(np.linalg.norm(p - f * q, axis=1), 1e-8))
+    return f
+
+
+def focal_axes_swapped(X, C):
+    """x / z matched with the row offset and y / z with the column (image (row, col) vs (x, y))."""
+    H, W = C.shape
+    u, v = np.meshgrid(np.arange(W) - (W - 1) / 2, np.arange(H) - (H - 1) / 2)
+    p, q = np.stack([v, u], -1).reshape(-1, 2), (X[..., :2] / X[..., 2:]).reshape(-1, 2)
+    f = _focal_lsq(p, q, C.ravel())
+    for _ in range(20):
+        f = _focal_lsq(p, q, C.ravel() / np.maximum(np.linalg.norm(p - f * q, axis=1), 1e-8))
+    return f
+
+
+def focal_least_squares(X, C):
+    """Confidence-weighted least squares, squared: the sky points still pull f."""
+    H, W = C.shape
+    u, v = np.meshgrid(np.arange(W) - (W - 1) / 2, np.arange(H) - (H - 1) / 2)
+    p, q = np.stack([u, v], -1).reshape(-1, 2), (X[..., :2] / X[..., 2:]).reshape(-1, 2)
+    return _focal_lsq(p, q, C.ravel())
+
+
+MUTANTS += [
+    ("10.17", "pixels from the corner", focal_uncentred, "principal point"),
+    ("10.17", "axes swapped", focal_axes_swapped, "the truth"),
+    ("10.17", "squared loss", focal_least_squares, "Weiszfeld"),
+]
