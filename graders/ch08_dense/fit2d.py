@@ -69,10 +69,11 @@ def _render_t(p, H, W, torch):
     return (g @ torch.sigmoid(p["c"])).reshape(H, W, 3)
 
 
-def gt_fit_splats(target, init, steps=150, max_gaussians=64, seed=0, densify=True):
+def gt_fit_splats(target, init, steps=150, max_gaussians=64, seed=0, densify=True, lr_means=0.3, log=None):
     """8.16's stand-in: Adam on (μ, log s, θ, logit c, logit o); every 30 steps up to 120 the Gaussians with
     the largest accumulated position gradient are densified (split in two along the long axis if wider than
-    1.5 px, cloned otherwise), those below o = 0.005 pruned, the budget kept by opacity."""
+    1.5 px, cloned otherwise), those below o = 0.005 pruned, the budget kept by opacity. `lr_means` is the
+    position learning rate (px per step); a list `log` gets one dict per 30-step round (8.20's run log)."""
     import torch
     with single_thread():
         torch.manual_seed(seed)
@@ -81,12 +82,13 @@ def gt_fit_splats(target, init, steps=150, max_gaussians=64, seed=0, densify=Tru
         lg = lambda x: torch.logit(torch.tensor(np.clip(np.asarray(x, float), 1e-4, 1 - 1e-4)))
         p = {"means": torch.tensor(np.asarray(init["means"], float)), "log_s": torch.log(torch.tensor(np.asarray(init["scales"], float))),
              "theta": torch.tensor(np.asarray(init["theta"], float)), "c": lg(init["color"]), "o": lg(init["opacity"])}
-        lrs = {"means": 0.3, "log_s": 0.05, "theta": 0.05, "c": 0.1, "o": 0.1}
+        lrs = {"means": lr_means, "log_s": 0.05, "theta": 0.05, "c": 0.1, "o": 0.1}
         for k in range(0, steps, 30):
             for v in p.values():
                 v.requires_grad_(True)
             opt = torch.optim.Adam([{"params": [p[n]], "lr": lrs[n]} for n in p])
             acc = torch.zeros(len(p["means"]), dtype=torch.float64)
+            start = p["means"].detach().clone()
             for _ in range(min(30, steps - k)):
                 opt.zero_grad()
                 loss = ((_render_t(p, H, W, torch) - T) ** 2).mean()
@@ -94,6 +96,12 @@ def gt_fit_splats(target, init, steps=150, max_gaussians=64, seed=0, densify=Tru
                 acc += p["means"].grad.norm(dim=1)
                 opt.step()
             p = {n: v.detach() for n, v in p.items()}
+            if log is not None:
+                m = p["means"].numpy()
+                inside = (m[:, 0] >= 0) & (m[:, 0] < W) & (m[:, 1] >= 0) & (m[:, 1] < H)
+                log.append({"step": k + min(30, steps - k), "loss": float(loss.detach()), "n": len(m),
+                            "inside": float(inside.mean()),
+                            "moved_px": float((p["means"] - start).norm(dim=1).mean()) / min(30, steps - k)})
             if densify and k + 30 < steps and k + 30 <= 120:
                 p = _densify_prune(p, acc, max_gaussians, torch)
         keep = torch.sigmoid(p["o"]) >= O_PRUNE

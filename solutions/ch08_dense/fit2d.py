@@ -42,17 +42,17 @@ def _densify(P: list, grad_acc: torch.Tensor, max_gaussians: int) -> list:
 
 
 def fit_splats(target, init: dict, steps: int = 150, max_gaussians: int = 64, every: int = 30,
-               densify_until: int = 120, o_min: float = 0.005) -> dict:
+               densify_until: int = 120, o_min: float = 0.005, lr_means: float = 0.3) -> dict:
     """Exercise 8.16: fit `target` (H, W, 3) with 2D Gaussians from `init` (dict: means (N, 2), scales (N, 2),
     theta (N,), color (N, 3), opacity (N,)); densify every `every` steps until `densify_until`, prune
-    opacity < o_min, never more than `max_gaussians`. Returns the fitted Gaussians in the same dict form."""
+    opacity < o_min, never more than `max_gaussians`; `lr_means` is the position learning rate. Returns the fitted Gaussians in the same dict form."""
     T = torch.as_tensor(np.asarray(target, float))
     H, W = T.shape[:2]
     logit = lambda x: torch.logit(torch.as_tensor(np.clip(np.asarray(x, float), 1e-4, 1 - 1e-4)))
     # torch.tensor copies: Adam updates in place and must not write into the caller's arrays
     P = [torch.tensor(np.asarray(init["means"], float)), torch.log(torch.tensor(np.asarray(init["scales"], float))),
          torch.tensor(np.asarray(init["theta"], float)), logit(init["color"]), logit(init["opacity"])]
-    lrs = [0.3, 0.05, 0.05, 0.1, 0.1]                     # px per step for μ; the rest in their own units
+    lrs = [lr_means, 0.05, 0.05, 0.1, 0.1]                # px per step for μ; the rest in their own units
     done = 0
     while done < steps:
         P = [p.detach().requires_grad_(True) for p in P]

@@ -1,9 +1,11 @@
-"""8.21 (DEBUG) from scratch: blurry splatting renders."""
+"""8.20-8.21 (DEBUG) from scratch: splatting training that diverges, blurry splatting renders."""
 from __future__ import annotations
+
+import numpy as np
 
 from .fit2d import fit_splats
 
-__all__ = ["fix_blurry_splats"]
+__all__ = ["fix_blurry_splats", "fix_diverging_splats"]
 
 
 def fix_blurry_splats(case: dict) -> dict:
@@ -13,3 +15,23 @@ def fix_blurry_splats(case: dict) -> dict:
     s = case["settings"]
     return {"cause": "no_densification",
             "gaussians": fit_splats(case["target"], case["init"], s["steps"], s["max_gaussians"])}
+
+
+def fix_diverging_splats(case: dict) -> dict:
+    """Exercise 8.20: read the log. Means that start outside the frame (none inside at step 30, a flat loss)
+    are initial points in the wrong units: bring them back into the frame (scale the cloud so it spans the
+    image) and refit. Means that start inside but scatter out while the loss climbs, each step moving more
+    than a Gaussian's width, are a position learning rate far too high: refit at 0.3 px per step."""
+    s, init = case["settings"], {k: np.array(v, float) for k, v in case["init"].items()}
+    H, W = case["target"].shape[:2]
+    m = init["means"]
+    inside = (m[:, 0] >= 0) & (m[:, 0] < W) & (m[:, 1] >= 0) & (m[:, 1] < H)
+    if inside.mean() < 0.5:
+        # the visible grid spans the frame's middle; a cloud scaled by k spans k times as much: undo k on the
+        # opaque points (the stray transparent ones are pruned whatever their position)
+        solid = init["opacity"] >= 0.005
+        k = np.median(m[solid], 0) / np.array([W / 2, H / 2])
+        init["means"] = m / k
+        return {"cause": "bad_init", "gaussians": fit_splats(case["target"], init, s["steps"], s["max_gaussians"])}
+    return {"cause": "position_lr", "gaussians": fit_splats(case["target"], init, s["steps"], s["max_gaussians"],
+                                                           lr_means=0.3)}

@@ -592,3 +592,7 @@ MUTANTS += [
 # ----------------------------------------------------------------- 8.13 tiny NeRF (its own module: size)
 from mutants.ch08_dense_nerf import MUTANTS as _NERF_MUTANTS  # noqa: E402
 MUTANTS += _NERF_MUTANTS
+
+# ----------------------------------------------------------------- 8.20 DEBUG diverging splats (its own module)
+from mutants.ch08_dense_diverge import MUTANTS as _DIVERGE_MUTANTS  # noqa: E402
+MUTANTS += _DIVERGE_MUTANTS
