@@ -113,6 +113,8 @@ def stub_text(ex: Exercise) -> str:
 def start(exercise_id: str | None = None, topic: str | None = None, weakest: bool = False,
           seed: int | None = None) -> Path:
     """Write a fresh stub file for a CODE exercise and start the clock. Returns the file's path."""
+    if exercise_id and "." not in exercise_id:     # a chapter number: one of its CODE exercises
+        exercise_id, topic = None, f"chapter:{exercise_id}"
     ex = get(exercise_id) if exercise_id else pick(topic, weakest, random.Random(seed))
     if ex.kind != "code" or ex.value:
         raise ValueError(f"{ex.id} is a {ex.kind.upper()} question, not a CODE exercise: drills are for CODE")
@@ -154,7 +156,11 @@ def pick(topic: str | None = None, weakest: bool = False, rng: random.Random | N
     then never attempted); else a due drill, else one not passed yet."""
     rng = rng or random.Random()
     pool = code_exercises()
-    if topic:
+    if topic and topic.startswith("chapter:"):
+        pool = [ex for ex in pool if ex.id.split(".")[0] == topic.split(":", 1)[1].lstrip("0")]
+        if not pool:
+            raise LookupError(f"no CODE exercise in chapter {topic.split(':', 1)[1]!r}")
+    elif topic:
         pool = [ex for ex in pool if _matches(ex, topic)]
         if not pool:
             raise LookupError(f"no CODE exercise matches {topic!r}")
@@ -289,7 +295,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog=f"python -m graders drill{'' if verb == 'start' else ' ' + verb}",
                                  description=__doc__.split("\n\n")[0])
     if verb == "start":
-        ap.add_argument("id", nargs="?", help="a CODE exercise id, e.g. 1.5")
+        ap.add_argument("id", nargs="?", help="a CODE exercise id, e.g. 1.5, or a chapter number, e.g. 3")
         ap.add_argument("--topic", help="words to match in the exercise or chapter title, e.g. 'ransac'")
         ap.add_argument("--weakest", action="store_true", help="the CODE exercise you are weakest at")
         ap.add_argument("--list", action="store_true", help="list the CODE drills with difficulty and target")
@@ -309,7 +315,11 @@ def main(argv: list[str] | None = None) -> int:
             for ex in code_exercises():
                 print(f"{ex.id:>6}  {DIFFICULTY[difficulty(ex)]:<7}  {target_minutes(ex):>4g} min  {ex.title}")
             return 0
-        start(args.id, args.topic, args.weakest)
+        try:
+            start(args.id, args.topic, args.weakest)
+        except (KeyError, LookupError, ValueError) as exc:   # an unknown id, topic or a non-CODE exercise
+            print(f"drill: {exc.args[0] if exc.args else exc}", file=sys.stderr)
+            return 2
     elif verb == "check":
         check_drill(args.file, args.seed)
     elif verb == "today":

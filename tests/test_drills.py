@@ -19,7 +19,8 @@ from graders.cards import Card, deck, export_anki, grade
 from graders.compare import max_abs
 from graders.reference import CORRECTIONS, TABLES, pipeline_numbers, reference_cards
 
-SEED_LESSON = Path("/work/shared/seed/000_222a4a16e5d953e6.txt")   # the course's source text, outside the repo
+# The course's source text, outside the repo: ../shared beside the checkout (as in CI and the workplace).
+SEED_LESSON = Path(__file__).resolve().parents[2] / "shared" / "seed" / "000_222a4a16e5d953e6.txt"
 
 
 @pytest.fixture
@@ -78,6 +79,14 @@ def test_only_code_exercises_are_drills(store):
     with pytest.raises(ValueError, match="not a CODE exercise"):
         drill.start("1.3")                   # a CONCEPT question
     assert not (store / "drills").exists() or not list((store / "drills").iterdir())
+
+
+def test_drill_command_picks_by_chapter_and_refuses_unknown_ids_in_one_line(store, capsys):
+    assert drill.main(["3"]) == 0 and "Drill 3." in capsys.readouterr().out        # a chapter: one of its drills
+    for argv, says in ((["1.x"], "no exercise '1.x'"), (["2.1"], "not a CODE exercise"), (["42"], "chapter '42'")):
+        assert drill.main(argv) == 2
+        err = capsys.readouterr().err
+        assert says in err and "Traceback" not in err, err
 
 
 def _attempt(id_, score, max_score, status, **kw):
