@@ -149,11 +149,11 @@ def race_scene(rng: np.random.Generator, n_views: int = 8, keypoints: int = 120,
     return {"pairs": d["pairs"], "n_views": n_views, "Rs": d["Rs"], "ts": d["ts"], "problem": problem}
 
 
-def race(sc: dict, align) -> dict:
+def race(sc: dict, align=None) -> dict:
     """Both routes on one scene: {"classical": {...}, "pointmaps": {...}}, each with "seconds" (CPU time of
     this process: a busy machine does not change it),
     "registered" (views with a pose), "rot_deg" (RMS) and "centre" (worst, of the ring radius) over the
-    registered views (NaN if fewer than 3)."""
+    registered views (NaN if fewer than 3). align=None runs the classical route only."""
     out = {}
     t0 = time.process_time()
     try:
@@ -163,6 +163,8 @@ def race(sc: dict, align) -> dict:
     except Exception:           # noqa: BLE001 — a pipeline that cannot start registers nothing
         poses = {}
     out["classical"] = _score(poses, sc, time.process_time() - t0)
+    if align is None:           # classical only (the pointmaps do not depend on the keypoints)
+        return out
     t0 = time.process_time()
     Rs, ts, _ = align(sc["pairs"], sc["n_views"])
     out["pointmaps"] = _score({i: (Rs[i], ts[i]) for i in range(sc["n_views"])}, sc, time.process_time() - t0)
