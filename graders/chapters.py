@@ -84,7 +84,11 @@ CHAPTERS: tuple[Chapter, ...] = (
             "flow tools (.flo, warping, EPE/Fl), vectorised Lucas-Kanade with the eigenvalue test, pyramidal LK "
             "(against OpenCV), Horn-Schunck, a coarse-to-fine dense flow graded on FlyingChairs against Farneback, "
             "occlusion by forward-backward consistency, joint point tracking, scene flow, a tiny RAFT-style model"),
-    Chapter(10, "large_scale", "Large-scale and learned 3D", ready=False),
+    Chapter(10, "large_scale", "Large-scale and learned 3D",
+            "a vocabulary tree with tf-idf and an inverted file (against brute-force matching), Sim(3) RANSAC (beside "
+            "pycolmap), merging sub-reconstructions, DUSt3R-style global alignment of pointmaps, a Dask map/reduce "
+            "matching pipeline with retries and atomic results, disconnected components, the domain gap, "
+            "out-of-memory chunking, the focal length a pointmap knows", ready=False),
     Chapter(11, "capstone", "Capstone: cascading pipeline failures", ready=False),
 )
 
