@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from .tools import bilinear, epe, epe_map, fl_rate, flow_tools, read_flo, warp_backward, write_flo
 
-# ---- part A (9.10-9.13, 9.1-9.4, 9.17-9.18, 9.21-9.23) ----
+# ---- part A (9.10-9.13, 9.1-9.4, 9.21-9.23) ----
 from .dense import HS_AVERAGE, dense_flow, horn_schunck
 from .questions import (application_trackers, budget_30hz, corr_memory, hs_update, normal_flow, pyramid_levels,
                         window_kinds)
