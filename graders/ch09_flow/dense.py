@@ -107,9 +107,16 @@ def cv_dense_flow(I1, I2) -> np.ndarray:
     return np.stack([median_filter(f[..., k], 5, mode="nearest") for k in (0, 1)], -1)
 
 
+# On a synthetic plane two good flows can both be near-exact (Farneback 0.11 px, the reference 0.14 px on
+# seed 3504150093): below this the gap between them is interpolation noise, not quality, so a flow this
+# accurate passes there whatever Farneback reaches. Every mutant errs by more (no pyramid 0.39-5.3 px).
+PLANE_FLOOR_PX = 0.3
+
+
 def _vs_farneback(out, truth):
-    """Mean EPE (px) over the judged pixels minus Farneback's on the same pixels: ≤ 0 passes."""
-    return float(gt_epe_map(out, truth["flow"])[truth["valid"]].mean() - truth["farneback"])
+    """Mean EPE (px) over the judged pixels minus the bar (Farneback's on the same pixels, or the plane
+    floor where that is higher): ≤ 0 passes."""
+    return float(gt_epe_map(out, truth["flow"])[truth["valid"]].mean() - truth["bar"])
 
 
 def _dense_cases(rng):
@@ -118,13 +125,14 @@ def _dense_cases(rng):
     for i, shift in enumerate([rng.uniform(2.0, 4.0), rng.uniform(5.0, 8.0)]):
         p = plane_pair(rng, 256, 192, shift=shift, warp=0.02)
         farn = float(gt_epe_map(cv_farneback(p["I1"], p["I2"]), p["flow"])[p["valid"]].mean())
-        truth = {"flow": p["flow"], "valid": p["valid"], "farneback": farn}
-        yield Case(f"plane {i + 1} ({shift:.1f} px): your EPE − Farneback's {farn:.2f} px", (p["I1"], p["I2"]), truth,
+        truth = {"flow": p["flow"], "valid": p["valid"], "farneback": farn, "bar": max(farn, PLANE_FLOOR_PX)}
+        yield Case(f"plane {i + 1} ({shift:.1f} px): your EPE − max(Farneback's {farn:.2f}, {PLANE_FLOOR_PX}) px",
+                   (p["I1"], p["I2"]), truth,
                    _vs_farneback, 0.0, "px", shape=p["flow"].shape, key=f"plane-{i + 1}", tags=("synthetic",))
     if real_available():
         I1, I2, F = load_chairs()
         farn = float(gt_epe_map(cv_farneback(I1, I2), F).mean())     # 7.77 px
-        truth = {"flow": F, "valid": np.ones(F.shape[:2], bool), "farneback": farn}
+        truth = {"flow": F, "valid": np.ones(F.shape[:2], bool), "farneback": farn, "bar": farn}
         yield Case(f"FlyingChairs: your EPE − Farneback's {farn:.2f} px", (I1, I2), truth, _vs_farneback, 0.0, "px",
                    shape=F.shape, key="chairs", tags=("real",))
 
@@ -135,7 +143,7 @@ def _zero(c, out):
 
 DENSE_HINTS = [
     Hint("the flow is zero everywhere.", _zero),
-    Hint(lambda c, out: f"your flow's EPE is {_vs_farneback(out, c.expected) + c.expected['farneback']:.2f} px "
+    Hint(lambda c, out: f"your flow's EPE is {_vs_farneback(out, c.expected) + c.expected['bar']:.2f} px "
          f"against Farneback's {c.expected['farneback']:.2f}: on FlyingChairs small chairs move 20-78 px over a "
          "background that moves ~1.4 px; coarse levels drag the chairs' motion into flat background. Keep the "
          "background's own (dominant) motion where it explains the images as well (fuse candidates by the local "

@@ -16,7 +16,7 @@ import numpy as np
 from graders.convert import OutputError
 from graders.engine import Case, Exercise, Hint, like, register, shared_run
 
-from .pairs import lk_scene
+from .pairs import MULTISCALE_TEXTURES, TEXTURES, lk_scene
 from .tools import gt_bilinear
 
 TRACKABLE = 20.0     # judged for position where the grader's λ_min ≥ 20 × min_eig (far from the threshold)
@@ -48,8 +48,9 @@ def gt_min_eig(I: np.ndarray, pts: np.ndarray, win: int) -> np.ndarray:
 
 def _draw(rng, width, height, shift, warp, win, min_eig, max_level=0):
     """A scene and the points to track: a jittered grid (trackable where λ_min is high, the rest not
-    judged), the flat and the edge centres (untrackable). Returns (args, truth)."""
-    p = lk_scene(rng, width, height, shift, warp, win)
+    judged), the flat and the edge centres (untrackable). Returns (args, truth). A pyramid needs texture
+    at its coarsest level too, so its scenes are drawn from the textures that have some at every scale."""
+    p = lk_scene(rng, width, height, shift, warp, win, textures=MULTISCALE_TEXTURES if max_level else TEXTURES)
     m = (win - 1) / 2 + shift + 4
     step = 6.0 if width * height < 50000 else 9.0
     ys, xs = np.mgrid[m:height - m:step, m:width - m:step]
