@@ -23,7 +23,7 @@ from .fit2d import psnr
 from .nerf import analytic_render, single_thread
 
 W_NERF, STEPS, N_EVAL = 20, 400, 64
-PROBE_R, PROBE_DB = 1.6, 20.0
+PROBE_R, PROBE_DB, PROBE_SLACK = 1.6, 20.0, 2.5
 SIGMA_BIAS = -2.0     # the stand-in's σ starts near softplus(−2) = 0.13 /m: the rays start almost empty
 
 
@@ -191,6 +191,7 @@ def _tiny_nerf_cases(rng):
     ref = gt_train_tiny_nerf(*sc["train"], sc["near"], sc["far"], STEPS, seed=1)
     p_ref = psnr(render_field(ref, O.reshape(-1, 3), D.reshape(-1, 3), sc["near"], sc["far"]), GT.reshape(-1, 3))
     info["psnr_ref"] = p_ref
+    probe_bar = min(PROBE_DB, psnr(render_field(ref, PROBE_R * n, -n, 0.0, PROBE_R), info["probe_gt"]) - PROBE_SLACK)
     # 3.5 dB below the stand-in: 400 Adam steps on 128 rays leave a noisy field; the reference's held-out PSNR
     # spreads over 22.2-26.2 dB with the training seed alone (the stand-in's 23.0-25.5), worst seen 3.4 dB
     # under the stand-in. A field trained with T_i including α_i lands 4-8 dB below, 25 steps 9-13 dB below.
@@ -198,9 +199,12 @@ def _tiny_nerf_cases(rng):
                lambda o, e: max(0.0, e - psnr(o["images"], GT)), 3.5, "dB", convert=_convert, call=run, info=info,
                key="psnr")
     # 20 dB on the surface colour seen along 1500 radial rays from r = 1.6 (a view no camera had): the
-    # reference reaches 21.1-23.8 dB, a field without positional encoding 14.4-19.8 dB (the stripes are
-    # smeared: spectral bias); the sphere painted in its mean colour ~15 dB.
-    yield Case(f"surface colour along 1500 radial probe rays: PSNR ≥ {PROBE_DB:.0f} dB", args, PROBE_DB,
+    # reference reaches 21.1-23.8 dB on most draws, a field without positional encoding 14.4-19.8 dB (the stripes
+    # are smeared: spectral bias); the sphere painted in its mean colour ~15 dB. On hard draws (stripes near
+    # 6 rad/m on all three channels) the stand-in itself falls to 19.9-21.4 dB and the reference to 19.6 dB
+    # (fairness seeds 1806810331, 4175483290; no encoding 16.7 / 13.9 dB there): the bar then drops to the
+    # stand-in's probe PSNR on the draw less PROBE_SLACK = 2.5 dB (the reference was 1.75 dB under it).
+    yield Case(f"surface colour along 1500 radial probe rays: PSNR ≥ {probe_bar:.1f} dB", args, probe_bar,
                lambda o, e, i=info: max(0.0, e - psnr(o["probe"], i["probe_gt"])), 0.0, "dB below", convert=_convert,
                call=run, info=info, key="probe")
 
