@@ -46,7 +46,21 @@ def gt_min_eig(I: np.ndarray, pts: np.ndarray, win: int) -> np.ndarray:
     return (a + c - np.sqrt((a - c) ** 2 + 4 * b * b)) / 2
 
 
+MIN_JUDGED = 30      # a draw judges positions at >= 30 clearly trackable points, else it is drawn again
+
+
 def _draw(rng, width, height, shift, warp, win, min_eig, max_level=0):
+    """A scene whose 90th-percentile error means something: redrawn until it has MIN_JUDGED clearly
+    trackable points inside the judged region (a dark crop of a texture at λ_min ≥ 40 had none, and the
+    percentile of nothing failed the reference: 9.11, seeds 624751615 and 807694133)."""
+    for _ in range(50):
+        args, truth = _draw_once(rng, width, height, shift, warp, win, min_eig, max_level)
+        if truth["good"].sum() >= MIN_JUDGED:
+            break
+    return args, truth
+
+
+def _draw_once(rng, width, height, shift, warp, win, min_eig, max_level=0):
     """A scene and the points to track: a jittered grid (trackable where λ_min is high, the rest not
     judged), the flat and the edge centres (untrackable). Returns (args, truth). A pyramid needs texture
     at its coarsest level too, so its scenes are drawn from the textures that have some at every scale."""
