@@ -186,7 +186,9 @@ MUTANTS += [
     ("9.10", "determinant test (the seed's)", _lk_with(test="det", gradients=_np_gradient), "determinant"),
     ("9.11", "guess not doubled going down", pyr_no_doubling, "guess down doubled"),
     ("9.11", "no pyramid", pyr_single_level, "guess down doubled"),
-    ("9.11", "points not scaled by 2^L", pyr_points_not_scaled, None),
+    # Not in the catalogue: pyr_points_not_scaled (coarse levels track the wrong place). On these scenes'
+    # near-translations the wrong place moves as the right one does, and level 0 refines the rest, so it
+    # errs only on some draws (at 35-100 % of textured points, but few of them inside the judged region).
     ("9.11", "I_t flipped (frames swapped)", pyr_flipped_it, None),
     ("9.11", "no eigenvalue test", pyr_no_eig_test, "no eigenvalue test"),
     ("9.11", "(dy, dx) stacked", pyr_swapped, "swapped"),
