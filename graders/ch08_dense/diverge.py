@@ -73,17 +73,12 @@ def _bar(target) -> float:
 
 
 def _convert(out, case):
-    if not isinstance(out, dict) or not {"cause", "gaussians"} <= set(out):
-        raise OutputError('expected a dict {"cause": one of CAUSES, "gaussians": dict like the case\'s'
-                          ' (means, scales, theta, color, opacity)}')
-    cause = str(out["cause"]).strip().lower()
-    if cause not in CAUSES:
-        raise OutputError(f'"cause" must be one of {", ".join(CAUSES)}; got {out["cause"]!r}')
-    g = fit2d._convert(out["gaussians"], case)
+    repair = fit2d.convert_repair(out, case, CAUSES)
+    g = repair["gaussians"]
     budget = case.args[0]["settings"]["max_gaussians"]
     if len(g["means"]) > budget:
         raise OutputError(f"{len(g['means'])} Gaussians: more than the run's budget of {budget}")
-    return {"cause": cause, "gaussians": g}
+    return repair
 
 
 def _psnr(out, case):

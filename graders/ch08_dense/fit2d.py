@@ -135,6 +135,17 @@ def _densify_prune(p, acc, max_gaussians, torch):
 _FIELDS = {"means": 2, "scales": 2, "theta": 0, "color": 3, "opacity": 0}
 
 
+def convert_repair(out, case, causes) -> dict:
+    """A diagnosed splatting repair (8.20, 8.21): {"cause": one of `causes`, "gaussians": a fit like 8.16's}."""
+    if not isinstance(out, dict) or not {"cause", "gaussians"} <= set(out):
+        raise OutputError('expected a dict {"cause": one of CAUSES, "gaussians": dict like the case\'s'
+                          ' (means, scales, theta, color, opacity)}')
+    cause = str(out["cause"]).strip().lower()
+    if cause not in causes:
+        raise OutputError(f'"cause" must be one of {", ".join(causes)}; got {out["cause"]!r}')
+    return {"cause": cause, "gaussians": _convert(out["gaussians"], case)}
+
+
 def _convert(out, case):
     if not isinstance(out, dict) or set(_FIELDS) - set(out):
         raise OutputError(f"expected a dict with {', '.join(_FIELDS)}")

@@ -12,7 +12,7 @@ import copy
 
 import numpy as np
 
-from graders.engine import Case, Exercise, Hint, OutputError, debug_practice, register, shared_run
+from graders.engine import Case, Exercise, Hint, debug_practice, register, shared_run
 
 from . import fit2d
 from .diverge import debug_diverging
@@ -47,13 +47,7 @@ def debug_blurry(rng: np.random.Generator) -> tuple[dict, dict]:
 
 
 def _convert(out, case):
-    if not isinstance(out, dict) or not {"cause", "gaussians"} <= set(out):
-        raise OutputError('expected a dict {"cause": one of CAUSES, "gaussians": dict like the case\'s'
-                          ' (means, scales, theta, color, opacity)}')
-    cause = str(out["cause"]).strip().lower()
-    if cause not in CAUSES:
-        raise OutputError(f'"cause" must be one of {", ".join(CAUSES)}; got {out["cause"]!r}')
-    return {"cause": cause, "gaussians": fit2d._convert(out["gaussians"], case)}
+    return fit2d.convert_repair(out, case, CAUSES)
 
 
 def _psnr(out, case):
