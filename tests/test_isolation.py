@@ -103,3 +103,16 @@ def test_every_public_name_a_chapter_exports_exists():
         package = importlib.import_module(ch.grader)
         missing += [f"{ch.grader}.{n}" for n in getattr(package, "__all__", ["<no __all__>"]) if not hasattr(package, n)]
     assert not missing, missing
+
+
+def test_a_shared_stand_in_has_one_copy():
+    """docs/ENGINE.md: a stand-in two chapters need lives in graders/oracles/ and its chapter imports it; no chapter
+    module defines a public function of the same name again (a second copy drifts from the first)."""
+    shared = {n.name: p.name for p in (GRADERS / "oracles").glob("*.py") for n in ast.parse(p.read_text()).body
+              if isinstance(n, ast.FunctionDef) and not n.name.startswith("_")}
+    # 4.14's bundle_adjust refines its recon dicts (K per camera, staged intrinsics): another adjuster, not a copy
+    different = {("ch04_sfm", "bundle_adjust")}
+    copies = [f"{p.relative_to(GRADERS)} defines {n.name} (graders/oracles/{shared[n.name]} has it)"
+              for p in GRADERS.glob("ch*/*.py") for n in ast.parse(p.read_text()).body
+              if isinstance(n, ast.FunctionDef) and n.name in shared and (p.parent.name, n.name) not in different]
+    assert not copies, "\n".join(copies)

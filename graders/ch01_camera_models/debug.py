@@ -15,7 +15,7 @@ from ..engine import (Exercise, Hint, OutputError, as_array, as_pose, as_poses, 
                       raised, register)
 from ..geometry import so3_exp, so3_log
 from .frames import gt_frame_change
-from .pinhole import cv_project
+from ..oracles.camera import cv_project
 
 W, H = 1280, 960
 

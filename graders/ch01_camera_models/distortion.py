@@ -10,21 +10,7 @@ from .. import datasets, scene
 from ..compare import max_distance
 from ..engine import Case, Exercise, Hint, like, register
 from ..geometry import pixels_to_normalised
-from .pinhole import cv_project
-
-
-def cv_undistort(uv: np.ndarray, K: np.ndarray, dist: np.ndarray, iters: int = 20) -> np.ndarray:
-    """OpenCV-backed `undistort_points`: (N, 2) pixels -> (N, 2) undistorted normalised coordinates.
-
-    `cv2.undistortPoints` without `criteria` runs a fixed 5 iterations, too few for strong
-    distortion at the corners; with a tight criterion it converges, but only linearly (with EPS set,
-    OpenCV 5 halves a step that raises the error): on a strong lens (1.6, seed 2582420416) 200 steps
-    left 0.38 px, 1,000 left 5e-5 px, 5,000 reach 4e-13 px. Points stop as soon as they converge.
-    """
-    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, max(iters, 5000), 1e-14)
-    x = cv2.undistortPoints(np.asarray(uv, float).reshape(-1, 1, 2), np.asarray(K, float),
-                            np.asarray(dist, float), None, None, None, criteria)
-    return x.reshape(-1, 2)
+from ..oracles.camera import cv_project, cv_undistort
 
 
 @lru_cache(maxsize=1)

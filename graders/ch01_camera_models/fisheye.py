@@ -10,7 +10,7 @@ from .. import scene
 from ..compare import max_angle_deg, max_distance
 from ..engine import Case, Exercise, OutputError, as_array, like, raised, register
 from ..geometry import kb_theta_d, pixels_to_normalised
-from .pinhole import cv_project
+from ..oracles.camera import cv_project
 
 
 def cv_fisheye_project(X_c: np.ndarray, K: np.ndarray, D: np.ndarray) -> np.ndarray:

@@ -1,23 +1,12 @@
 """1.5 — pinhole projection with Brown-Conrady distortion: the OpenCV oracle, hidden cases, hints."""
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from .. import scene
 from ..compare import max_distance
 from ..engine import Case, Exercise, like, register
-from ..geometry import so3_log
-
-
-def cv_project(X: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray,
-               dist: np.ndarray | None = None) -> np.ndarray:
-    """OpenCV-backed `project_points`. X: (N, 3) world -> (N, 2) pixels."""
-    X = np.asarray(X, float).reshape(-1, 1, 3)
-    d = np.zeros(5) if dist is None else np.asarray(dist, float)
-    rvec = so3_log(np.asarray(R, float)).reshape(3, 1)
-    uv, _ = cv2.projectPoints(X, rvec, np.asarray(t, float).reshape(3, 1), np.asarray(K, float), d)
-    return uv.reshape(-1, 2)
+from ..oracles.camera import cv_project
 
 
 def cases_project_points(rng) -> list[Case]:

@@ -9,6 +9,7 @@ import numpy as np
 from .. import scene
 from ..compare import max_angle_deg, rotation_angle_deg, unordered
 from ..engine import Case, Exercise, Hint, OutputError, register
+from ..oracles.two_view import cv_recover_pose
 from .scenes import as_pose_nonzero, convert_pose_unit, depths, gt_essential, to_normalised, two_view
 
 _W = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
@@ -19,16 +20,6 @@ def cv_decompose_essential(E: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]
     R1, R2, t = cv2.decomposeEssentialMat(np.asarray(E, float))
     t = t.ravel() / np.linalg.norm(t)
     return [(R1, t), (R1, -t), (R2, t), (R2, -t)]
-
-
-def cv_recover_pose(E: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """OpenCV-backed `recover_pose` on normalised coordinates (camera matrix I).
-
-    recoverPose's 4-argument overload counts, for each of the four decompositions, the points with
-    positive depth in both cameras closer than 50 units, and keeps the best.
-    """
-    _, R, t, _ = cv2.recoverPose(np.asarray(E, float), np.asarray(x1, float), np.asarray(x2, float), np.eye(3))
-    return R, t.ravel() / np.linalg.norm(t)
 
 
 def colmap_essential(s: dict) -> dict:

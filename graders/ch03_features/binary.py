@@ -13,7 +13,7 @@ import cv2
 from ..compare import max_abs
 from ..engine import Case, Exercise, OutputError, like, register
 from .common import common, homography_pair, nn_index_accuracy, transfer
-from .corners import cv_fast
+from ..oracles.features import cv_fast
 
 def brief_pattern(seed: int = 0, n: int = 256, radius: int = 13) -> np.ndarray:
     """The course's BRIEF sampling pattern: (n, 4) int rows (ax, ay, bx, by), pairs drawn from an

@@ -21,6 +21,7 @@ import numpy as np
 from .. import datasets, scene
 from ..engine import Case, Hint, OutputError, as_points
 from ..geometry import from_h, to_h
+from ..oracles.features import cv_ratio_matches  # noqa: F401 (chapter API)
 
 # ============================================================ images with a known homography ====
 
@@ -114,16 +115,6 @@ def mma(x1: np.ndarray, x2: np.ndarray, H: np.ndarray, t: float = 3.0) -> float:
     return float(np.mean(np.linalg.norm(transfer(H, x1) - np.asarray(x2, float)[:, :2], axis=1) <= t))
 
 
-def cv_ratio_matches(D1: np.ndarray, D2: np.ndarray, ratio: float = 0.8, norm: int = cv2.NORM_L2) -> np.ndarray:
-    """cv2.BFMatcher knnMatch(k=2) + Lowe's ratio test -> (K, 2) int rows (i, j)."""
-    if len(D1) == 0 or len(D2) < 2:
-        return np.zeros((0, 2), int)
-    dtype = np.uint8 if norm == cv2.NORM_HAMMING else np.float32
-    knn = cv2.BFMatcher(norm).knnMatch(np.asarray(D1, dtype), np.asarray(D2, dtype), k=2)
-    return np.array([(m[0].queryIdx, m[0].trainIdx) for m in knn
-                     if len(m) == 2 and m[0].distance < ratio * m[1].distance], int).reshape(-1, 2)
-
-
 # ============================================================ output checks ====
 
 def _points(out: Any, case: Case, width: int = 2) -> np.ndarray:
@@ -159,7 +150,6 @@ def homography_pair_from(rng, img: np.ndarray, size=(640, 480), **kw):
     """Two uint8 views (size = (width, height)) of any float image in [0, 1] and H with x2 ~ H x1."""
     a, b, H = scene.random_homography_pair(rng, img, width=size[0], height=size[1], **kw)
     return to_u8(a), to_u8(b), H
-
 
 
 # ============================================================ detectors judged on a pair of views ====

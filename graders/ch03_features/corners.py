@@ -12,12 +12,8 @@ import numpy as np
 
 from .. import datasets
 from ..engine import Case, Exercise, Hint, OutputError, like, register
+from ..oracles.features import cv_corners, cv_fast
 from .common import SIZE, _both, _points, detector_pair_case, graf_half, homography_pair, swap_hint, to_u8
-
-def cv_corners(img: np.ndarray, n: int = 500, method: str = "harris") -> np.ndarray:
-    """cv2.goodFeaturesToTrack with a near-zero quality level, so it returns n corners like ours."""
-    c = cv2.goodFeaturesToTrack(np.asarray(img), n, 1e-6, 4, blockSize=5, useHarrisDetector=(method == "harris"), k=0.04)
-    return np.zeros((0, 2)) if c is None else c.reshape(-1, 2).astype(float)
 
 
 def cv_corners_gaussian(img: np.ndarray, n: int = 500, method: str = "harris", k: float = 0.04, sigma: float = 1.5,
@@ -42,13 +38,6 @@ def cv_corners_gaussian(img: np.ndarray, n: int = 500, method: str = "harris", k
     ys, xs = np.nonzero(peak)
     order = np.argsort(-R[ys, xs], kind="stable")[:n]
     return np.c_[xs[order], ys[order]].astype(float)
-
-
-def cv_fast(img: np.ndarray, threshold: int = 20, nms: bool = True) -> np.ndarray:
-    """cv2.FastFeatureDetector (TYPE_9_16) corners in raster order: (N, 2) (x, y)."""
-    det = cv2.FastFeatureDetector_create(int(threshold), bool(nms), cv2.FAST_FEATURE_DETECTOR_TYPE_9_16)
-    pts = np.array([k.pt for k in det.detect(np.asarray(img, np.uint8))], float).reshape(-1, 2)
-    return pts[np.lexsort((pts[:, 0], pts[:, 1]))]
 
 
 # ============================================================ 3.5 corners ====
@@ -217,7 +206,6 @@ FAST_HINTS = [
     Hint("far fewer corners than cv2, and not only those whose arc wraps: is the arc 12 contiguous pixels "
          "instead of 9 (FAST-9 needs 9 of the 16)?", lambda c, out: len(out) < 0.8 * len(c.expected)),
 ]
-
 
 
 register(

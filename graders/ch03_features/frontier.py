@@ -11,7 +11,7 @@ import numpy as np
 from .. import scene
 from ..engine import Case, Exercise, Hint, OutputError, register
 from .common import to_u8
-from .sift import _sift
+from ..oracles.features import sift_detector
 
 # ============================================================ FRONTIER: a tiny learned descriptor ====
 
@@ -93,7 +93,7 @@ def cv_sift_patch_descriptor(P: np.ndarray) -> np.ndarray:
     """cv2.SIFT's descriptor at each patch's centre (keypoint size 4 px, i.e. a window about the
     patch's size), turned to the patch's dominant gradient direction: (K, 128), unit rows.
     (SIFT.compute takes the angle as given, so we estimate it from a smoothed 36-bin histogram.)"""
-    sift = _sift()
+    sift = sift_detector()
     r = np.arange(64) - 31.5
     w = np.exp(-(r[None] ** 2 + r[:, None] ** 2) / (2 * 6.0 ** 2))
     out = []

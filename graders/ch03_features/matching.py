@@ -2,24 +2,10 @@
 oracle, query by query (queries that rounding could tip either way are skipped), hidden cases, hints."""
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from ..engine import Case, Exercise, Hint, OutputError, register
-
-def cv_match(D1: np.ndarray, D2: np.ndarray, ratio: float | None = 0.8, mutual: bool = False) -> np.ndarray:
-    """Stand-in for `match_descriptors` on cv2.BFMatcher: knnMatch(k=2) for the ratio test, the
-    reverse match() for mutual nearest neighbours. (K, 2) int64 rows (i, j), i ascending."""
-    D1, D2 = np.asarray(D1, np.float32), np.asarray(D2, np.float32)
-    knn = cv2.BFMatcher(cv2.NORM_L2).knnMatch(D1, D2, k=2)
-    keep = {}
-    for m in knn:
-        if ratio is None or m[0].distance < ratio * m[1].distance:
-            keep[m[0].queryIdx] = m[0].trainIdx
-    if mutual:
-        back = {m.queryIdx: m.trainIdx for m in cv2.BFMatcher(cv2.NORM_L2).match(D2, D1)}
-        keep = {i: j for i, j in keep.items() if back.get(j) == i}
-    return np.array(sorted(keep.items()), np.int64).reshape(-1, 2)
+from ..oracles.features import cv_match
 
 
 # ============================================================ 3.11 matching ====
@@ -122,7 +108,6 @@ MATCH_HINTS = [
     Hint("rows should be (i, j): i indexes D1 (the query), j indexes D2.",
          lambda c, out: _match_metric(out[:, ::-1], c.expected) == 0 if len(out) else False),
 ]
-
 
 
 register(

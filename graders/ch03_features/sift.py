@@ -11,49 +11,9 @@ import numpy as np
 
 from .. import datasets
 from ..engine import Case, Exercise, Hint, OutputError, register
+from ..oracles.features import cv_dog, cv_sift_descriptors
 from .common import (_both, _points, cv_ratio_matches, detector_pair_case, graf_half, homography_pair, mma,
                      nn_index_accuracy, swap_hint, to_u8)
-
-_SIFT = None
-
-
-def _sift():
-    global _SIFT
-    if _SIFT is None:
-        _SIFT = cv2.SIFT_create()
-    return _SIFT
-
-
-def cv_dog(img: np.ndarray, n_features: int = 1000) -> np.ndarray:
-    """cv2.SIFT's DoG keypoints, strongest first: (N, 3) rows (x, y, sigma = size / 2).
-
-    cv2.SIFT starts from the image doubled by linear resizing and halves the coordinates it finds
-    there, which places every point 0.25 px right of and below the course's pixel-centre
-    convention (measured on Gaussian blobs: +0.250 px in x and y); we take that off."""
-    kps = sorted(_sift().detect(np.asarray(img, np.uint8)), key=lambda k: -k.response)
-    out, seen = [], set()
-    for k in kps:  # SIFT repeats a keypoint once per dominant orientation: keep one
-        if (round(k.pt[0], 2), round(k.pt[1], 2)) not in seen:
-            seen.add((round(k.pt[0], 2), round(k.pt[1], 2)))
-            out.append((k.pt[0] - 0.25, k.pt[1] - 0.25, k.size / 2))
-    return np.array(out[:n_features], float).reshape(-1, 3)
-
-
-def cv_sift_descriptors(img: np.ndarray, kps: np.ndarray) -> np.ndarray:
-    """cv2.SIFT descriptors for (x, y, sigma) keypoints; orientation from cv2's own detector run
-    at the same place (SIFT.compute does not compute orientations). (N, 128) float64, unit length."""
-    img = np.asarray(img, np.uint8)
-    kps = np.asarray(kps, float)
-    det = _sift().detect(img)
-    pts = np.array([k.pt for k in det]) if det else np.zeros((0, 2))
-    cv_kps = []
-    for x, y, s in kps:
-        j = int(np.argmin(np.linalg.norm(pts - [x, y], axis=1))) if len(pts) else -1
-        angle = det[j].angle if j >= 0 and np.hypot(*(pts[j] - [x, y])) < 1.0 else 0.0
-        cv_kps.append(cv2.KeyPoint(float(x), float(y), float(2 * s), float(angle)))
-    _, d = _sift().compute(img, cv_kps)
-    d = np.asarray(d, float).reshape(-1, 128)
-    return d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
 
 
 # ============================================================ 3.9 DoG detector ====
@@ -309,7 +269,6 @@ SIFT_HINTS = [
     _probe_hint("rot180", False, "good on upright pairs, poor on turned ones (even by exactly 180°): measure gradient "
                 "angles relative to the keypoint's dominant orientation (and sample the patch turned by it)."),
 ]
-
 
 
 register(

@@ -13,12 +13,12 @@ first third's (a VO that re-estimates its scale at every frame drifts by tens of
 """
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from graders.engine import Case, Exercise, Hint, OutputError, register, shared_run
 from graders.geometry import so3_exp, umeyama
-from graders.oracles.sfm_standin import cv_pnp_ransac, triangulate_normalised
+from graders.oracles.two_view import SOLVERS
+from graders.oracles.vo import centres, standin_vo
 
 F, W, H = 500.0, 640, 480
 K = np.array([[F, 0, W / 2], [0, F, H / 2], [0, 0, 1.0]])
@@ -58,106 +58,11 @@ def vo_sequence(rng, n_frames: int = 40, n_points: int = 1600, wrong: float = 0.
 
 # ----------------------------------------------------------------- the solvers handed to the learner
 
-def essential_ransac(x1, x2, K_):
-    """E from pixel correspondences with RANSAC (cv2.findEssentialMat, 5-point, 1 px): (E (3, 3), inliers (m,))."""
-    cv2.setRNGSeed(0)   # deterministic: a replayed seed gets the same answer
-    E, mask = cv2.findEssentialMat(np.asarray(x1, float), np.asarray(x2, float), np.asarray(K_, float),
-                                   method=cv2.RANSAC, prob=0.999, threshold=1.0)
-    if E is None:
-        raise ValueError("findEssentialMat failed")
-    return E[:3], mask.ravel().astype(bool)
-
-
-def pose_from_essential(E, x1, x2, K_):
-    """(R, t) of camera 2 relative to camera 1 (x_2 = R x_1 + t, ‖t‖ = 1) by the cheirality test
-    (cv2.recoverPose), and the inliers in front of both cameras."""
-    _, R, t, mask = cv2.recoverPose(np.asarray(E, float), np.asarray(x1, float), np.asarray(x2, float),
-                                    np.asarray(K_, float))
-    return R, t.ravel(), mask.ravel() > 0
-
-
-def triangulate(T1, T2, x1, x2, K_):
-    """Linear triangulation of pixel correspondences seen by cameras T1, T2 (T_cw, 4x4): (m, 3) world points."""
-    Ki = np.linalg.inv(np.asarray(K_, float))
-    n1 = (np.c_[np.asarray(x1, float), np.ones(len(x1))] @ Ki.T)[:, :2]
-    n2 = (np.c_[np.asarray(x2, float), np.ones(len(x2))] @ Ki.T)[:, :2]
-    return triangulate_normalised(np.asarray(T1, float)[:3], np.asarray(T2, float)[:3], n1, n2)
-
-
-def pnp_ransac(X, uv, K_):
-    """Camera pose from 3D-2D matches with RANSAC (cv2.solvePnPRansac, AP3P, 4 px, then LM on the inliers):
-    (T_cw (4, 4), inliers (m,))."""
-    R, t, inl = cv_pnp_ransac(np.asarray(X, float), np.asarray(uv, float), np.asarray(K_, float))
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, t
-    return T, inl
-
-
-SOLVERS = {"essential": essential_ransac, "pose_from_essential": pose_from_essential,
-           "triangulate": triangulate, "pnp": pnp_ransac}
-
 
 # ----------------------------------------------------------------- the stand-in VO (grader's own)
 
-def _reprojection_ok(T, X, uv, K_, px=2.0):
-    P = X @ T[:3, :3].T + T[:3, 3]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        e = np.linalg.norm(P[:, :2] / P[:, 2:] * K_[0, 0] + K_[:2, 2] - uv, axis=1)
-    return (P[:, 2] > 0) & (e < px)
-
-
-def _parallax_deg(T1, T2, X):
-    """Angle at each point between the rays to the two camera centres (degrees)."""
-    c1, c2 = centres(T1[None])[0], centres(T2[None])[0]
-    a, b = X - c1, X - c2
-    cos = np.sum(a * b, 1) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
-    return np.degrees(np.arccos(np.clip(cos, -1, 1)))
-
-
-def standin_vo(frames, K_, solvers, init: int = 6, gap: int = 5, min_parallax: float = 1.5) -> np.ndarray:
-    """Stand-in for 6.13: initialise on frames 0 and `init`, then PnP on the map and triangulation of new
-    points against the frame `gap` frames back (kept if they reproject within 2 px in both and their rays
-    meet at >= min_parallax degrees)."""
-    n = len(frames)
-    T = np.tile(np.eye(4), (n, 1, 1))
-
-    def common(a, b):
-        ia = {int(i): j for j, i in enumerate(frames[a]["ids"])}
-        pairs = [(ia[int(i)], j) for j, i in enumerate(frames[b]["ids"]) if int(i) in ia]
-        p = np.array(pairs, int).reshape(-1, 2)
-        return frames[a]["ids"][p[:, 0]], frames[a]["uv"][p[:, 0]], frames[b]["uv"][p[:, 1]]
-
-    ids, x1, x2 = common(0, init)
-    E, inl = solvers["essential"](x1, x2, K_)
-    R, t, ok = solvers["pose_from_essential"](E, x1[inl], x2[inl], K_)
-    T[init, :3, :3], T[init, :3, 3] = R, t
-    world: dict[int, np.ndarray] = {}
-
-    def extend(a, b, ids, x1, x2):
-        X = solvers["triangulate"](T[a], T[b], x1, x2, K_)
-        good = _reprojection_ok(T[a], X, x1, K_) & _reprojection_ok(T[b], X, x2, K_) & \
-            (_parallax_deg(T[a], T[b], X) > min_parallax)
-        for i, Xi in zip(ids[good], X[good]):
-            world.setdefault(int(i), Xi)
-
-    extend(0, init, ids[inl], x1[inl], x2[inl])
-    for k in list(range(1, init)) + list(range(init + 1, n)):
-        fr = frames[k]
-        have = np.array([int(i) in world for i in fr["ids"]], bool)
-        Xm = np.array([world[int(i)] for i in fr["ids"][have]]).reshape(-1, 3)
-        T[k], _ = solvers["pnp"](Xm, fr["uv"][have], K_)
-        for back in (gap, gap // 2) if k > init else ():   # fast motion: tracks too short for `gap`
-            ids, x1, x2 = common(k - back, k)
-            new = np.array([int(i) not in world for i in ids], bool)
-            if new.any():
-                extend(k - back, k, ids[new], x1[new], x2[new])
-    return T
-
 
 # ----------------------------------------------------------------- judging
-
-def centres(T) -> np.ndarray:
-    return -np.einsum("nji,nj->ni", T[:, :3, :3], T[:, :3, 3])
 
 
 def _convert(out, case):

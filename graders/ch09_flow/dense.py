@@ -6,12 +6,12 @@ ground truth, the learner's mean EPE against cv2.calcOpticalFlowFarneback's meas
 """
 from __future__ import annotations
 
-import cv2
 import numpy as np
 from scipy.ndimage import gaussian_filter, median_filter
 
 from graders.convert import OutputError, as_array
 from graders.engine import Case, Exercise, Hint, like, register
+from graders.oracles.flow import cv_dis, cv_farneback
 
 from .pairs import load_chairs, plane_pair, real_available
 from .tools import gt_epe_map, gt_warp
@@ -80,22 +80,11 @@ HS_HINTS = [
 # ----------------------------------------------------------------- 9.13 dense_flow
 
 
-def cv_farneback(I1, I2) -> np.ndarray:
-    """cv2.calcOpticalFlowFarneback(pyr_scale 0.5, 3 levels, window 15, 3 iterations, poly_n 5, sigma 1.2)."""
-    u8 = lambda I: np.clip(np.rint(I), 0, 255).astype(np.uint8)   # noqa: E731
-    return cv2.calcOpticalFlowFarneback(u8(I1), u8(I2), None, 0.5, 3, 15, 3, 5, 1.2, 0).astype(float)
-
-
-def cv_dis(I1, I2) -> np.ndarray:
-    u8 = lambda I: np.clip(np.rint(I), 0, 255).astype(np.uint8)   # noqa: E731
-    return cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM).calc(u8(I1), u8(I2), None).astype(float)
-
-
 def cv_dense_flow(I1, I2) -> np.ndarray:
     """Stand-in for 9.13: DIS (medium preset) fused per pixel with the dominant motion (the median of
     cv2.calcOpticalFlowPyrLK tracks on a 16-px grid): DIS where its local warp error is below half the
     dominant motion's, then a 5 x 5 median filter."""
-    from .lk import cv_pyramidal_lk
+    from graders.oracles.flow import cv_pyramidal_lk
     f = cv_dis(I1, I2)
     H, W = np.shape(I1)
     ys, xs = np.mgrid[8:H - 8:16, 8:W - 8:16]

@@ -10,30 +10,16 @@ gradient and it scales the tensor by 2⁻²⁰).
 """
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from graders.convert import OutputError
 from graders.engine import Case, Exercise, Hint, like, register, shared_run
+from graders.oracles.flow import cv_lucas_kanade, cv_pyramidal_lk
 
 from .pairs import MULTISCALE_TEXTURES, TEXTURES, lk_scene
 from .tools import gt_bilinear
 
 TRACKABLE = 20.0     # judged for position where the grader's λ_min ≥ 20 × min_eig (far from the threshold)
-
-
-def cv_lucas_kanade(I1, I2, pts, win=9, iters=20, eps=0.01, min_eig=1.0, max_level=0):
-    """cv2.calcOpticalFlowPyrLK on the images rounded to 8 bits (what it accepts): (pts2 (N, 2), status (N,))."""
-    u8 = lambda I: np.clip(np.rint(I), 0, 255).astype(np.uint8)   # noqa: E731
-    p2, st, _ = cv2.calcOpticalFlowPyrLK(u8(I1), u8(I2), np.asarray(pts, np.float32).reshape(-1, 1, 2), None,
-                                         winSize=(win, win), maxLevel=max_level,
-                                         criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iters, eps),
-                                         minEigThreshold=min_eig / 1024)
-    return p2.reshape(-1, 2).astype(float), st.ravel().astype(bool)
-
-
-def cv_pyramidal_lk(I1, I2, pts, win=21, max_level=3, iters=30, eps=0.01, min_eig=1.0):
-    return cv_lucas_kanade(I1, I2, pts, win, iters, eps, min_eig, max_level)
 
 
 def gt_min_eig(I: np.ndarray, pts: np.ndarray, win: int) -> np.ndarray:

@@ -1,10 +1,14 @@
-"""Two-view oracles shared by chapters 2 and 4: the non-linear refit of an essential matrix."""
+"""Two-view oracles and stand-ins shared by chapters 2, 4, 6 and the capstone: the non-linear refit of an essential
+matrix, pose by cheirality (cv2.recoverPose), and the solvers chapter 6 hands to the learner's VO loop (E with
+RANSAC, pose from E, linear triangulation, PnP RANSAC)."""
 from __future__ import annotations
 
+import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
 from ..geometry import skew, so3_exp, to_h
+from .sfm_standin import cv_pnp_ransac, triangulate_normalised
 
 _W = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 
@@ -33,3 +37,52 @@ def refine_essential(E0: np.ndarray, x1: np.ndarray, x2: np.ndarray, K1: np.ndar
 
     E = E_of(least_squares(residual, np.zeros(5), method="lm", max_nfev=50).x)
     return E / np.linalg.norm(E)
+
+
+def cv_recover_pose(E: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV-backed `recover_pose` on normalised coordinates (camera matrix I).
+
+    recoverPose's 4-argument overload counts, for each of the four decompositions, the points with
+    positive depth in both cameras closer than 50 units, and keeps the best.
+    """
+    _, R, t, _ = cv2.recoverPose(np.asarray(E, float), np.asarray(x1, float), np.asarray(x2, float), np.eye(3))
+    return R, t.ravel() / np.linalg.norm(t)
+
+
+def essential_ransac(x1, x2, K_):
+    """E from pixel correspondences with RANSAC (cv2.findEssentialMat, 5-point, 1 px): (E (3, 3), inliers (m,))."""
+    cv2.setRNGSeed(0)   # deterministic: a replayed seed gets the same answer
+    E, mask = cv2.findEssentialMat(np.asarray(x1, float), np.asarray(x2, float), np.asarray(K_, float),
+                                   method=cv2.RANSAC, prob=0.999, threshold=1.0)
+    if E is None:
+        raise ValueError("findEssentialMat failed")
+    return E[:3], mask.ravel().astype(bool)
+
+
+def pose_from_essential(E, x1, x2, K_):
+    """(R, t) of camera 2 relative to camera 1 (x_2 = R x_1 + t, ‖t‖ = 1) by the cheirality test
+    (cv2.recoverPose), and the inliers in front of both cameras."""
+    _, R, t, mask = cv2.recoverPose(np.asarray(E, float), np.asarray(x1, float), np.asarray(x2, float),
+                                    np.asarray(K_, float))
+    return R, t.ravel(), mask.ravel() > 0
+
+
+def triangulate(T1, T2, x1, x2, K_):
+    """Linear triangulation of pixel correspondences seen by cameras T1, T2 (T_cw, 4x4): (m, 3) world points."""
+    Ki = np.linalg.inv(np.asarray(K_, float))
+    n1 = (np.c_[np.asarray(x1, float), np.ones(len(x1))] @ Ki.T)[:, :2]
+    n2 = (np.c_[np.asarray(x2, float), np.ones(len(x2))] @ Ki.T)[:, :2]
+    return triangulate_normalised(np.asarray(T1, float)[:3], np.asarray(T2, float)[:3], n1, n2)
+
+
+def pnp_ransac(X, uv, K_):
+    """Camera pose from 3D-2D matches with RANSAC (cv2.solvePnPRansac, AP3P, 4 px, then LM on the inliers):
+    (T_cw (4, 4), inliers (m,))."""
+    R, t, inl = cv_pnp_ransac(np.asarray(X, float), np.asarray(uv, float), np.asarray(K_, float))
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, t
+    return T, inl
+
+
+SOLVERS = {"essential": essential_ransac, "pose_from_essential": pose_from_essential,
+           "triangulate": triangulate, "pnp": pnp_ransac}
