@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from graders import oracles, scene  # noqa: F401
+from graders import scene
 from graders.ch11_capstone import pipeline as P
 from graders.oracles import camera, features, flow, stereo, two_view
 

@@ -1,13 +1,14 @@
-"""Chapter 11 — the capstone, from scratch: every learner name of the notebook's part A (instructor release).
+"""Chapter 11 — the capstone, from scratch: every learner name of the notebook (part A and 11.8; instructor release).
 
 numpy only. The monitor (11.5) and the degradation machine (11.6) work frame by frame on metric streams;
 root-cause isolation (11.7) on a run's stage metrics against stored baselines.
 """
 from __future__ import annotations
 
+from .hybrid import hybrid_odometry
 from .monitor import degradation_modes, health_monitor
 from .questions import cascade_numbers, data_flow, depth_errors_m, look_first
 from .rootcause import first_faulty_stage
 
 __all__ = ["cascade_numbers", "data_flow", "degradation_modes", "depth_errors_m", "first_faulty_stage",
-           "health_monitor", "look_first"]
+           "health_monitor", "hybrid_odometry", "look_first"]

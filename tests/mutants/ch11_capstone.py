@@ -184,3 +184,62 @@ MUTANTS += [
     ("11.7", "ignores the baseline spread", blame_relative_change, "relative change is not a deviation"),
     ("11.7", "first metric only", blame_first_metric_only, None),
 ]
+
+
+# ----------------------------------------------------------------- 11.8 hybrid_odometry
+
+def _hybrid(features, inlier_ratio, T_classical, T_direct, min_features, min_inliers, k, *, test="both",
+            wait=True, switch_late=False, right_multiply=False, never=False):
+    poses = [np.eye(4)]
+    direct, streak = False, 0
+    for i in range(1, len(features)):
+        f_ok, w_ok = features[i] >= min_features, inlier_ratio[i] >= min_inliers
+        ok = {"both": f_ok and w_ok, "features": f_ok, "inliers": w_ok}[test] or never
+        streak = streak + 1 if ok else 0
+        use_direct = direct
+        if not direct and not ok:
+            direct = True
+        elif direct and streak >= (k if wait else 1):
+            direct = False
+        if not switch_late:
+            use_direct = direct
+        step = np.asarray(T_direct[i] if use_direct else T_classical[i], float)
+        poses.append(poses[-1] @ step if right_multiply else step @ poses[-1])
+    return np.array(poses)
+
+
+def hybrid_never_switches(features, inlier_ratio, T_classical, T_direct, min_features=80, min_inliers=0.3, k=2):
+    """Trusts the classical front end on every frame."""
+    return _hybrid(features, inlier_ratio, T_classical, T_direct, min_features, min_inliers, k, never=True)
+
+
+def hybrid_no_hysteresis(features, inlier_ratio, T_classical, T_direct, min_features=80, min_inliers=0.3, k=2):
+    """Comes back to the classical estimate on the first confident frame (ignores k)."""
+    return _hybrid(features, inlier_ratio, T_classical, T_direct, min_features, min_inliers, k, wait=False)
+
+
+def hybrid_counts_features_only(features, inlier_ratio, T_classical, T_direct, min_features=80, min_inliers=0.3,
+                                k=2):
+    """The confidence test looks at the feature count only."""
+    return _hybrid(features, inlier_ratio, T_classical, T_direct, min_features, min_inliers, k, test="features")
+
+
+def hybrid_switches_a_frame_late(features, inlier_ratio, T_classical, T_direct, min_features=80, min_inliers=0.3,
+                                 k=2):
+    """Decides the mode on frame i but applies it from frame i+1: the failing frame keeps the bad estimate."""
+    return _hybrid(features, inlier_ratio, T_classical, T_direct, min_features, min_inliers, k, switch_late=True)
+
+
+def hybrid_chains_on_the_right(features, inlier_ratio, T_classical, T_direct, min_features=80, min_inliers=0.3,
+                               k=2):
+    """T_cw[i] = T_cw[i-1] @ T_rel[i]: the motions composed on the wrong side."""
+    return _hybrid(features, inlier_ratio, T_classical, T_direct, min_features, min_inliers, k, right_multiply=True)
+
+
+MUTANTS += [
+    ("11.8", "never switches", hybrid_never_switches, "never switched"),
+    ("11.8", "no hysteresis", hybrid_no_hysteresis, "k confident frames in a row"),
+    ("11.8", "features only", hybrid_counts_features_only, "only the feature count is tested"),
+    ("11.8", "switches a frame late", hybrid_switches_a_frame_late, None),
+    ("11.8", "chains on the right", hybrid_chains_on_the_right, "chained on the wrong side"),
+]
