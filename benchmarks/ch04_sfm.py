@@ -4,8 +4,8 @@ photos (different cameras, no ground truth) and the 11 Sceaux Castle photos (one
 - pycolmap 4.2: `extract_features` (SIFT, one camera per image, images downscaled to MAX_SIDE) +
   `match_exhaustive` + `incremental_mapping`, default options, on a temporary database; the
   largest reconstruction is kept.
-- reference: `solutions.ch04_sfm.reconstruct_folder` — SIFT-lite (Chapter 3) on images
-  downscaled to the same MAX_SIDE, mutual-NN + ratio matching, F-RANSAC verification (Chapter 2),
+- reference: `solutions.ch04_sfm.reconstruct_folder` — SIFT-lite (Chapter 3; a 1.5x first octave, 4,000
+  features) on images downscaled to the same MAX_SIDE, mutual-NN + ratio matching, F-RANSAC verification (Chapter 2),
   `incremental_sfm` with unknown focal lengths (1.2 x max side prior, self-calibrated from F,
   refined with k1, k2 by Chapter 5's BA).
 
@@ -34,7 +34,7 @@ import numpy as np
 from benchmarks.timing import table
 
 MAX_SIDE = 1024
-GOALS = {"mean reprojection px": 1.0, "rotation deg": 2.0, "time ratio": 3.0}
+GOALS = {"mean reprojection px": 1.0, "rotation deg": 2.0, "time ratio": 2.0}      # issues 11 (item 5) and 20
 
 
 def _rotation_angle_deg(R: np.ndarray) -> np.ndarray:
@@ -183,7 +183,8 @@ def run_set(name: str) -> list[dict]:
               ("mean reprojection error <= 1 px", ref["reproj"] <= GOALS["mean reprojection px"]),
               ("rotations within 2° of pycolmap's (relative, every pair)",
                agree["relative_max"] <= GOALS["rotation deg"]),
-              ("time <= 3× pycolmap's", ref["timings"]["total"] <= GOALS["time ratio"] * col["timings"]["total"])]
+              (f"time <= {GOALS['time ratio']:g}× pycolmap's",
+               ref["timings"]["total"] <= GOALS["time ratio"] * col["timings"]["total"])]
     if missing:
         print("registered by pycolmap only: " + ", ".join(missing))
     for text, ok in checks:
