@@ -39,7 +39,9 @@ from . import tiny_nerf  # noqa: F401,E402 (register 8.13)
 from .tiny_nerf import gt_train_tiny_nerf, nerf_scene, render_field  # noqa: E402
 __all__ += ["gt_train_tiny_nerf", "nerf_scene", "render_field"]
 from . import neural_questions  # noqa: F401,E402 (register 8.4-8.7, 8.22-8.23)
+from . import floaters  # noqa: F401,E402 (register 8.19)
+from .floaters import debug_floaters, render_gaussians  # noqa: E402
 from . import diverge, neural_debug  # noqa: F401,E402 (register 8.20, 8.21)
 from .diverge import debug_diverging  # noqa: E402
 from .neural_debug import debug_blurry, neural_debug_case  # noqa: E402
-__all__ += ["debug_blurry", "debug_diverging", "neural_debug_case"]
+__all__ += ["debug_blurry", "debug_diverging", "debug_floaters", "neural_debug_case", "render_gaussians"]

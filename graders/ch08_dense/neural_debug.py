@@ -16,6 +16,7 @@ from graders.engine import Case, Exercise, Hint, debug_practice, register, share
 
 from . import fit2d
 from .diverge import debug_diverging
+from .floaters import debug_floaters
 from .nerf import single_thread
 
 CAUSES = {
@@ -89,4 +90,4 @@ register(Exercise(
     id="8.21", title="Blurry splatting renders", name="fix_blurry_splats", kind="debug", points=2, cases=_cases,
     hints=DEBUG_HINTS, fallback=None, timeout=60.0, arg_names=("case",)))
 
-neural_debug_case = debug_practice({"8.20": debug_diverging, "8.21": debug_blurry})
+neural_debug_case = debug_practice({"8.19": debug_floaters, "8.20": debug_diverging, "8.21": debug_blurry})

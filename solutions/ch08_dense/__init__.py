@@ -28,5 +28,5 @@ __all__ += ["fit_splats", "render_splats_torch"]
 from .neural_questions import *  # noqa: F401,F403,E402 (8.4-8.7, 8.22-8.23)
 from .neural_questions import __all__ as _neural_questions  # noqa: E402
 __all__ += list(_neural_questions)
-from .neural_debug import fix_blurry_splats, fix_diverging_splats  # noqa: E402
-__all__ += ["fix_blurry_splats", "fix_diverging_splats"]
+from .neural_debug import fix_blurry_splats, fix_diverging_splats, fix_floaters  # noqa: E402
+__all__ += ["fix_blurry_splats", "fix_diverging_splats", "fix_floaters"]

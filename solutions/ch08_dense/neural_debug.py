@@ -1,11 +1,11 @@
-"""8.20-8.21 (DEBUG) from scratch: splatting training that diverges, blurry splatting renders."""
+"""8.19-8.21 (DEBUG) from scratch: 3DGS floaters, splatting training that diverges, blurry splatting renders."""
 from __future__ import annotations
 
 import numpy as np
 
 from .fit2d import fit_splats
 
-__all__ = ["fix_blurry_splats", "fix_diverging_splats"]
+__all__ = ["fix_blurry_splats", "fix_diverging_splats", "fix_floaters"]
 
 
 def fix_blurry_splats(case: dict) -> dict:
@@ -35,3 +35,20 @@ def fix_diverging_splats(case: dict) -> dict:
         return {"cause": "bad_init", "gaussians": fit_splats(case["target"], init, s["steps"], s["max_gaussians"])}
     return {"cause": "position_lr", "gaussians": fit_splats(case["target"], init, s["steps"], s["max_gaussians"],
                                                            lr_means=0.3)}
+
+
+def fix_floaters(case: dict) -> dict:
+    """Exercise 8.19: the training views are near perfect, the held-out views show blobs, the settings switch
+    opacity reset and pruning off, and a handful of semi-transparent Gaussians have their centre in at most one
+    training image: floaters. A surface point is seen by several training views; a Gaussian that no view, or
+    only one, constrains is what an opacity reset followed by pruning removes. Keep the Gaussians whose centre
+    lies in front of and inside at least 2 training images, and prune opacity < 0.005 (3DGS's threshold)."""
+    g = {k: np.asarray(v, float) for k, v in case["gaussians"].items()}
+    seen = np.zeros(len(g["mu"]), int)
+    for K, R, t in zip(case["Ks"], case["Rs"], case["ts"]):
+        Xc = g["mu"] @ np.asarray(R).T + np.asarray(t)
+        z = np.where(Xc[:, 2] > 0.2, Xc[:, 2], np.inf)
+        u, v = K[0, 0] * Xc[:, 0] / z + K[0, 2], K[1, 1] * Xc[:, 1] / z + K[1, 2]
+        seen += np.isfinite(z) & (u >= 0) & (u < case["W"]) & (v >= 0) & (v < case["H"])
+    keep = (seen >= 2) & (g["opacity"] >= 0.005)
+    return {"cause": "floaters", "gaussians": {k: v[keep] for k, v in g.items()}}

@@ -596,3 +596,7 @@ MUTANTS += _NERF_MUTANTS
 # ----------------------------------------------------------------- 8.20 DEBUG diverging splats (its own module)
 from mutants.ch08_dense_diverge import MUTANTS as _DIVERGE_MUTANTS  # noqa: E402
 MUTANTS += _DIVERGE_MUTANTS
+
+# 8.19 (3DGS floaters) lives in its own file like 8.20
+from mutants.ch08_dense_floaters import MUTANTS as _FLOATER_MUTANTS  # noqa: E402
+MUTANTS += _FLOATER_MUTANTS

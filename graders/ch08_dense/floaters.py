@@ -1,0 +1,258 @@
+"""8.19 (DEBUG) — 3DGS floaters: blobs in the air in novel views, no opacity reset and no pruning.
+
+A small 3DGS scene: a wall of 49 opaque Gaussians (the surface, opacity 0.6-0.99) seen by 6 training cameras
+4 m away, and two held-out cameras stepped back to 5-6 m. The colleague trained it with opacity reset off and
+pruning off, from a noisy initialisation; the result keeps (a) 4-10 *floaters*: semi-transparent Gaussians
+(opacity 0.2-0.45) 0.8-3 m in front of a held-out camera, which at most one training camera sees (one that
+no view constrains keeps its initial colour; one that a single view sees is coloured like the wall it covers
+there), so the training views still look right while the held-out views show blobs; (b) 20 nearly
+transparent stray Gaussians (o < 0.004) from the initialisation, which pruning at o < 0.005 would have
+removed. The case holds the training cameras and images, the trained Gaussians, the settings, a log and
+metrics; the held-out poses are given, their images (the hidden truth) stay in the grader.
+
+The learner names the cause (from CAUSES, half the points) and returns the repaired Gaussians. The grader
+projects and composites them with its own 3DGS renderer (8.14's and 8.15's stand-ins) and measures
+(1) the held-out views: the repair must remove >= 90 % of the floaters' squared error there, and (2) the
+training views: no more than 0.5 dB below the colleague's run (a repair that deletes surface Gaussians,
+e.g. pruning far above the floaters' opacity, fails here).
+"""
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from graders.convert import OutputError
+from graders.engine import Case, Exercise, Hint, register, shared_run
+from graders.scene import look_at
+
+from .nerf import to_numpy
+from .raster import gt_rasterize
+from .splat import gt_project
+
+CAUSES = {
+    "floaters": "no opacity reset and no pruning: semi-transparent Gaussians from a noisy initialisation stay in the "
+                "air, each explaining one training view",
+    "view_dependence": "the colours have no view dependence (spherical-harmonics degree 0)",
+    "no_densification": "too few Gaussians: densification never ran",
+    "position_lr": "the position learning rate is too high",
+    "wrong_poses": "the held-out cameras' poses are wrong",
+}
+W = H = 32
+FOCAL = 40.0
+N_SIDE = 7
+HELD_SHARE = 0.1    # the repair may leave at most 10 % of the floaters' held-out squared error
+TRAIN_DB = 0.5      # training views at most 0.5 dB below the colleague's
+
+
+def _camera(az_deg: float, el_deg: float, dist: float = 4.0):
+    a, e = np.radians(az_deg), np.radians(el_deg)
+    C = dist * np.array([np.sin(a) * np.cos(e), np.sin(e), -np.cos(a) * np.cos(e)])
+    return look_at(C, np.zeros(3))
+
+
+def _wall(rng) -> dict:
+    g = np.linspace(-0.9, 0.9, N_SIDE)
+    x, y = np.meshgrid(g, g)
+    n = N_SIDE * N_SIDE
+    mu = np.stack([x.ravel(), y.ravel(), np.zeros(n)], 1) + np.c_[rng.uniform(-0.05, 0.05, (n, 2)), np.zeros(n)]
+    q = Rotation.from_euler("z", rng.uniform(0, np.pi, (n, 1))).as_quat()[:, [3, 0, 1, 2]]     # (w, x, y, z)
+    s = np.c_[rng.uniform(0.12, 0.2, (n, 2)), np.full(n, 0.01)]                             # flat discs, m
+    base = np.array([rng.uniform(0.2, 0.8, 3) for _ in range(2)])
+    color = np.clip(base[0] + (base[1] - base[0]) * (0.5 + 0.5 * x.ravel())[:, None]
+                    + rng.normal(0, 0.12, (n, 3)), 0.02, 0.98)
+    return {"mu": mu, "q": q, "s": s, "color": color, "opacity": rng.uniform(0.6, 0.99, n)}
+
+
+def render_gaussians(g: dict, K, R, t) -> np.ndarray:
+    """The grader's 3DGS render (8.14's projection, 8.15's compositing) of Gaussians g at one camera."""
+    if len(g["mu"]) == 0:
+        return np.zeros((H, W, 3))
+    p = gt_project(g["mu"], g["q"], g["s"], R, t, K, W, H)
+    v = p["visible"]
+    img, _ = gt_rasterize(p["means2d"][v], p["conic"][v], g["color"][v], g["opacity"][v], p["depth"][v],
+                          p["radius"][v], W, H)
+    return img
+
+
+def views_seeing(mu, cams, margin: float = 0.0) -> np.ndarray:
+    """How many of the cameras (K, R, t) have each point's projection inside the image (shrunk by `margin`
+    px), in front (z > 0.2 m)."""
+    count = np.zeros(len(mu), int)
+    for K, R, t in cams:
+        Xc = mu @ R.T + t
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = K[0, 0] * Xc[:, 0] / Xc[:, 2] + K[0, 2]
+            v = K[1, 1] * Xc[:, 1] / Xc[:, 2] + K[1, 2]
+        count += (Xc[:, 2] > 0.2) & (u >= margin) & (u < W - margin) & (v >= margin) & (v < H - margin)
+    return count
+
+
+def _floaters(rng, cams, held, wall_imgs, n: int) -> list[dict]:
+    """Up to n floaters in the held-out views' frusta (0.8-3 m in front of them) that at most one training
+    camera sees: a point no view constrains keeps its initial colour; one seen by a single view is coloured
+    like the wall it covers there (it explains that view)."""
+    out = []
+    for h in rng.permutation(len(held)):
+        K, R, t = held[h]
+        m = 300
+        px = rng.uniform(3, W - 3, (m, 2))
+        rays = np.linalg.solve(K, np.c_[px, np.ones(m)].T).T @ R           # world directions, z_cam = 1
+        d = rng.uniform(0.8, 3.0, m)
+        X = -R.T @ t + d[:, None] * rays
+        s = np.repeat((rng.uniform(2.0, 5.0, m) * d / FOCAL)[:, None], 3, 1)
+        q = np.tile([1.0, 0, 0, 0], (m, 1))
+        seen = np.array([gt_project(X, q, s, R2, t2, K2, W, H)["visible"] for K2, R2, t2 in cams])
+        for i in np.flatnonzero(seen.sum(0) <= 1)[:(n + 1) // 2]:
+            color = rng.uniform(0.05, 0.95, 3)
+            if seen[:, i].any():
+                v = int(np.argmax(seen[:, i]))
+                p = gt_project(X[i:i + 1], q[i:i + 1], s[i:i + 1], *cams[v][1:], cams[v][0], W, H)
+                (x0, y0), r = np.clip(p["means2d"][0], 0, W - 1).astype(int), int(p["radius"][0])
+                color = wall_imgs[v][max(0, y0 - r):y0 + r + 1, max(0, x0 - r):x0 + r + 1].reshape(-1, 3).mean(0)
+            out.append({"mu": X[i][None], "q": q[i][None], "s": s[i][None], "color": color[None],
+                        "opacity": np.array([rng.uniform(0.2, 0.45)])})
+    return out[:n]
+
+
+def _join(*gs) -> dict:
+    return {k: np.concatenate([g[k] for g in gs]) for k in ("mu", "q", "s", "color", "opacity")}
+
+
+def _psnr(imgs, refs) -> float:
+    mse = np.mean([(a - b) ** 2 for a, b in zip(imgs, refs)])
+    return float(10 * np.log10(1.0 / max(mse, 1e-12)))
+
+
+def _draw(rng):
+    K = np.array([[FOCAL, 0, W / 2], [0, FOCAL, H / 2], [0, 0, 1]])
+    az = np.sort(rng.uniform(-45, 45, 6))
+    cams = [(K, *_camera(a, rng.uniform(-12, 12))) for a in az]
+    # novel views stepped back (5-6 m): they see the space in front of the training cameras, where floaters sit
+    held = [(K, *_camera(rng.uniform(-40, 40), rng.uniform(-15, 15), rng.uniform(5.0, 6.0))) for _ in range(2)]
+    wall = _wall(rng)
+    if views_seeing(wall["mu"], cams).min() < 2:
+        return None
+    wall_imgs = [render_gaussians(wall, *c) for c in cams]
+    floaters = _floaters(rng, cams, held, wall_imgs, int(rng.integers(6, 11)))
+    if len(floaters) < 4:
+        return None
+    m = 20
+    stray = {"mu": rng.uniform([-2, -1.5, -2.5], [2, 1.5, 0.5], (m, 3)),
+             "q": Rotation.random(m, random_state=rng).as_quat()[:, [3, 0, 1, 2]],
+             "s": rng.uniform(0.03, 0.1, (m, 3)), "color": rng.uniform(0, 1, (m, 3)),
+             "opacity": rng.uniform(0.001, 0.004, m)}
+    trained = _join(wall, *floaters, stray)
+    order = rng.permutation(len(trained["mu"]))
+    trained = {k: v[order] for k, v in trained.items()}
+    return cams, held, wall, wall_imgs, trained
+
+
+def debug_floaters(rng: np.random.Generator) -> tuple[dict, dict]:
+    """A 3DGS scene with floaters (the colleague's run) and its hidden truth (held-out views)."""
+    drawn = None
+    while drawn is None:        # redraw until every wall Gaussian is seen by >= 2 training views and >= 4 floaters
+        drawn = _draw(rng)
+    cams, held, wall, wall_imgs, trained = drawn
+    held_truth = [render_gaussians(wall, *c) for c in held]
+    train_psnr = [_psnr([render_gaussians(trained, *c)], [img]) for c, img in zip(cams, wall_imgs)]
+    held_psnr = [_psnr([render_gaussians(trained, *c)], [img]) for c, img in zip(held, held_truth)]
+    seen = views_seeing(trained["mu"], cams)
+    o = trained["opacity"]
+    settings = {"iterations": 3000, "opacity_reset_every": None, "prune_opacity": 0.0, "densify_every": 100,
+                "sh_degree": 3, "init": "SfM points + 20 random points"}
+    log = [f"settings: {settings}",
+           f"{len(o)} Gaussians; opacity < 0.005: {int(np.sum(o < 0.005))}, 0.005-0.5: "
+           f"{int(np.sum((o >= 0.005) & (o < 0.5)))}, >= 0.5: {int(np.sum(o >= 0.5))}",
+           "training views: PSNR " + ", ".join(f"{p:.1f}" for p in train_psnr) + " dB",
+           "held-out views: PSNR " + ", ".join(f"{p:.1f}" for p in held_psnr) + " dB (blobs in the air)",
+           "Gaussians by the number of training views whose image holds their centre: "
+           + ", ".join(f"{k}: {int(np.sum(seen == k))}" for k in range(len(cams) + 1) if np.any(seen == k))]
+    case = {"gaussians": trained, "train_images": wall_imgs, "Ks": [c[0] for c in cams], "Rs": [c[1] for c in cams],
+            "ts": [c[2] for c in cams], "held_out": {"Ks": [c[0] for c in held], "Rs": [c[1] for c in held],
+                                                    "ts": [c[2] for c in held]},
+            "W": W, "H": H, "settings": settings, "log": log,
+            "metrics": {"train_psnr_db": train_psnr, "held_out_psnr_db": held_psnr, "views_seeing": seen},
+            "causes": dict(CAUSES)}
+    broken_held = [render_gaussians(trained, *c) for c in held]
+    truth = {"cause": "floaters", "cams": cams, "held": held, "held_truth": held_truth, "train_images": wall_imgs,
+             "mse_held_broken": float(np.mean([(a - b) ** 2 for a, b in zip(broken_held, held_truth)])),
+             "train_psnr_broken": _psnr([render_gaussians(trained, *c) for c in cams], wall_imgs)}
+    return case, truth
+
+
+_FIELDS = {"mu": 3, "q": 4, "s": 3, "color": 3, "opacity": 0}
+
+
+def _convert(out, case):
+    if not isinstance(out, dict) or not {"cause", "gaussians"} <= set(out):
+        raise OutputError('expected a dict {"cause": one of CAUSES, "gaussians": dict like the case\'s (mu, q, s, '
+                          'color, opacity)}')
+    cause = str(out["cause"]).strip().lower()
+    if cause not in CAUSES:
+        raise OutputError(f'"cause" must be one of {", ".join(CAUSES)}; got {out["cause"]!r}')
+    g = out["gaussians"]
+    if not isinstance(g, dict) or set(_FIELDS) - set(g):
+        raise OutputError(f"gaussians: expected a dict with {', '.join(_FIELDS)}")
+    arr = {k: np.asarray(to_numpy(g[k]), float) for k in _FIELDS}
+    N = len(arr["mu"])
+    for k, d in _FIELDS.items():
+        if arr[k].shape != ((N, d) if d else (N,)):
+            raise OutputError(f"{k} has shape {arr[k].shape}, expected {(N, d) if d else (N,)}")
+        if not np.isfinite(arr[k]).all():
+            raise OutputError(f"{k} has non-finite values")
+    if (arr["s"] <= 0).any() or (np.linalg.norm(arr["q"], axis=1) == 0).any():
+        raise OutputError("scales must be positive and quaternions non-zero")
+    return {"cause": cause, "gaussians": arr}
+
+
+def _held_share(o, t) -> float:
+    imgs = [render_gaussians(o["gaussians"], *c) for c in t["held"]]
+    return float(np.mean([(a - b) ** 2 for a, b in zip(imgs, t["held_truth"])])) / t["mse_held_broken"]
+
+
+def _train_drop(o, t) -> float:
+    return max(0.0, t["train_psnr_broken"] - _psnr([render_gaussians(o["gaussians"], *c) for c in t["cams"]], t["train_images"]))
+
+
+def _cases(rng):
+    case, truth = debug_floaters(rng)
+
+    def learner(fn, c=case):
+        return fn(copy.deepcopy(c))
+    call = shared_run(learner)
+    yield Case("the cause you named", (case,), truth, lambda o, t: float(o["cause"] != t["cause"]), 0, "wrong",
+               convert=_convert, call=call, key="cause", tags=("cause",), weight=2.0)      # half the points
+    # 10 %: removing exactly the floaters (and the strays) renders the held-out views exactly (share 0); the
+    # broken run's share is 1 by definition, and keeping even the fainter half of the floaters leaves > 15 %.
+    yield Case("held-out views: share of the floaters' squared error left ≤ 10 %", (case,), truth, _held_share,
+               HELD_SHARE, "", convert=_convert, call=call, key="held-out", tags=("fix",))
+    # 0.5 dB: removing the floaters can only raise the training PSNR (they cost it 0-3 dB); deleting the surface
+    # Gaussians under o = 0.9 costs 8-20 dB.
+    yield Case(f"training views: PSNR ≥ the colleague's {truth['train_psnr_broken']:.1f} dB − {TRAIN_DB} dB",
+               (case,), truth, _train_drop, TRAIN_DB, "dB", convert=_convert, call=call, key="train", tags=("fix",))
+
+
+def _single_view(c, o) -> int:
+    g = o["gaussians"]
+    seen = views_seeing(g["mu"], c.expected["cams"])
+    return int(np.sum((seen < 2) & (g["opacity"] >= 0.005)))
+
+
+FLOATER_HINTS = [
+    Hint(lambda c, o: f"look at the log: every training view is at {min(c.args[0]['metrics']['train_psnr_db']):.0f}+ dB "
+         f"but the held-out views are not; {int(np.sum(c.args[0]['metrics']['views_seeing'] == 1))} Gaussians are seen "
+         "by one training view only, and the settings switch opacity reset and pruning off — what is in the air?",
+         lambda c, o: c.key == "cause" and o["cause"] != "floaters"),
+    Hint(lambda c, o: f"floaters remain: {_single_view(c, o)} Gaussians of your scene (opacity ≥ 0.005) are seen by "
+         "fewer than 2 training views — a surface point is seen by several. Remove what only one view supports "
+         "(what an opacity reset followed by pruning does), not only the nearly transparent ones.",
+         lambda c, o: c.key == "held-out" and _single_view(c, o) > 0),
+    Hint("your repair removed surface Gaussians: the training views got worse. Pruning far above the floaters' "
+         "opacity deletes the wall too; remove the floaters only.", lambda c, o: c.key == "train"),
+]
+
+register(Exercise(
+    id="8.19", title="3DGS floaters", name="fix_floaters", kind="debug", points=2, cases=_cases,
+    hints=FLOATER_HINTS, fallback=None, timeout=30.0, arg_names=("case",)))

@@ -1,0 +1,59 @@
+"""Chapter 8 mutants of 8.19 (3DGS floaters), appended to ch08_dense.MUTANTS.
+
+Each is a standalone wrong repair (none uses the grader's renderer, which produces the expected images): the
+wrong diagnosis, a knob turned too little or too far, or the classic "prune the large ones" rule.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def _views(case) -> np.ndarray:
+    g = case["gaussians"]
+    n = np.zeros(len(g["mu"]), int)
+    for K, R, t in zip(case["Ks"], case["Rs"], case["ts"]):
+        Xc = np.asarray(g["mu"]) @ np.asarray(R).T + t
+        z = np.where(Xc[:, 2] > 0.2, Xc[:, 2], np.inf)
+        u, v = K[0, 0] * Xc[:, 0] / z + K[0, 2], K[1, 1] * Xc[:, 1] / z + K[1, 2]
+        n += np.isfinite(z) & (u >= 0) & (u < case["W"]) & (v >= 0) & (v < case["H"])
+    return n
+
+
+def _keep(case, keep, cause="floaters"):
+    return {"cause": cause, "gaussians": {k: np.asarray(v)[keep] for k, v in case["gaussians"].items()}}
+
+
+def floaters_blames_view_dependence(case):
+    """Removes the floaters properly but blames the missing view dependence (SH degree 0)."""
+    return _keep(case, (_views(case) >= 2) & (case["gaussians"]["opacity"] >= 0.005), "view_dependence")
+
+
+def floaters_default_prune(case):
+    """Switches pruning on at 3DGS's o < 0.005 and nothing else: the strays go, the floaters stay."""
+    return _keep(case, case["gaussians"]["opacity"] >= 0.005)
+
+
+def floaters_prune_large(case):
+    """Prunes the Gaussians wider than 0.25 m (3DGS's "too large" rule, as a tenth of the wall) and o < 0.005:
+    most floaters are smaller than that."""
+    g = case["gaussians"]
+    return _keep(case, (np.asarray(g["s"]).max(1) < 0.25) & (g["opacity"] >= 0.005))
+
+
+def floaters_prune_high(case):
+    """Raises the pruning threshold far too high (o < 0.9): the floaters go, and so does most of the wall."""
+    return _keep(case, case["gaussians"]["opacity"] >= 0.9)
+
+
+def floaters_unchanged(case):
+    """Right cause, the colleague's Gaussians handed back."""
+    return {"cause": "floaters", "gaussians": case["gaussians"]}
+
+
+MUTANTS: list[tuple] = [
+    ("8.19", "blames view dependence", floaters_blames_view_dependence, "what is in the air?"),
+    ("8.19", "default pruning only", floaters_default_prune, "floaters remain"),
+    ("8.19", "prunes large Gaussians", floaters_prune_large, "floaters remain"),
+    ("8.19", "prunes at 0.9", floaters_prune_high, "removed surface Gaussians"),
+    ("8.19", "unchanged", floaters_unchanged, "floaters remain"),
+]
