@@ -70,7 +70,9 @@ __all__ += ["fixed_tracker", "pose_errors", "run_tracker", "tracking_case", "tra
 from . import visual_odometry  # noqa: E402,F401 (register 6.13)
 from .visual_odometry import K as K_VO  # noqa: E402
 from .visual_odometry import SOLVERS as VO_SOLVERS  # noqa: E402
-from .visual_odometry import ate_sim3, scale_drift, standin_vo, vo_sequence  # noqa: E402
+from .visual_odometry import K_R as K_VO_RENDERED  # noqa: E402
+from .visual_odometry import ate_sim3, rendered_vo_sequence, scale_drift, standin_vo, vo_sequence  # noqa: E402
 
-__all__ += ["K_VO", "VO_SOLVERS", "ate_sim3", "scale_drift", "standin_vo", "vo_sequence"]
+__all__ += ["K_VO", "K_VO_RENDERED", "VO_SOLVERS", "ate_sim3", "rendered_vo_sequence", "scale_drift", "standin_vo",
+            "vo_sequence"]
 # /fe:613

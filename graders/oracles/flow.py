@@ -29,3 +29,34 @@ def cv_farneback(I1, I2) -> np.ndarray:
 def cv_dis(I1, I2) -> np.ndarray:
     u8 = lambda I: np.clip(np.rint(I), 0, 255).astype(np.uint8)   # noqa: E731
     return cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM).calc(u8(I1), u8(I2), None).astype(float)
+
+
+def klt_tracks(images, n_max: int = 500, fb_px: float = 0.5, min_dist: int = 10) -> list[dict]:
+    """A feature tracker's output on uint8 images (h, w): Shi-Tomasi corners followed by pyramidal LK
+    (21 x 21, 3 levels), kept when tracking back lands within fb_px of the start (forward-backward check);
+    new corners, away from the live tracks, whenever fewer than 70 % of n_max survive.
+    Returns frames [{"ids": (m,) track ids, "uv": (m, 2) pixels}], one per image."""
+    frames, prev = [], None
+    pts, ids, next_id = np.zeros((0, 2), np.float32), np.zeros(0, int), 0
+    lk = dict(winSize=(21, 21), maxLevel=3)
+    for img in images:
+        h, w = img.shape
+        if prev is not None and len(pts):
+            p1, st, _ = cv2.calcOpticalFlowPyrLK(prev, img, pts, None, **lk)
+            p0, st_back, _ = cv2.calcOpticalFlowPyrLK(img, prev, p1, None, **lk)
+            ok = (st.ravel() == 1) & (st_back.ravel() == 1) & (np.linalg.norm(p0 - pts, axis=1) < fb_px)
+            ok &= (p1[:, 0] >= 0) & (p1[:, 0] <= w - 1) & (p1[:, 1] >= 0) & (p1[:, 1] <= h - 1)
+            pts, ids = p1[ok], ids[ok]
+        if len(pts) < 0.7 * n_max:
+            mask = np.full((h, w), 255, np.uint8)
+            for x, y in pts:                      # no new corner within min_dist of a live track
+                cv2.circle(mask, (int(x), int(y)), min_dist, 0, -1)
+            new = cv2.goodFeaturesToTrack(img, n_max - len(pts), 0.01, min_dist, mask=mask)
+            if new is not None:
+                new = new.reshape(-1, 2)
+                pts = np.r_[pts, new].astype(np.float32)
+                ids = np.r_[ids, np.arange(next_id, next_id + len(new))]
+                next_id += len(new)
+        frames.append({"ids": ids.copy(), "uv": pts.astype(float)})
+        prev = img
+    return frames
