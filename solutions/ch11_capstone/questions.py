@@ -1,4 +1,4 @@
-"""Chapter 11's answers to the CONCEPT questions of part A (11.1-11.4)."""
+"""Chapter 11's answers to the CONCEPT questions of part A (11.1-11.4) and the DESIGN question 11.14."""
 from __future__ import annotations
 
 from math import erf, sqrt
@@ -29,3 +29,8 @@ data_flow = [1280 * 960 * 3 / 1e6, 6 * 30 * 1280 * 960 * 3 / 1e6, 6 * 30 * 1280 
              6 * 5 // 2 * 200]
 
 look_first = ["calibration", "features", "map", "time sync", "matching"]
+
+# 3 stereo pairs at 30 fps; per pair and frame 2 + 1.5 + 1 + 0.8 + 0.5 + 6 ms, plus BA's 40 ms every 10th frame.
+_per_frame = 2.0 + 1.5 + 1.0 + 0.8 + 0.5 + 6.0 + 40.0 / 10
+compute_budget = [_per_frame * 3 * 30, _per_frame * 3 * 30 / 4000, 0.5 * 4000 / (_per_frame * 3),
+                  (_per_frame - 6.0) * 3 * 30 + 6.0 * 30, 10.0 / 3]
