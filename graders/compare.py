@@ -30,6 +30,16 @@ def rotation_angle_deg(R1: np.ndarray, R2: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
 
 
+def rotation_angle_exact_deg(R1: np.ndarray, R2: np.ndarray) -> float:
+    """Angle of the rotation R1 R2^T in degrees, accurate to float64 rounding near 0 (atan2 of the skew part
+    against the trace). R1, R2: (3, 3) rotations. rotation_angle_deg's arccos of the trace cannot resolve
+    less than ~1e-6° (one rounding of the trace near 3 is already 8.5e-7°): use this one where a tolerance
+    is float64 rounding (exact data)."""
+    M = np.asarray(R1, float) @ np.asarray(R2, float).T
+    w = np.array([M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1]])     # 2 sin(θ) axis
+    return float(np.degrees(np.arctan2(np.linalg.norm(w), np.trace(M) - 1.0)))
+
+
 def max_angle_deg(u: np.ndarray, v: np.ndarray) -> float:
     """Largest angle in degrees between corresponding direction vectors. u, v: (N, 3)."""
     u = u / np.linalg.norm(u, axis=-1, keepdims=True)
