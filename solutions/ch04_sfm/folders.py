@@ -29,12 +29,12 @@ def load_image(path, max_side: int | None = 1024) -> tuple[np.ndarray, float]:
         return np.asarray(im, np.float64) / 255.0, scale
 
 
-# Features for photos (`reconstruct_folder`), measured on both real sets at 1024 px against pycolmap 4.2 (SIFT,
-# 2x first octave, up to 8,192 features): detecting on the image upsampled 2x (COLMAP's first octave) with 6,000
-# features took 2.05 s of CPU per Sacre Coeur photo and 0.27 s per matched pair; 1.5x with 4,000 takes 0.96 s and
-# 0.12 s, and registers the same images with rotations as close to pycolmap's (notes/issue20_ch4.md has the
-# figures). A 1.5x first octave still resolves blobs of sigma 1.6 / 1.5 = 1.07 px of the photo; 2x adds those of
-# 0.8-1.07 px, a third of the detections, which the 4,000 strongest mostly leave out anyway.
+# Features for photos (`reconstruct_folder`), measured at 1024 px against pycolmap 4.2 (SIFT, 2x first octave, up to
+# 8,192 features): detecting on the image upsampled 2x (COLMAP's first octave) with 6,000 features took 2.05 s of
+# CPU per Sacre Coeur photo and 0.22 s per matched pair; 1.5x with 4,000 takes 0.96 s and 0.10 s, registers the
+# same images and agrees with pycolmap's rotations as well (`python -m benchmarks 04` measures both real
+# sets). A 1.5x first octave still resolves blobs of sigma 1.6 / 1.5 = 1.07 px of the photo; 2x adds those of
+# 0.8-1.07 px, 27 % of its detections on Sacre Coeur, and costs twice the CPU for them.
 UPSAMPLE = 1.5
 
 
@@ -48,8 +48,8 @@ def extract_features(img: np.ndarray, n_features: int = N_FEATURES, upsample: fl
     Detecting on the image upsampled by `upsample` (2 in SIFT and COLMAP, 1.5 here: see UPSAMPLE) finds the
     small-scale blobs that carry most matches between photos of a facade. Keypoints are mapped back to the
     original pixels: with pixel centres at integers and the image edges kept in place (grid_mode), per axis
-    x = (x_up + 0.5) / s - 0.5 with s = upsampled size / size (the rounded size makes s differ from `upsample`
-    by up to 0.1 %), sigma = sigma_up / s.
+    x = (x_up + 0.5) / s - 0.5 with s = upsampled size / size (the size is rounded: for an odd side n at 1.5x, s
+    differs from `upsample` by 0.5 / n), sigma = sigma_up / s.
     img: (H, W) in [0, 1]. Returns (kps (N, 3) rows (x, y, sigma), desc (N, 128) float32).
     """
     from scipy import ndimage
