@@ -5,6 +5,7 @@ import numpy as np
 from scipy import ndimage
 
 from .common import gray
+from .corners import fast_detect, harris_at
 
 
 # ============================================================ 3.7 / 3.8 ORB-like ====
@@ -67,3 +68,88 @@ def hamming_distances(D1: np.ndarray, D2: np.ndarray, block: int = 512) -> np.nd
         x = D1[i:i + block, None, :] ^ D2[None, :, :]
         out[i:i + block] = np.bitwise_count(x).sum(axis=2)
     return out
+
+
+# ============================================================ the ORB-like pipeline ====
+
+def resize_bilinear(I: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Bilinear resize to `shape` (h, w) keeping pixel centres (output x reads input (x + 0.5) W / w - 0.5):
+    linear interpolation between rows, then between columns (bilinear is separable)."""
+    def weights(n_in, n_out):  # for each output sample: the lower input sample and its weight
+        u = np.clip((np.arange(n_out) + 0.5) * n_in / n_out - 0.5, 0, n_in - 1)
+        i0 = np.minimum(np.floor(u).astype(int), n_in - 2)
+        return i0, u - i0
+    y0, fy = weights(I.shape[0], shape[0])
+    x0, fx = weights(I.shape[1], shape[1])
+    rows = I[y0] * (1 - fy)[:, None] + I[y0 + 1] * fy[:, None]  # (h, W)
+    return rows[:, x0] * (1 - fx) + rows[:, x0 + 1] * fx  # (h, w)
+
+
+def orb_detect(img: np.ndarray, n_features: int = 1000, n_levels: int = 8, scale: float = 1.2,
+               threshold: int = 20, border: int = 16):
+    """ORB's detector (Rublee et al. 2011): FAST-9 on a pyramid of images each `scale` times smaller,
+    re-ranked by the Harris response. Level l keeps its share n_l ~ scale^-l of n_features (OpenCV's
+    split), the strongest by Harris among FAST corners at least `border` px inside.
+
+    Returns a list over levels of (level image uint8, (n_l, 2) keypoints in that level's pixels,
+    (sx, sy) = level-0 pixels per level pixel)."""
+    I = np.asarray(img, np.float32)
+    f = 1.0 / scale
+    share = n_features * (1 - f) / (1 - f ** n_levels) * f ** np.arange(n_levels)
+    out = []
+    for lv in range(n_levels):
+        shape = (int(round(I.shape[0] * f ** lv)), int(round(I.shape[1] * f ** lv)))
+        if min(shape) < 2 * border + 8:
+            break
+        L = I if lv == 0 else resize_bilinear(L, shape)  # each level from the previous one, as OpenCV does
+        L8 = np.clip(np.rint(L), 0, 255).astype(np.uint8)
+        k = fast_detect(L8, threshold, True)
+        h, w = shape
+        k = k[(k[:, 0] >= border) & (k[:, 0] < w - border) & (k[:, 1] >= border) & (k[:, 1] < h - border)]
+        k = k[np.argsort(-harris_at(L8, k), kind="stable")[:int(round(share[lv]))]]
+        out.append((L8, k, (img.shape[1] / w, img.shape[0] / h)))
+    return out
+
+
+def orb_like(img: np.ndarray, pattern: np.ndarray, n_features: int = 1000) -> tuple[np.ndarray, np.ndarray]:
+    """The ORB-like pipeline: orb_detect's pyramid keypoints, each described by 3.7's oriented BRIEF
+    on its own level. Returns ((N, 3) rows (x, y, scale) in level-0 pixels, (N, 32) uint8)."""
+    kps, desc = [], []
+    for L8, k, (sx, sy) in orb_detect(img, n_features):
+        desc.append(orb_descriptors(L8, k, pattern))
+        kps.append(np.c_[(k[:, 0] + 0.5) * sx - 0.5, (k[:, 1] + 0.5) * sy - 0.5, np.full(len(k), sx)])
+    if not kps:  # smaller than one level
+        return np.zeros((0, 3)), np.zeros((0, 32), np.uint8)
+    return np.concatenate(kps), np.concatenate(desc)
+
+
+def learn_brief_pattern(images, n_bits: int = 256, radius: int = 13, n_candidates: int = 3000,
+                        seed: int = 0, corr_start: float = 0.2) -> np.ndarray:
+    """ORB's learned test pattern (Rublee et al. 2011, 4.3): tests that vary a lot and agree little.
+
+    Candidate pairs are drawn uniformly in a disc of `radius`; each is evaluated as a steered test
+    (3.7's orb_descriptors) at orb_detect's keypoints of the training images. Candidates are taken
+    greedily, highest variance first (mean bit nearest 0.5), keeping one only if its correlation
+    with every test kept so far is below a bar (raised by 0.05 when the candidates run out).
+    Returns (n_bits, 4) int rows (ax, ay, bx, by)."""
+    rng = np.random.default_rng(seed)
+    disc = _disc(radius)
+    cand = np.c_[disc[rng.integers(0, len(disc), n_candidates)], disc[rng.integers(0, len(disc), n_candidates)]]
+    cand = np.unique(cand[np.any(cand[:, :2] != cand[:, 2:], axis=1)], axis=0)
+    bits = np.concatenate([np.unpackbits(orb_descriptors(L8, k, cand), axis=1)[:, :len(cand)]
+                           for img in images for L8, k, _ in orb_detect(img, 500)]).astype(np.float32)
+    mean = bits.mean(0)
+    Z = (bits - mean) / np.maximum(bits.std(0), 1e-6) / np.sqrt(len(bits))  # Z[:, i] @ Z[:, j] = correlation
+    order = np.argsort(np.abs(mean - 0.5), kind="stable")
+    worst = np.zeros(len(cand), np.float32)  # each candidate's largest |correlation| with the tests kept
+    taken, chosen, bar = np.zeros(len(cand), bool), [], corr_start
+    while len(chosen) < n_bits:
+        for i in order:
+            if not taken[i] and worst[i] < bar:
+                taken[i] = True
+                chosen.append(i)
+                worst = np.maximum(worst, np.abs(Z.T @ Z[:, i]))
+                if len(chosen) == n_bits:
+                    break
+        bar += 0.05
+    return cand[chosen]

@@ -42,8 +42,9 @@ def dog_detect(img: np.ndarray, n_features: int = 1000, n_octaves: int = 4, n_sc
     rejected if an offset still exceeds 0.6, if |D(x^)| < contrast / n_scales or if the
     principal-curvature ratio exceeds edge_ratio. Two candidates refined to the same extremum keep one.
     """
+    I = gray(img).astype(np.float32)  # float32 halves the memory traffic; D is refined in float64 below
     rows = [_octave_keypoints(G[1:] - G[:-1], o, n_scales, sigma0, contrast, edge_ratio)
-            for o, G in enumerate(_gaussian_octaves(gray(img), n_octaves, n_scales, sigma0))]
+            for o, G in enumerate(_gaussian_octaves(I, n_octaves, n_scales, sigma0))]
     kp = np.concatenate(rows) if rows else np.zeros((0, 4))
     kp = kp[np.argsort(-kp[:, 3], kind="stable")][:n_features]
     return kp[:, :3]
@@ -53,10 +54,10 @@ def _octave_keypoints(D: np.ndarray, o: int, n_scales: int, sigma0: float, contr
                       edge_ratio: float) -> np.ndarray:
     """Refined extrema of one octave's DoG stack D: (n_scales + 2, h, w) -> (K, 4) rows (x, y, sigma, |D|)."""
     ns, h, w = D.shape
-    big = ndimage.maximum_filter(D, size=3, mode="nearest")
-    small = ndimage.minimum_filter(D, size=3, mode="nearest")
-    cand = ((D == big) | (D == small)) & (np.abs(D) > 0.5 * contrast / n_scales)
-    cand[[0, -1]] = False
+    inner = D[1:-1, 1:-1, 1:-1]  # every sample with a full 3x3x3 neighbourhood
+    cand = np.zeros(D.shape, bool)
+    cand[1:-1, 1:-1, 1:-1] = (((inner == _max3(D)) | (inner == -_max3(-D)))
+                              & (np.abs(inner) > 0.5 * contrast / n_scales))
     cand[:, :5], cand[:, -5:], cand[:, :, :5], cand[:, :, -5:] = False, False, False, False
     s, y, x = np.nonzero(cand)
     alive = np.ones(len(s), bool)
@@ -73,7 +74,7 @@ def _octave_keypoints(D: np.ndarray, o: int, n_scales: int, sigma0: float, contr
     g, Hm = _dog_derivatives(D, s, y, x)  # the offset where each candidate ended up
     off = -np.linalg.solve(Hm + 1e-12 * np.eye(3), g[..., None])[..., 0]
     alive &= np.all(np.abs(off) <= MOVE, axis=1)
-    value = D[s, y, x] + 0.5 * np.sum(g * off, axis=1)
+    value = D[s, y, x].astype(np.float64) + 0.5 * np.sum(g * off, axis=1)
     tr, det = Hm[:, 1, 1] + Hm[:, 2, 2], Hm[:, 1, 1] * Hm[:, 2, 2] - Hm[:, 1, 2] ** 2
     alive &= (np.abs(value) >= contrast / n_scales) & (det > 0)
     alive &= tr ** 2 * edge_ratio < (edge_ratio + 1) ** 2 * det
@@ -91,9 +92,17 @@ def _octave_keypoints(D: np.ndarray, o: int, n_scales: int, sigma0: float, contr
     return np.c_[ref[:, 2] * scale, ref[:, 1] * scale, sigma0 * 2.0 ** (ref[:, 0] / n_scales) * scale, ref[:, 3]]
 
 
+def _max3(A: np.ndarray) -> np.ndarray:
+    """Maximum over every 3x3x3 block: (ns, h, w) -> (ns - 2, h - 2, w - 2), one axis at a time by
+    shifted slices (a 3-wide maximum is two np.maximum calls; separable like a box filter)."""
+    A = np.maximum(np.maximum(A[:, :, :-2], A[:, :, 1:-1]), A[:, :, 2:])
+    A = np.maximum(np.maximum(A[:, :-2], A[:, 1:-1]), A[:, 2:])
+    return np.maximum(np.maximum(A[:-2], A[1:-1]), A[2:])
+
+
 def _dog_derivatives(D: np.ndarray, s, y, x):
-    """Gradient (n, 3) and Hessian (n, 3, 3) of D at integer (s, y, x) by central differences."""
-    v = lambda ds, dy, dx: D[s + ds, y + dy, x + dx]  # noqa: E731
+    """Gradient (n, 3) and Hessian (n, 3, 3) of D at integer (s, y, x) by central differences (float64)."""
+    v = lambda ds, dy, dx: D[s + ds, y + dy, x + dx].astype(np.float64)  # noqa: E731
     c = v(0, 0, 0)
     g = 0.5 * np.stack([v(1, 0, 0) - v(-1, 0, 0), v(0, 1, 0) - v(0, -1, 0), v(0, 0, 1) - v(0, 0, -1)], axis=1)
     dss = v(1, 0, 0) + v(-1, 0, 0) - 2 * c
@@ -166,7 +175,7 @@ def sift_descriptors(img: np.ndarray, kps: np.ndarray) -> np.ndarray:
     Gaussian-weighted (half the window) and trilinearly binned into 4 x 4 cells x 8 angles; the
     vector is normalised, clipped at 0.2 and renormalised (Lowe 2004, 6).
     """
-    I = gray(img)
+    I = gray(img).astype(np.float32)  # float32: half the memory traffic, ample for unit descriptors
     kps = np.asarray(kps, float)
     N = len(kps)
     if N == 0:
@@ -174,32 +183,24 @@ def sift_descriptors(img: np.ndarray, kps: np.ndarray) -> np.ndarray:
     pyr = pyramid(I, 5)
     theta = dominant_orientation(pyr, kps)
     n, step = 18, 0.75  # 16 x 16 samples plus a ring for the central differences
-    P = sample_patches(pyr, kps, theta, n, step)
+    P = sample_patches(pyr, kps, theta, n, step).astype(np.float32)
     gy, gx = np.gradient(P, axis=(1, 2))  # in the rotated patch frame: relative to theta
     gy, gx = gy[:, 1:-1, 1:-1], gx[:, 1:-1, 1:-1]  # (N, 16, 16)
-    mag = np.hypot(gx, gy)
-    ang = np.arctan2(gy, gx) % (2 * np.pi)
-    c = np.arange(16) - 7.5
+    c = np.arange(16, dtype=np.float32) - 7.5
     wgt = np.exp(-(c[None, :] ** 2 + c[:, None] ** 2) / (2 * 8.0 ** 2))  # sigma = half the window
-    mag = mag * wgt
-    # continuous bin coordinates: cell centres at 1.5, 5.5, 9.5, 13.5 samples
-    cb = (np.arange(16) + 0.5) / 4.0 - 0.5  # (16,)
-    ob = ang / (2 * np.pi) * 8.0
-    rows = np.broadcast_to(cb[:, None], (16, 16))
-    cols = np.broadcast_to(cb[None, :], (16, 16))
-    r0, c0, o0 = np.floor(rows).astype(int), np.floor(cols).astype(int), np.floor(ob).astype(int)
-    fr, fc, fo = rows - r0, cols - c0, ob - o0
-    hist = np.zeros(N * 6 * 6 * 8)
-    base = np.arange(N)[:, None, None] * 288
-    for dr in (0, 1):
-        wr = fr if dr else 1 - fr
-        for dc in (0, 1):
-            wc = fc if dc else 1 - fc
-            for do in (0, 1):
-                wo = fo if do else 1 - fo
-                idx = base + ((r0 + dr + 1) * 6 + (c0 + dc + 1)) * 8 + (o0 + do) % 8
-                hist += np.bincount(idx.ravel(), (mag * wr * wc * wo).ravel(), N * 288)
-    desc = hist.reshape(N, 6, 6, 8)[:, 1:5, 1:5, :].reshape(N, 128)
+    mag = np.hypot(gx, gy) * wgt
+    ob = (np.arctan2(gy, gx) % (2 * np.pi)) * (8 / (2 * np.pi))  # angle in bins, [0, 8)
+    # Trilinear binning = a tent weight max(0, 1 - distance) along each of the three axes.
+    # Angle: circular distance to each of the 8 bin centres -> O (N, 16, 16, 8).
+    d = np.abs(ob[..., None] - np.arange(8, dtype=np.float32))
+    O = mag[..., None] * np.maximum(0, 1 - np.minimum(d, 8 - d))
+    # Space: sample k sits at (k + 0.5) / 4 - 0.5 in cell units (cell centres at samples 1.5, 5.5, ...).
+    # The tent weights w (16 samples, 4 cells) are the same along rows and columns and for every keypoint,
+    # so the spatial binning is one (16 cells, 256 samples) matrix S: S[(i, j), (a, b)] = w[a, i] w[b, j].
+    w = np.maximum(0, 1 - np.abs((np.arange(16) + 0.5) / 4 - 0.5 - np.arange(4)[:, None])).T
+    S = np.einsum("ai,bj->ijab", w, w).reshape(16, 256).astype(np.float32)
+    hist = S @ O.reshape(N, 256, 8)  # (N, 16 cells, 8 angles)
+    desc = hist.reshape(N, 128).astype(np.float64)
     desc /= np.maximum(np.linalg.norm(desc, axis=1, keepdims=True), 1e-12)
     desc = np.minimum(desc, 0.2)
     return desc / np.maximum(np.linalg.norm(desc, axis=1, keepdims=True), 1e-12)
