@@ -3,17 +3,21 @@
 Synthetic: 500 matches, 30 % of them wrong, 0.5 px noise, five random two-view scenes (1280 x 960,
 different cameras for F, one camera for E); threshold 1 px on the Sampson distance. Real: the
 Graffiti pair graf1 -> graf3 (SIFT, ratio test 0.85, about half the matches wrong) against its
-published homography, fifteen RANSAC seeds; threshold 2 px on the transfer error. (The reference's
-H is bimodal on this pair: in ~1 run in 4 it settles on a competing structure — 83 matches in the
-bottom-left corner that sit 4-8 px off the published H — at a 6 % higher MSAC cost and 2.2 px on
-the wall; five seeds made the median a coin toss, fifteen make it the typical run. "H bad runs"
-below counts the runs over 1.5 px.) Accuracy: rotation error (°), inlier F1 against
+published homography, fifteen RANSAC seeds; threshold 2 px on the transfer error. (H is bimodal on
+this pair: a competing structure — 83 matches in the bottom-left corner that sit 4-8 px off the
+published H — is a local optimum of the MSAC cost 6 % above the right one and 2.2 px off on the wall.
+The reference settled on it in ~1 run in 4 until its inner RANSAC drew 24 subsets of 6 inliers
+instead of 5 of 12: 12 matches rarely avoid the 83 (~2 %), 6 do ~17 % of the time; now 1 run in 100,
+seeds 0-99. "runs over 1.5 px" counts them.) Accuracy: rotation error (°), inlier F1 against
 the planted outliers (for graf: against the matches within 3 px of the true H), held-out Sampson
 or transfer error (px); time: median wall time per call over the scenes; ratio = reference time /
-that method's time (< 1: the reference is faster). The issue's goal is the same accuracy as OpenCV at
-no more than 5x its time; each OpenCV row gets a verdict: "err ×" = reference error / OpenCV's error
+that method's time (< 1: the reference is faster); "CPU ms" and "CPU ref / it" are the same for
+the process's CPU time (all its threads), which a busy machine inflates far less than wall time (at a
+load of 10-20 on 2 cores the wall time of a 10 ms Python call is 2-5x its CPU time, that of a 1 ms
+OpenCV call ~1x). Issue 20's goal is the same accuracy as OpenCV's USAC_MAGSAC at no more than 3x its
+time (CPU time; wall time is shown beside it); each OpenCV row gets a verdict: "err ×" = reference error / OpenCV's error
 on the task's main metric (F, H: held-out px; E: rotation error), "F1 Δ" = reference F1 − OpenCV's,
-"same accuracy" = err × ≤ 1.10 and F1 Δ ≥ −0.01, "time OK" = ref / it ≤ 5. pycolmap runs with its default RANSACOptions
+"same accuracy" = err × ≤ 1.10 and F1 Δ ≥ −0.01, "time OK" = CPU ref / it ≤ 3. pycolmap runs with its default RANSACOptions
 (confidence 0.9999, at least 1,000 trials) apart from max_error. Every number is the median over
 the five scenes (or seeds).
 """
@@ -23,7 +27,9 @@ import cv2
 import numpy as np
 import pycolmap
 
-from benchmarks.timing import median_time, table
+import time
+
+from benchmarks.timing import table
 from graders import ch02_epipolar as ch2
 from graders import datasets
 from graders.compare import max_angle_deg, rotation_angle_deg, sampson_rms_px
@@ -90,18 +96,34 @@ def essential_methods(s):
             "OpenCV USAC_MAGSAC": cv(cv2.USAC_MAGSAC), "pycolmap LO-RANSAC": colmap}
 
 
-ACCURACY_SLACK, TIME_GOAL, F1_SLACK = 1.10, 5.0, 0.01
+ACCURACY_SLACK, TIME_GOAL, F1_SLACK = 1.10, 3.0, 0.01
+
+
+def wall_and_cpu(fn, repeat: int = 5) -> tuple[float, float]:
+    """Median wall time and median process CPU time of `fn()` in seconds over `repeat` runs (after one
+    warm-up run)."""
+    fn()
+    wall, cpu = [], []
+    for _ in range(repeat):
+        w, c = time.perf_counter(), time.process_time()
+        fn()
+        wall.append(time.perf_counter() - w)
+        cpu.append(time.process_time() - c)
+    return float(np.median(wall)), float(np.median(cpu))
 
 
 def _rows(task, per_method, ref_name, err_key):
     """per_method: name -> dict of metric lists and times; one row per method, ratios vs reference,
     and for OpenCV's methods the verdict against the goal (same accuracy, at most 5x the time)."""
     t_ref = np.median(per_method[ref_name]["time"])
+    c_ref = np.median(per_method[ref_name]["cpu"])
     e_ref, f1_ref = np.median(per_method[ref_name][err_key]), np.median(per_method[ref_name]["inlier F1"])
     rows = []
     for name, m in per_method.items():
         t = np.median(m["time"])
-        row = {"task": task, "method": name, "median ms": f"{1e3 * t:.2f}", "ref / it": f"{t_ref / t:.2f}×"}
+        c = np.median(m["cpu"])
+        row = {"task": task, "method": name, "median ms": f"{1e3 * t:.2f}", "ref / it": f"{t_ref / t:.2f}×",
+               "CPU ms": f"{1e3 * c:.2f}", "CPU ref / it": f"{c_ref / c:.2f}×"}
         for key, fmt in m["fmt"].items():
             row[key] = fmt.format(np.median(m[key]))
         if name != ref_name:
@@ -110,7 +132,7 @@ def _rows(task, per_method, ref_name, err_key):
             row["err ×"], row["F1 Δ"] = f"{err_ratio:.2f}", f"{f1_delta:+.3f}"
             if name.startswith("OpenCV"):
                 same = err_ratio <= ACCURACY_SLACK and f1_delta >= -F1_SLACK
-                fast = t_ref / t <= TIME_GOAL
+                fast = c_ref / c <= TIME_GOAL
                 row["verdict"] = ("same accuracy" if same else "LESS ACCURATE") + ", " + \
                                  ("time OK" if fast else f"OVER {TIME_GOAL:g}× TIME")
         rows.append(row)
@@ -119,7 +141,7 @@ def _rows(task, per_method, ref_name, err_key):
 
 def run() -> list[dict]:
     rows = []
-    columns = ["task", "method", "rot err °", "t dir °", "held-out px", "inlier F1", "median ms", "ref / it",
+    columns = ["task", "method", "rot err °", "t dir °", "held-out px", "inlier F1", "median ms", "ref / it", "CPU ms", "CPU ref / it",
                "err ×", "F1 Δ", "verdict"]
 
     # ---- F on synthetic scenes
@@ -128,11 +150,13 @@ def run() -> list[dict]:
         s = ch2.two_view(np.random.default_rng(seed), N, noise=NOISE, outliers=OUTLIERS, held_out=300)
         for name, fn in fundamental_methods(s).items():
             F, inl = fn()
-            m = per.setdefault(name, {"time": [], "held-out px": [], "inlier F1": [],
+            m = per.setdefault(name, {"time": [], "cpu": [], "held-out px": [], "inlier F1": [],
                                       "fmt": {"held-out px": "{:.3f}", "inlier F1": "{:.3f}"}})
             m["held-out px"].append(sampson_rms_px(F, *s["held_out"]))
             m["inlier F1"].append(_f1(inl, s["is_outlier"]))
-            m["time"].append(median_time(fn, repeat=5))
+            wall, cpu = wall_and_cpu(fn)
+            m["time"].append(wall)
+            m["cpu"].append(cpu)
     rows += _rows(f"F: {N} matches, {OUTLIERS:.0%} outliers", per, "reference LO-RANSAC (7-pt, MSAC)",
                   "held-out px")
 
@@ -142,12 +166,14 @@ def run() -> list[dict]:
         s = ch2.two_view(np.random.default_rng(100 + seed), N, noise=NOISE, outliers=OUTLIERS, same_K=True, held_out=1)
         for name, fn in essential_methods(s).items():
             R, t, inl = fn()
-            m = per.setdefault(name, {"time": [], "rot err °": [], "t dir °": [], "inlier F1": [],
+            m = per.setdefault(name, {"time": [], "cpu": [], "rot err °": [], "t dir °": [], "inlier F1": [],
                                       "fmt": {"rot err °": "{:.3f}", "t dir °": "{:.3f}", "inlier F1": "{:.3f}"}})
             m["rot err °"].append(rotation_angle_deg(R, s["R"]))
             m["t dir °"].append(max_angle_deg(np.asarray(t, float).reshape(1, 3), s["t"][None]))
             m["inlier F1"].append(_f1(inl, s["is_outlier"]))
-            m["time"].append(median_time(fn, repeat=5))
+            wall, cpu = wall_and_cpu(fn)
+            m["time"].append(wall)
+            m["cpu"].append(cpu)
     rows += _rows(f"E: {N} matches, {OUTLIERS:.0%} outliers", per, "reference LO-RANSAC (5-pt, MSAC)",
                   "rot err °")
 
@@ -178,11 +204,13 @@ def run() -> list[dict]:
             for name, fn in methods.items():
                 cv2.setRNGSeed(seed)
                 H, inl = fn()
-                m = per.setdefault(name, {"time": [], "held-out px": [], "inlier F1": [],
+                m = per.setdefault(name, {"time": [], "cpu": [], "held-out px": [], "inlier F1": [],
                                           "fmt": {"held-out px": "{:.2f}", "inlier F1": "{:.3f}"}})
                 m["held-out px"].append(ch2.rms_transfer(H, grid))
                 m["inlier F1"].append(_f1(inl, truth_out))
-                m["time"].append(median_time(fn, repeat=5))
+                wall, cpu = wall_and_cpu(fn)
+                m["time"].append(wall)
+                m["cpu"].append(cpu)
         rows += _rows(f"H: real graf1→graf3, {len(a)} SIFT matches ({truth_out.mean():.0%} off the true H)", per,
                       "reference LO-RANSAC (4-pt DLT, MSAC)", "held-out px")
         for row in rows[-len(per):]:
@@ -194,7 +222,7 @@ def run() -> list[dict]:
     print("held-out px: F — RMS Sampson distance of 300 held-out noise-free matches; H — RMS transfer error "
           "against the published homography on a 15 x 12 grid over graf1.")
     print(f"err × = reference error / that method's (F, H: held-out px; E: rotation); F1 Δ = reference F1 − its; "
-          f"verdict: same accuracy = err × ≤ {ACCURACY_SLACK:.2f} and F1 Δ ≥ −{F1_SLACK}, time OK = ref / it ≤ "
+          f"verdict: same accuracy = err × ≤ {ACCURACY_SLACK:.2f} and F1 Δ ≥ −{F1_SLACK}, time OK = CPU ref / it ≤ "
           f"{TIME_GOAL:g}×.")
     return rows
 

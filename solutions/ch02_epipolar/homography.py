@@ -17,15 +17,26 @@ def homography_dlt(x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
     """
     n1, T1 = normalise_points(x1)
     n2, T2 = normalise_points(x2)
+    A = dlt_rows(n1, n2).reshape(n1.shape[:-2] + (-1, 9))          # (..., 2N, 9)
+    _, V = np.linalg.eigh(np.swapaxes(A, -1, -2) @ A)
+    Hn = V[..., :, 0].reshape(A.shape[:-2] + (3, 3))
+    return denormalise_homography(Hn, T1, T2)
+
+
+def dlt_rows(n1: np.ndarray, n2: np.ndarray) -> np.ndarray:
+    """The two rows of A h = 0 that each correspondence gives (x2h x H x1h = 0), h = H.ravel().
+    n1, n2: (..., N, 2) -> (..., N, 2, 9)."""
     p = to_h(n1)                                                     # (..., N, 3)
     z = np.zeros_like(p)
     u, v = n2[..., 0:1], n2[..., 1:2]
     rows1 = np.concatenate([z, -p, v * p], axis=-1)                # (..., N, 9)
     rows2 = np.concatenate([p, z, -u * p], axis=-1)
-    A = np.concatenate([rows1, rows2], axis=-2)                    # (..., 2N, 9)
-    _, V = np.linalg.eigh(np.swapaxes(A, -1, -2) @ A)
-    Hn = V[..., :, 0].reshape(A.shape[:-2] + (3, 3))
-    H = np.linalg.solve(T2, Hn @ T1)                               # H = T2^-1 Hn T1
+    return np.stack([rows1, rows2], axis=-2)
+
+
+def denormalise_homography(Hn: np.ndarray, T1: np.ndarray, T2: np.ndarray) -> np.ndarray:
+    """H = T2^-1 Hn T1 for Hn fitted to normalised points, scaled to H[2, 2] = 1 (unit norm if H[2, 2] ~ 0)."""
+    H = np.linalg.solve(T2, Hn @ T1)
     scale = H[..., 2:3, 2:3]
     bad = np.abs(scale) < 1e-12 * np.linalg.norm(H, axis=(-2, -1), keepdims=True)
     return np.where(bad, H / np.linalg.norm(H, axis=(-2, -1), keepdims=True), H / np.where(bad, 1.0, scale))
