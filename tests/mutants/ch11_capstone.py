@@ -243,3 +243,52 @@ MUTANTS += [
     ("11.8", "switches a frame late", hybrid_switches_a_frame_late, None),
     ("11.8", "chains on the right", hybrid_chains_on_the_right, "chained on the wrong side"),
 ]
+
+
+# ----------------------------------------------------------------- 11.9 fix_right_mount
+
+def _mount_fit(x_left, x_right, K, *, loss="soft_l1", axes=(0, 2), pixels=False, transpose=False):
+    from scipy.optimize import least_squares
+    from scipy.spatial.transform import Rotation
+    x_left, x_right = np.asarray(x_left, float), np.asarray(x_right, float)
+    K = np.eye(3) if pixels else np.asarray(K, float)
+
+    def R_of(p):
+        w = np.zeros(3)
+        w[list(axes)] = p
+        return Rotation.from_rotvec(w).as_matrix()
+
+    def rows(p):
+        h = np.c_[x_right, np.ones(len(x_right))] @ (K @ R_of(p).T @ np.linalg.inv(K)).T
+        return h[:, 1] / h[:, 2] - x_left[:, 1]
+
+    R = R_of(least_squares(rows, np.zeros(len(axes)), loss=loss, f_scale=0.5).x)
+    return R.T if transpose else R
+
+
+def mount_transposed(x_left, x_right, K):
+    """Fits the repair rotation and returns it as the mount (R_m^T where R_m is asked)."""
+    return _mount_fit(x_left, x_right, K, transpose=True)
+
+
+def mount_least_squares(x_left, x_right, K):
+    """Plain least squares on every match: the repetitive texture's wrong matches pull it."""
+    return _mount_fit(x_left, x_right, K, loss="linear")
+
+
+def mount_pitch_only(x_left, x_right, K):
+    """Explains the row error by a pitch alone (one offset), robustly: the roll stays."""
+    return _mount_fit(x_left, x_right, K, axes=(0,))
+
+
+def mount_in_pixels(x_left, x_right, K):
+    """Turns the pixels themselves (K left out): a rotation of pixel coordinates is not the camera's."""
+    return _mount_fit(x_left, x_right, K, pixels=True)
+
+
+MUTANTS += [
+    ("11.9", "transposed", mount_transposed, "wrong way"),
+    ("11.9", "plain least squares", mount_least_squares, "plain least-squares fit"),
+    ("11.9", "pitch only", mount_pitch_only, "no roll"),
+    ("11.9", "K left out", mount_in_pixels, None),
+]
