@@ -5,11 +5,12 @@ from scripted episodes (11.5), fault scenarios with known alert intervals (11.6)
 known first deviating stage (11.7) — and the lesson's own figures (11.1-11.4).
 
 Modules: `questions` (11.1-11.4), `monitor` (11.5), `degradation` (11.6), `rootcause` (11.7), `hybrid`
-(11.8, the hybrid switch), `remount` (11.9, DEBUG the right camera shifted), `design` (11.14, the compute
+(11.8, the hybrid switch), `remount` (11.9, DEBUG the right camera shifted), `sync` (11.10,
+DEBUG a loose sync cable), `design` (11.14, the compute
 budget), `demo`
 (the notebook's drawings), `pipeline` (part B: the course's own stages from graders.oracles, or the
 learner's, run on `scene.rig_sequence`'s faulted stereo sequence, with per-stage metrics and the fault x
-stage table). Not here yet: four of the five cascade DEBUG rows (11.10-11.13), the monitoring DESIGN question, FRONTIER, the widget. Importing the package registers the chapter; the names
+stage table). Not here yet: three of the five cascade DEBUG rows (11.11-11.13), the monitoring DESIGN question, FRONTIER, the widget. Importing the package registers the chapter; the names
 below are the API of the notebook and the tests.
 """
 from __future__ import annotations
@@ -18,6 +19,7 @@ from . import design, questions  # noqa: F401 (registers 11.1-11.4, 11.14)
 from .hybrid import chain as chain_motions
 from .hybrid import gt_hybrid_choice, gt_hybrid_odometry, hybrid_run
 from .remount import gt_fix_right_mount, remount_problem, repaired_rows
+from .sync import depth_error, gt_sync_offset, sync_problem
 from .degradation import COMPONENT_OF, MODES, fault_scenario, gt_degradation_modes
 from .demo import PIPELINE, alert_states, cascade_curves, draw_cascade
 from .monitor import MONITOR_TABLE, gt_health_monitor, metric_streams
@@ -27,7 +29,7 @@ from .rootcause import STAGE_METRICS, STAGES, fault_run, gt_first_faulty_stage
 
 __all__ = [
     "chain_motions", "gt_hybrid_choice", "gt_hybrid_odometry", "hybrid_run", "gt_fix_right_mount", "remount_problem",
-    "repaired_rows",
+    "repaired_rows", "depth_error", "gt_sync_offset", "sync_problem",
     "FAULTS", "METRICS", "STANDINS", "WINDOW", "fault_sequence", "fault_table", "format_fault_table", "run_pipeline",
     "COMPONENT_OF", "MODES", "MONITOR_TABLE", "PIPELINE", "STAGES", "STAGE_METRICS", "alert_states",
     "cascade_curves", "draw_cascade", "fault_run", "fault_scenario", "gt_degradation_modes", "gt_first_faulty_stage",

@@ -292,3 +292,33 @@ MUTANTS += [
     ("11.9", "pitch only", mount_pitch_only, "no roll"),
     ("11.9", "K left out", mount_in_pixels, None),
 ]
+
+
+# ----------------------------------------------------------------- 11.10 sync_offset
+
+def _offset_fit(x_left, x_right, v_left, *, axis=1, scale=1000.0 / 30.0, sign=1.0):
+    d = np.asarray(x_right, float)[:, axis] - np.asarray(x_left, float)[:, axis]
+    v = np.asarray(v_left, float)[:, axis]
+    return float(sign * np.dot(v, d) / np.dot(v, v) * scale)
+
+
+def sync_left_minus_right(x_left, x_right, v_left):
+    """Takes the row difference the other way round (y_l - y_r): the sign flips."""
+    return _offset_fit(x_left, x_right, v_left, sign=-1.0)
+
+
+def sync_in_frames(x_left, x_right, v_left):
+    """Returns the slope itself: the delay in frames, not ms."""
+    return _offset_fit(x_left, x_right, v_left, scale=1.0)
+
+
+def sync_from_columns(x_left, x_right, v_left):
+    """Fits the columns: their difference is mostly the disparity, which the velocity does not explain."""
+    return _offset_fit(x_left, x_right, v_left, axis=0)
+
+
+MUTANTS += [
+    ("11.10", "left minus right", sync_left_minus_right, "the sign"),
+    ("11.10", "frames, not ms", sync_in_frames, "offset in frames"),
+    ("11.10", "columns", sync_from_columns, None),
+]
