@@ -9,11 +9,12 @@ from __future__ import annotations
 
 from .tools import bilinear, epe, epe_map, fl_rate, flow_tools, read_flo, warp_backward, write_flo
 
-# ---- part A (9.10-9.13, 9.1-9.4, 9.21-9.23) ----
+# ---- part A (9.10-9.13, 9.17-9.18, 9.1-9.4, 9.21-9.23) ----
 from .dense import HS_AVERAGE, dense_flow, horn_schunck
 from .questions import (application_trackers, budget_30hz, corr_memory, hs_update, normal_flow, pyramid_levels,
                         window_kinds)
 from .lk import gradients, lucas_kanade, pyr_down, pyramid, pyramidal_lk
+from .debug_a import fix_drift, fix_large_motion
 
 # ---- part B (9.5-9.8, 9.14-9.16, 9.19-9.20, 9.24) ----
 from .occlusion import occlusion_mask  # noqa: E402
@@ -24,6 +25,6 @@ from .debug_b import fix_lost_tracks, fix_noisy_scene_flow  # noqa: E402
 from .frontier import corr_lookup  # noqa: E402
 
 __all__ = ["application_trackers", "budget_30hz", "corr_memory", "hs_update", "normal_flow", "pyramid_levels",
-           "window_kinds", "HS_AVERAGE", "dense_flow", "horn_schunck", "gradients", "lucas_kanade", "pyr_down", "pyramid", "pyramidal_lk", "bilinear", "epe", "epe_map", "fl_rate", "flow_tools", "read_flo", "warp_backward", "write_flo"]
+           "window_kinds", "fix_drift", "fix_large_motion", "HS_AVERAGE", "dense_flow", "horn_schunck", "gradients", "lucas_kanade", "pyr_down", "pyramid", "pyramidal_lk", "bilinear", "epe", "epe_map", "fl_rate", "flow_tools", "read_flo", "warp_backward", "write_flo"]
 __all__ += ["fb_verdicts", "joint_tracker", "occlusion_mask", "raft_sizes", "scene_flow", "scene_flow_errors_mm",
             "similarity_fit", "tracker_choice", "unproject", "fix_lost_tracks", "fix_noisy_scene_flow", "corr_lookup"]

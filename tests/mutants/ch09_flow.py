@@ -290,3 +290,80 @@ MUTANTS += [
     ("9.13", "frames swapped", dense_frames_swapped, "sign and (u, v) order"),
     ("9.13", "(v, u) order", dense_uv_swapped, "sign and (u, v) order"),
 ]
+
+
+# ----------------------------------------------------------------- 9.17-9.18 DEBUG (drift, large motion)
+
+from solutions.ch09_flow import debug_a as ref_debug  # noqa: E402
+
+
+def drift_wrong_cause(case):
+    return dict(ref_debug.fix_drift(case), cause="noise")
+
+
+def drift_unchanged(case):
+    return {"cause": "drift", "tracks": case["tracks"]}
+
+
+def drift_smoothed(case):
+    """The tempting fix for 'noisy' tracks: a 9-frame moving average of the chained tracks (drift stays)."""
+    tr = np.asarray(case["tracks"], float)
+    k = np.ones(9) / 9
+    pad = np.concatenate([np.repeat(tr[:1], 4, 0), tr, np.repeat(tr[-1:], 4, 0)])
+    sm = np.stack([np.stack([np.convolve(pad[:, i, j], k, "valid") for j in (0, 1)], -1) for i in range(tr.shape[1])], 1)
+    return {"cause": "noise", "tracks": sm}
+
+
+def drift_raw_anchors(case):
+    """Re-detect every frame and trust the keyframe matcher's output as is (look-alikes included)."""
+    return {"cause": "drift", "tracks": np.asarray(case["anchor"], float).copy()}
+
+
+def drift_anchors_by_score(case):
+    """Re-anchor wherever the match scores above 0.6, without checking it against the prediction."""
+    steps, anchor, score = (np.asarray(case[k], float) for k in ("steps", "anchor", "score"))
+    tracks = np.empty_like(anchor)
+    tracks[0] = case["query"]
+    for t in range(1, len(tracks)):
+        tracks[t] = np.where((score[t] > 0.6)[:, None], anchor[t], tracks[t - 1] + steps[t - 1])
+    return {"cause": "drift", "tracks": tracks}
+
+
+def motion_wrong_cause(case):
+    return dict(ref_debug.fix_large_motion(case), cause="iterations")
+
+
+def motion_more_iterations(case):
+    """Knob-turning: 10x the iterations, still one level."""
+    p2, _ = ref_lk.lucas_kanade(case["I1"], case["I2"], case["pts"], win=case["win"], iters=300)
+    return {"cause": "iterations", "pts2": p2}
+
+
+def motion_bigger_window(case):
+    """Knob-turning: a 41-px window, still one level."""
+    p2, _ = ref_lk.lucas_kanade(case["I1"], case["I2"], case["pts"], win=41, iters=50)
+    return {"cause": "no_pyramid", "pts2": p2}
+
+
+def motion_pyramid_not_doubled(case):
+    """A pyramid whose guess is not doubled going down a level."""
+    p2, _ = pyr_no_doubling(case["I1"], case["I2"], case["pts"], win=case["win"], max_level=3)
+    return {"cause": "no_pyramid", "pts2": p2}
+
+
+def motion_unchanged(case):
+    return {"cause": "no_pyramid", "pts2": case["pts2"]}
+
+
+MUTANTS += [
+    ("9.17", "wrong cause", drift_wrong_cause, "small errors accumulate"),
+    ("9.17", "unchanged", drift_unchanged, "still drift"),
+    ("9.17", "chained tracks smoothed", drift_smoothed, "still drift"),
+    ("9.17", "raw keyframe matches", drift_raw_anchors, "look-alikes"),
+    ("9.17", "re-anchored by score alone", drift_anchors_by_score, "look-alikes"),
+    ("9.18", "wrong cause", motion_wrong_cause, "beyond one level's reach"),
+    ("9.18", "more iterations, one level", motion_more_iterations, "coarse to fine"),
+    ("9.18", "41-px window, one level", motion_bigger_window, "coarse to fine"),
+    ("9.18", "pyramid, guess not doubled", motion_pyramid_not_doubled, "coarse to fine"),
+    ("9.18", "unchanged", motion_unchanged, "colleague's positions"),
+]
