@@ -19,8 +19,12 @@ where K is known, and wall time of each stage. Both pipelines use the 2 cores
 (pycolmap's threads; our feature extraction and matching in 2 processes, BLAS threads elsewhere).
 pycolmap is run before and after ours and its stage times averaged (the load of a shared machine
 drifts during the run).
-Quoted when written (2-core machine shared with other jobs, timings vary 1.5-2x): see the report
-printed by `python -m benchmarks 04`.
+Quoted when written (2 Dec 2026, one run per set at load 20-40 on 2 cores, so wall times ~10-20x an idle
+machine's; the reference before = 2x first octave and 6,000 features, after = 1.5x and 4,000, the rest the same):
+  Sacre Coeur: pycolmap 249.5 s, 10/10; before 586.3 s (2.35x), 10/10, rotations median 0.50° / max 1.20°;
+    after 315.6 s (1.27x), 10/10, 0.25° / 0.58°.
+  Sceaux Castle: pycolmap 284.3 s, 11/11, focal error 2.5 % / 2.7 %; before 1188.3 s (4.18x), 11/11, 0.04° /
+    0.14°, focal 2.9 % / 3.0 %; after 386.7 s (1.36x), 11/11, 0.05° / 0.14°, focal 2.7 % / 3.0 %.
 """
 from __future__ import annotations
 
