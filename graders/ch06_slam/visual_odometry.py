@@ -129,10 +129,11 @@ TOL_ATE = 0.015
 TOL_DRIFT = 0.3
 
 
-# On the rendered run the tracks come from images (KLT drifts along a track, corners die and are re-detected): the
-# reference reaches <= 1.1 % of the path and OpenCV's stand-in loop <= 3.3 % (120 + 120 runs); a sound loop should
-# stay within 5 %. Scale drift is not judged there: the tracker's own drift enters it.
-TOL_ATE_RENDERED = 0.05
+# On the rendered run the tracks come from images (KLT drifts along a track, corners die and are re-detected): over
+# 120 runs the reference reaches a median 0.6 % of the path and 3.8 % at worst, OpenCV's stand-in loop 0.7 % and
+# 3.1 % (and 200 fairness runs of the reference pass); 6 % leaves a sound loop room. Scale drift is not judged
+# there: the tracker's own drift enters it.
+TOL_ATE_RENDERED = 0.06
 
 
 def cases_vo(rng):
