@@ -134,9 +134,13 @@ def _cases(rng):
         truth_rms = held_rms((P["s"], P["R"], P["t"]), P)
         eR_lib, es_lib = rotation_angle_deg(lib[1], P["R"]), _rel_scale(lib, P)
         conv = lambda out, case: as_sim3(out)
-        # Held-out RMS within 6 % of the truth's: a refit on 100-150 inliers adds ~1 % (3.5 % at worst in
-        # 50 draws); the best minimal sample without the refit leaves a median 14 % (3-30 %).
-        yield Case(f"{label}: held-out residual", args, P, lambda out, P: held_rms(out, P) / truth_rms, 1.06,
+        # Held-out RMS within 6 % of the truth's, or 2 % above pycolmap's inliers refit on this draw if that is
+        # worse: a refit on 100-150 inliers adds ~1 % (3.5 % at worst in 50 draws), but on a façade draw
+        # (seed 2788062897) the reference and pycolmap + refit both left 1.0647x, and Umeyama on every true
+        # inlier 1.047x: the bar, not the answer, was off. The best minimal sample without the refit leaves a
+        # median 14 % (3-30 %).
+        held_tol = max(1.06, 1.02 * held_rms(lib, P) / truth_rms)
+        yield Case(f"{label}: held-out residual", args, P, lambda out, P, r=truth_rms: held_rms(out, P) / r, held_tol,
                    "x truth's RMS", convert=conv, call=run, key=f"{key}-held", info=P, tags=(key, "held"))
         # Scale and rotation: within 2x pycolmap's error on this draw + 0.2 % / 0.05° (refits on other
         # inlier sets of the same pairs differ by about that much).
