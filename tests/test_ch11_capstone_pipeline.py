@@ -91,3 +91,14 @@ def test_a_stage_swaps_for_the_learners(table):
     assert np.nanmedian(r["metrics"]["features"][a:b]) < table["clean"]["features"]
     assert np.isnan(r["metrics"]["features"][:a]).all()
     assert r["T_cw"].shape == (b, 4, 4)
+
+
+def test_monitor_baselines_are_the_pipeline_s():
+    # 11.15 (graders/ch11_capstone/design.py) states the clean row error's per-frame mean and sigma: they are the
+    # pipeline's own, measured on fault_sequence(seed, None), seeds 0-2, frames 1-15 (45 frames): 0.0400 / 0.0048 px.
+    # One seed here (15 frames, CI time): its mean within 0.005 px and sigma within a factor 2 cover seed-to-seed
+    # spread (seeds 0-2 each: mean 0.0396-0.0404, sigma 0.0047-0.0050).
+    from graders.ch11_capstone import design
+    r = P.run_pipeline(P.fault_sequence(SEED, None), None, (1, P.WINDOW[1]))["metrics"]["row_error_px"][1:]
+    assert abs(np.mean(r) - design.ROW_MEAN_PX) < 0.005
+    assert design.ROW_SIGMA_PX / 2 < np.std(r, ddof=1) < 2 * design.ROW_SIGMA_PX

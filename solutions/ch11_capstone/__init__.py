@@ -7,10 +7,11 @@ from __future__ import annotations
 
 from .hybrid import hybrid_odometry
 from .monitor import degradation_modes, health_monitor
-from .questions import cascade_numbers, compute_budget, data_flow, depth_errors_m, look_first
+from .questions import (alert_actions, cascade_numbers, compute_budget, data_flow, depth_errors_m, look_first,
+                        monitor_thresholds)
 from .remount import fix_right_mount
 from .rootcause import first_faulty_stage
 from .sync import sync_offset
 
-__all__ = ["cascade_numbers", "compute_budget", "data_flow", "degradation_modes", "depth_errors_m", "first_faulty_stage", "fix_right_mount",
-           "health_monitor", "hybrid_odometry", "look_first", "sync_offset"]
+__all__ = ["alert_actions", "cascade_numbers", "compute_budget", "data_flow", "degradation_modes", "depth_errors_m", "first_faulty_stage", "fix_right_mount",
+           "health_monitor", "hybrid_odometry", "look_first", "monitor_thresholds", "sync_offset"]

@@ -1,4 +1,4 @@
-"""Chapter 11's answers to the CONCEPT questions of part A (11.1-11.4) and the DESIGN question 11.14."""
+"""Chapter 11's answers to the CONCEPT questions of part A (11.1-11.4) and the DESIGN questions 11.14-11.16."""
 from __future__ import annotations
 
 from math import erf, sqrt
@@ -34,3 +34,23 @@ look_first = ["calibration", "features", "map", "time sync", "matching"]
 _per_frame = 2.0 + 1.5 + 1.0 + 0.8 + 0.5 + 6.0 + 40.0 / 10
 compute_budget = [_per_frame * 3 * 30, _per_frame * 3 * 30 / 4000, 0.5 * 4000 / (_per_frame * 3),
                   (_per_frame - 6.0) * 3 * 30 + 6.0 * 30, 10.0 / 3]
+
+# 11.15: N = 8 h x 3600 s x 30 fps frames a shift; one false alert a shift: N p = 1 (k = 1) or N p^3 = 1 (k = 3),
+# one-sided z = Phi^-1(1 - p); threshold 0.040 + z 0.0048 px; a pitch theta moves rows by f theta (f = 288 px).
+_N = 8 * 3600 * 30
+
+
+def _z(p: float) -> float:
+    """Inverse of the upper normal tail by bisection on erf (numpy only)."""
+    lo, hi = 0.0, 10.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if 1 - _phi(mid) > p else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+_thr = 0.040 + _z(_N ** (-1 / 3)) * 0.0048
+monitor_thresholds = [_z(1 / _N), _z(_N ** (-1 / 3)), _thr, float(np.degrees(_thr / 288.0)), _N ** (2 / 3)]
+
+alert_actions = ["recalibrate the extrinsics", "switch to direct VO", "re-synchronise the cameras",
+                 "predict from the IMU", "mask the region", "no action"]
