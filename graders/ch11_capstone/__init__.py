@@ -21,7 +21,8 @@ from .hybrid import gt_hybrid_choice, gt_hybrid_odometry, hybrid_run
 from .remount import gt_fix_right_mount, remount_problem, repaired_rows
 from .sync import depth_error, gt_sync_offset, sync_problem
 from .degradation import COMPONENT_OF, MODES, fault_scenario, gt_degradation_modes
-from .demo import PIPELINE, alert_states, cascade_curves, draw_cascade
+from .demo import (PIPELINE, alert_states, cascade_curves, cascade_run, draw_cascade, draw_cascade_run,
+                   severity_params)
 from .monitor import MONITOR_TABLE, gt_health_monitor, metric_streams
 from .pipeline import (FAULTS, METRICS, STANDINS, WINDOW, fault_sequence, fault_table, format_fault_table,
                        run_pipeline)
@@ -32,6 +33,6 @@ __all__ = [
     "repaired_rows", "depth_error", "gt_sync_offset", "sync_problem",
     "FAULTS", "METRICS", "STANDINS", "WINDOW", "fault_sequence", "fault_table", "format_fault_table", "run_pipeline",
     "COMPONENT_OF", "MODES", "MONITOR_TABLE", "PIPELINE", "STAGES", "STAGE_METRICS", "alert_states",
-    "cascade_curves", "draw_cascade", "fault_run", "fault_scenario", "gt_degradation_modes", "gt_first_faulty_stage",
+    "cascade_curves", "cascade_run", "draw_cascade", "draw_cascade_run", "severity_params", "fault_run", "fault_scenario", "gt_degradation_modes", "gt_first_faulty_stage",
     "gt_health_monitor", "metric_streams",
 ]
