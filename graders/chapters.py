@@ -88,7 +88,7 @@ CHAPTERS: tuple[Chapter, ...] = (
             "a vocabulary tree with tf-idf and an inverted file (against brute-force matching), Sim(3) RANSAC (beside "
             "pycolmap), merging sub-reconstructions, DUSt3R-style global alignment of pointmaps, a Dask map/reduce "
             "matching pipeline with retries and atomic results, disconnected components, the domain gap, "
-            "out-of-memory chunking, the focal length a pointmap knows", ready=False),
+            "out-of-memory chunking, the focal length a pointmap knows"),
     Chapter(11, "capstone", "Capstone: cascading pipeline failures", ready=False),
 )
 

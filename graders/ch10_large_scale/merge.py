@@ -268,5 +268,5 @@ MERGE_HINTS = [
 
 register(Exercise(
     id="10.8", title="Merge two sub-reconstructions, then refine", name="merge_reconstructions", kind="code",
-    points=3, cases=_cases, hints=MERGE_HINTS, fallback=gt_merge_reconstructions, timeout=60.0,
+    points=3, cases=_cases, hints=MERGE_HINTS, fallback=gt_merge_reconstructions, timeout=30.0,
     arg_names=("rec_a", "rec_b")))

@@ -304,5 +304,5 @@ VOCAB_HINTS = [
 ]
 register(Exercise(
     id="10.6", title="A vocabulary tree with an inverted file", name="vocab_tree_retrieve", kind="code", points=4,
-    cases=_cases, hints=VOCAB_HINTS, fallback=cv_vocab_tree_retrieve, timeout=60.0,
+    cases=_cases, hints=VOCAB_HINTS, fallback=cv_vocab_tree_retrieve, timeout=30.0,
     arg_names=("db_descriptors", "query_descriptors", "k", "branching", "depth")))
