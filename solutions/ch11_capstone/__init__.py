@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from .frontier import confidence_flags
 from .hybrid import hybrid_odometry
+from .lens import find_smudge
 from .monitor import degradation_modes, health_monitor
 from .questions import (alert_actions, cascade_numbers, compute_budget, data_flow, depth_errors_m, look_first,
                         monitor_thresholds)
@@ -14,5 +15,5 @@ from .remount import fix_right_mount
 from .rootcause import first_faulty_stage
 from .sync import sync_offset
 
-__all__ = ["alert_actions", "cascade_numbers", "compute_budget", "confidence_flags", "data_flow", "degradation_modes", "depth_errors_m", "first_faulty_stage", "fix_right_mount",
+__all__ = ["alert_actions", "cascade_numbers", "compute_budget", "confidence_flags", "data_flow", "degradation_modes", "depth_errors_m", "find_smudge", "first_faulty_stage", "fix_right_mount",
            "health_monitor", "hybrid_odometry", "look_first", "monitor_thresholds", "sync_offset"]

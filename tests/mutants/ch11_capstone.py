@@ -371,3 +371,47 @@ MUTANTS += [
     ("11.17", "d not d^2", flags_distance_not_squared, "(not d)"),
     ("11.17", "no log", flags_no_log, "use the log"),
 ]
+
+
+# ----------------------------------------------------------------- 11.11 find_smudge
+
+def _smudge_fit(before, now, shape, *, baseline=True):
+    """Least squares over 8-px cells: today's counts = reference counts x the part of each cell outside a disc."""
+    from scipy.optimize import minimize
+    h, w = shape
+    rng_ = ((0, h), (0, w))
+    hn = sum(np.histogram2d(k[:, 1], k[:, 0], bins=(h // 8, w // 8), range=rng_)[0] for k in now)
+    hb = (sum(np.histogram2d(k[:, 1], k[:, 0], bins=(h // 8, w // 8), range=rng_)[0] for k in before) if baseline
+          else np.full_like(hn, hn.mean()))                      # no baseline: "features should be uniform"
+    yc, xc = (np.arange(h // 8) + 0.5) * 8, (np.arange(w // 8) + 0.5) * 8
+
+    def cost(p):
+        inside = np.clip((abs(p[2]) - np.hypot(yc[:, None] - p[1], xc[None] - p[0])) / 8 + 0.5, 0, 1)
+        return float(np.sum((hn - hb * (1 - inside)) ** 2))
+    grid = [(x, y, r) for x in range(24, w - 23, 16) for y in range(24, h - 23, 16) for r in (32, 48, 64, 80)]
+    p = minimize(cost, min(grid, key=cost), method="Nelder-Mead").x
+    return np.array([p[0], p[1], abs(p[2]) / 0.9])
+
+
+def smudge_without_baseline(before, now, shape):
+    """Reads today's heatmap alone: the emptiest region wins, smudged or just textureless."""
+    return _smudge_fit(before, now, shape, baseline=False)
+
+
+def smudge_diameter(before, now, shape):
+    """Reports the diameter in the radius slot."""
+    cx, cy, r = _smudge_fit(before, now, shape)
+    return np.array([cx, cy, 2 * r])
+
+
+def smudge_row_col(before, now, shape):
+    """Returns (row, column, r): the image-array order, not (x, y)."""
+    cx, cy, r = _smudge_fit(before, now, shape)
+    return np.array([cy, cx, r])
+
+
+MUTANTS += [
+    ("11.11", "no baseline", smudge_without_baseline, "not where the features went"),
+    ("11.11", "diameter", smudge_diameter, "not the diameter"),
+    ("11.11", "row, column", smudge_row_col, "x and y swapped"),
+]
