@@ -123,6 +123,17 @@ def as_poses(out: Any, n: int | None = None) -> list[tuple[np.ndarray, np.ndarra
     return out_poses
 
 
+def as_pose_stack(out: Any, n: int, what: str = "poses") -> np.ndarray:
+    """A trajectory: a finite (n, 4, 4) array of poses T_cw (world to camera)."""
+    try:
+        T = np.asarray(out, float)
+    except (TypeError, ValueError):
+        raise OutputError(f"{what}: expected poses T_cw as a numeric ({n}, 4, 4) array") from None
+    if T.shape != (n, 4, 4) or not np.isfinite(T).all():
+        raise OutputError(f"{what}: expected a finite ({n}, 4, 4) array of poses T_cw, got shape {T.shape}")
+    return T
+
+
 def as_sim3(out: Any) -> tuple[float, np.ndarray, np.ndarray]:
     """A similarity (s, R, t) with s > 0 finite, R in SO(3), t: (3,)."""
     if out is None:

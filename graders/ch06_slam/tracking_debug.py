@@ -21,6 +21,7 @@ from functools import lru_cache
 import numpy as np
 from scipy.spatial import cKDTree
 
+from graders.convert import as_pose_stack
 from graders.engine import Case, Exercise, Hint, OutputError, register, shared_run
 from graders.geometry import so3_exp
 
@@ -183,13 +184,7 @@ def _convert(out, case):
     cause = str(out[0]).strip().lower()
     if cause not in CAUSES:
         raise OutputError(f"cause must be one of {', '.join(CAUSES)}; got {out[0]!r}")
-    try:
-        T = np.asarray(out[1], float)
-    except (TypeError, ValueError):
-        raise OutputError("poses: expected a numeric (n_frames, 4, 4) array") from None
-    if T.shape != (n, 4, 4) or not np.isfinite(T).all():
-        raise OutputError(f"poses: expected a finite ({n}, 4, 4) array, got {T.shape}")
-    return cause, T
+    return cause, as_pose_stack(out[1], n)
 
 
 def pose_errors(T, T_true) -> tuple[np.ndarray, np.ndarray]:

@@ -16,12 +16,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.engine import Case, Exercise, Hint, OutputError, register, shared_run
+from graders.convert import as_pose_stack
+from graders.engine import Case, Exercise, Hint, register, shared_run
 from graders.geometry import so3_exp, umeyama
-from graders.scene import render_corridor
 from graders.oracles.flow import klt_tracks
 from graders.oracles.two_view import SOLVERS
 from graders.oracles.vo import centres, standin_vo
+from graders.scene import render_corridor
 
 F, W, H = 500.0, 640, 480
 K = np.array([[F, 0, W / 2], [0, F, H / 2], [0, 0, 1.0]])
@@ -90,14 +91,7 @@ def rendered_vo_sequence(rng, n_frames: int = 40, noise: float = 1.0) -> dict:
 
 
 def _convert(out, case):
-    n = len(case.args[0])
-    try:
-        T = np.asarray(out, float)
-    except (TypeError, ValueError):
-        raise OutputError("expected poses T_cw as a numeric (n_frames, 4, 4) array") from None
-    if T.shape != (n, 4, 4) or not np.isfinite(T).all():
-        raise OutputError(f"expected a finite ({n}, 4, 4) array of poses T_cw, got {T.shape}")
-    return T
+    return as_pose_stack(out, len(case.args[0]))
 
 
 def ate_sim3(T, T_true) -> float:

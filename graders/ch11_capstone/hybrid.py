@@ -19,7 +19,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from graders.engine import Case, Exercise, OutputError, like, register
+from graders.convert import as_pose_stack
+from graders.engine import Case, Exercise, like, register
 from graders.oracles.vo import centres
 
 N_FRAMES = 60
@@ -106,14 +107,7 @@ def gt_hybrid_odometry(features, inlier_ratio, T_classical, T_direct, min_featur
 
 
 def _trajectory(out, case) -> np.ndarray:
-    n = len(case.args[0])
-    try:
-        T = np.asarray(out, float)
-    except (TypeError, ValueError):
-        raise OutputError("expected poses T_cw as a numeric (T, 4, 4) array") from None
-    if T.shape != (n, 4, 4) or not np.isfinite(T).all():
-        raise OutputError(f"expected a finite ({n}, 4, 4) array of poses T_cw, got shape {T.shape}")
-    return T
+    return as_pose_stack(out, len(case.args[0]))
 
 
 def _pose_gap(out, expected) -> float:
