@@ -13,7 +13,8 @@ from .questions import (alert_actions, cascade_numbers, compute_budget, data_flo
                         monitor_thresholds)
 from .remount import fix_right_mount
 from .rootcause import first_faulty_stage
+from .sky import sky_rows
 from .sync import sync_offset
 
 __all__ = ["alert_actions", "cascade_numbers", "compute_budget", "confidence_flags", "data_flow", "degradation_modes", "depth_errors_m", "find_smudge", "first_faulty_stage", "fix_right_mount",
-           "health_monitor", "hybrid_odometry", "look_first", "monitor_thresholds", "sync_offset"]
+           "health_monitor", "hybrid_odometry", "look_first", "monitor_thresholds", "sky_rows", "sync_offset"]

@@ -415,3 +415,40 @@ MUTANTS += [
     ("11.11", "diameter", smudge_diameter, "not the diameter"),
     ("11.11", "row, column", smudge_row_col, "x and y swapped"),
 ]
+
+
+# ----------------------------------------------------------------- 11.12 sky_rows
+
+def _sky_count(images, *, strict=False):
+    """Leading rows that are sky: each row's mean brightness over the frames >= 250 (or, strict, every pixel 255)."""
+    stack = np.asarray(images, float)
+    is_sky = (stack == 255).all(axis=(0, 2)) if strict else stack.mean(axis=(0, 2)) >= 250
+    return int(np.argmin(is_sky)) if not is_sky.all() else len(is_sky)
+
+
+def sky_without_margin(images):
+    """Masks the clipped rows only: FAST's ring still reaches the sky from the 3 rows below."""
+    return _sky_count(images)
+
+
+def sky_ring_diameter(images):
+    """Adds the ring's diameter (7 px, minus the centre) instead of its radius."""
+    return _sky_count(images) + 6
+
+
+def sky_as_fraction(images):
+    """Returns the masked share of the image height."""
+    return (_sky_count(images) + 3) / np.asarray(images[0]).shape[0]
+
+
+def sky_every_pixel_white(images):
+    """A row is sky only if every pixel is 255: the sensor noise stops it at the first noisy row."""
+    return _sky_count(images, strict=True) + 3
+
+
+MUTANTS += [
+    ("11.12", "no ring margin", sky_without_margin, "FAST's 16-pixel ring has radius 3"),
+    ("11.12", "ring diameter", sky_ring_diameter, "not its diameter"),
+    ("11.12", "fraction", sky_as_fraction, "a fraction of the image height"),
+    ("11.12", "every pixel 255", sky_every_pixel_white, "'every pixel == 255'"),
+]
