@@ -23,7 +23,7 @@ from solutions import ch11_capstone as capstone
 
 SEEDS = [0, 1, 2]
 PART_A = ("11.1", "11.2", "11.3", "11.4", "11.5", "11.6", "11.7")
-PART_B = ("11.8", "11.9", "11.10", "11.11", "11.12", "11.14", "11.15", "11.16", "11.17")   # + budget, monitor, actions, frontier
+PART_B = ("11.8", "11.9", "11.10", "11.11", "11.12", "11.13", "11.14", "11.15", "11.16", "11.17")   # + budget, monitor, actions, frontier
 EXERCISES = {ex.id: ex for ex in chapter(11) if ex.id in PART_A + PART_B}
 
 

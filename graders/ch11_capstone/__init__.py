@@ -11,7 +11,7 @@ budget; 11.15-11.16, the monitor's thresholds and each alert's action), `frontie
 overconfident learned stage), `demo`
 (the notebook's drawings and the widget's runs), `pipeline` (part B: the course's own stages from graders.oracles, or the
 learner's, run on `scene.rig_sequence`'s faulted stereo sequence, with per-stage metrics and the fault x
-stage table). `lens` (11.11, DEBUG a dirty lens), `sky` (11.12, DEBUG the sky saturates). Not here yet: the fifth cascade DEBUG row (11.13). Importing the package registers the chapter; the names
+stage table). `lens` (11.11, DEBUG a dirty lens), `sky` (11.12, DEBUG the sky saturates), `exposure` (11.13, DEBUG a firmware exposure change). Importing the package registers the chapter; the names
 below are the API of the notebook and the tests.
 """
 from __future__ import annotations
@@ -20,6 +20,7 @@ from . import design, questions  # noqa: F401 (registers 11.1-11.4, 11.14-11.16)
 from .frontier import confidence_run, gt_confidence_flags, scipy_confidence_flags
 from .lens import gt_smudge, smudge_error, smudge_problem
 from .sky import FAST_RADIUS, cv_sky_rows, sky_problem
+from .exposure import cv_exposure_change, exposure_error, exposure_problem
 from .hybrid import chain as chain_motions
 from .hybrid import gt_hybrid_choice, gt_hybrid_odometry, hybrid_run
 from .remount import gt_fix_right_mount, remount_problem, repaired_rows
@@ -34,7 +35,7 @@ from .rootcause import STAGE_METRICS, STAGES, fault_run, gt_first_faulty_stage
 
 __all__ = [
     "confidence_run", "gt_confidence_flags", "scipy_confidence_flags", "gt_smudge", "smudge_error", "smudge_problem",
-    "FAST_RADIUS", "cv_sky_rows", "sky_problem",
+    "FAST_RADIUS", "cv_sky_rows", "sky_problem", "cv_exposure_change", "exposure_error", "exposure_problem",
     "chain_motions", "gt_hybrid_choice", "gt_hybrid_odometry", "hybrid_run", "gt_fix_right_mount", "remount_problem",
     "repaired_rows", "depth_error", "gt_sync_offset", "sync_problem",
     "FAULTS", "METRICS", "STANDINS", "WINDOW", "fault_sequence", "fault_table", "format_fault_table", "run_pipeline",

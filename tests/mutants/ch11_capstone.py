@@ -452,3 +452,52 @@ MUTANTS += [
     ("11.12", "fraction", sky_as_fraction, "a fraction of the image height"),
     ("11.12", "every pixel 255", sky_every_pixel_white, "'every pixel == 255'"),
 ]
+
+
+# ----------------------------------------------------------------- 11.13 exposure_change
+
+def _exposure_fit(before, now, *, axis=1, fit_gain=True, max_length=25, m=16):
+    """(gain, L): box-blur the baseline along `axis` for each L (scipy's uniform_filter1d), gain by least squares
+    (or fixed at 1 with the ratio of means reported), the smallest residual away from the borders."""
+    from scipy.ndimage import uniform_filter1d
+    B = [np.asarray(b, float) for b in before]
+    N = [np.asarray(x, float)[m:-m, m:-m] for x in now]
+    best = (np.inf, 1.0, 1)
+    for length in range(1, max_length + 1):
+        bb = [uniform_filter1d(b, length, axis=axis)[m:-m, m:-m] for b in B]
+        gain = (sum((x * y).sum() for x, y in zip(bb, N)) / sum((x * x).sum() for x in bb)) if fit_gain else 1.0
+        res = sum(((y - gain * x) ** 2).sum() for x, y in zip(bb, N))
+        if res < best[0]:
+            best = (res, gain, length)
+    gain = best[1] if fit_gain else float(np.mean(N) / np.mean([b[m:-m, m:-m] for b in B]))
+    return np.array([gain, float(best[2])])
+
+
+def exposure_correction_gain(before, now):
+    """Reports the correction to apply (1 / gain) where the measured gain is asked."""
+    g, length = _exposure_fit(before, now)
+    return np.array([1 / g, length])
+
+
+def exposure_half_width(before, now):
+    """Reports the box's half-width as the blur length."""
+    g, length = _exposure_fit(before, now)
+    return np.array([g, length / 2])
+
+
+def exposure_blur_along_columns(before, now):
+    """Smears the baseline down the columns: the robot's motion is sideways in the image."""
+    return _exposure_fit(before, now, axis=0)
+
+
+def exposure_blur_without_gain(before, now):
+    """Picks the blur that matches today's images with the baseline's brightness (gain from the means only)."""
+    return _exposure_fit(before, now, fit_gain=False)
+
+
+MUTANTS += [
+    ("11.13", "correction gain", exposure_correction_gain, "(1 / gain)"),
+    ("11.13", "half-width", exposure_half_width, "not its half-width"),
+    ("11.13", "columns", exposure_blur_along_columns, "not down the columns"),
+    ("11.13", "blur without gain", exposure_blur_without_gain, "not brightness-matched"),
+]
