@@ -112,3 +112,64 @@ def test_the_widget_s_run_shows_the_cascade():
         assert demo.severity_params(kind, 1.0) == params or kind == "dirty_lens", kind
     r = demo.cascade_run("dropped_frames", 1.0, seed=SEED)
     assert r["first"] == "VO" and r["image"].dtype == np.uint8
+
+
+# ------------------------------------------------ the DEBUG rows' proof: the fix applied, the metrics back in range
+
+TRUE_FIX = {"11.9": np.array([[1, 0, 0], [0, np.cos(np.radians(1)), -np.sin(np.radians(1))],
+                              [0, np.sin(np.radians(1)), np.cos(np.radians(1))]]),   # scene's pitch about x, 1°
+            "11.10": 5.0,                                  # FAULTS["time_offset"]["ms"]
+            "11.11": (0.3 * 320, 0.55 * 240, 0.25 * 320),  # scene's default smudge: centre (0.3 w, 0.55 h), r 0.25 w
+            "11.12": int(0.45 * 240) + 3,                  # FAULTS["saturated_sky"]["rows"] x 240 + FAST's ring radius
+            "11.13": (0.25, 9.0)}                          # proof.FIRMWARE
+# 6-frame medians of these move from seed to seed of the *clean* route by more than the table's 25 % (vo_trans_pct
+# 2.3-3.2 %, depth_err_pct 1.43-1.53 %), so they are held to 50 % of the clean run (worst measured on seeds 0-3
+# with the truth fixes and the stand-ins: +29 % VO translation after the remount, +33 % depth after a 0.36 ms sync
+# residual).
+NOISY = {"vo_trans_pct": 0.5, "depth_err_pct": 0.5}
+
+
+def _assert_proof(p, row):
+    from graders.ch11_capstone.proof import NOT_RESTORED
+    assert p["out"]["faulty"], f"{row}: the fault moved no metric out of range"
+    for name in p["out"]["fixed"]:
+        if name in NOT_RESTORED.get(row, {}):
+            continue
+        c, x = p["clean"][name], p["fixed"][name]
+        assert name in NOISY and abs(x - c) <= NOISY[name] * abs(c), (row, name, c, p["faulty"][name], x)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("row", list(TRUE_FIX))
+def test_the_true_fix_brings_the_metrics_back(row, seed):
+    from graders.ch11_capstone import proof
+    _assert_proof(proof.prove_fix(row, TRUE_FIX[row], seed), row)
+
+
+@pytest.mark.parametrize("row", list(TRUE_FIX))
+def test_the_stand_in_s_diagnosis_on_the_faulted_run_fixes_it(row):
+    # The stand-ins of 11.9-11.13 measure the fix on the faulted run itself (proof.debug_inputs), as the learner's
+    # function does in the notebook; seed 1 (seed 0 is the notebook's).
+    from graders import ch11_capstone as ch11
+    from graders.ch11_capstone import proof
+    fn = {"11.9": ch11.gt_fix_right_mount, "11.10": ch11.gt_sync_offset, "11.11": ch11.gt_smudge,
+          "11.12": ch11.cv_sky_rows, "11.13": ch11.cv_exposure_change}[row]
+    _assert_proof(proof.prove_fix(row, fn, 1), row)
+
+
+def test_a_digital_gain_alone_does_not_undo_the_firmware_change():
+    # The honest half of 11.13: x 1 / gain on today's images brings the corners back only partly and not the dense
+    # stereo (the smear stays); rolling the settings back brings every metric back (the test above).
+    from graders.ch11_capstone import proof
+    p = proof.prove_fix("11.13", TRUE_FIX["11.13"], SEED, how="digital gain")
+    assert {"features", "stereo_bad_pct", "stereo_density"} <= set(p["out"]["fixed"])
+    assert set(p["out"]["fixed"]) <= set(proof.NOT_RESTORED["11.13 digital gain"])
+    assert p["faulty"]["features"] < p["fixed"]["features"] < 0.75 * p["clean"]["features"]
+
+
+def test_an_unfixed_or_wrong_fix_leaves_the_metrics_out():
+    # The proof is not a formality: no repair (identity, 0 ms, no mask) leaves the fault's metrics out of range.
+    from graders.ch11_capstone import proof
+    for row, nothing in (("11.9", np.eye(3)), ("11.10", 0.0), ("11.12", 0)):
+        p = proof.prove_fix(row, nothing, SEED)
+        assert p["out"]["fixed"] == p["out"]["faulty"] != [], row

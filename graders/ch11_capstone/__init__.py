@@ -11,7 +11,8 @@ budget; 11.15-11.16, the monitor's thresholds and each alert's action), `frontie
 overconfident learned stage), `demo`
 (the notebook's drawings and the widget's runs), `pipeline` (part B: the course's own stages from graders.oracles, or the
 learner's, run on `scene.rig_sequence`'s faulted stereo sequence, with per-stage metrics and the fault x
-stage table). `lens` (11.11, DEBUG a dirty lens), `sky` (11.12, DEBUG the sky saturates), `exposure` (11.13, DEBUG a firmware exposure change). Importing the package registers the chapter; the names
+stage table). `lens` (11.11, DEBUG a dirty lens), `sky` (11.12, DEBUG the sky saturates), `exposure` (11.13, DEBUG a firmware exposure change), `proof` (11.9-11.13's fix applied to the pipeline: clean / faulty /
+fixed stage metrics against the table's line). Importing the package registers the chapter; the names
 below are the API of the notebook and the tests.
 """
 from __future__ import annotations
@@ -31,6 +32,7 @@ from .demo import (PIPELINE, alert_states, cascade_curves, cascade_run, draw_cas
 from .monitor import MONITOR_TABLE, gt_health_monitor, metric_streams
 from .pipeline import (FAULTS, METRICS, STANDINS, WINDOW, fault_sequence, fault_table, format_fault_table,
                        run_pipeline)
+from .proof import NOT_RESTORED, debug_inputs, format_proof, prove_fix
 from .rootcause import STAGE_METRICS, STAGES, fault_run, gt_first_faulty_stage
 
 __all__ = [
@@ -41,5 +43,5 @@ __all__ = [
     "FAULTS", "METRICS", "STANDINS", "WINDOW", "fault_sequence", "fault_table", "format_fault_table", "run_pipeline",
     "COMPONENT_OF", "MODES", "MONITOR_TABLE", "PIPELINE", "STAGES", "STAGE_METRICS", "alert_states",
     "cascade_curves", "cascade_run", "draw_cascade", "draw_cascade_run", "severity_params", "fault_run", "fault_scenario", "gt_degradation_modes", "gt_first_faulty_stage",
-    "gt_health_monitor", "metric_streams",
+    "gt_health_monitor", "metric_streams", "NOT_RESTORED", "debug_inputs", "format_proof", "prove_fix",
 ]

@@ -74,11 +74,16 @@ def _grid_cap(pts: np.ndarray, width: int, height: int, n: int = MAX_FEATURES) -
     return pts[np.lexsort((cell, rank))[:n]]
 
 
-def _coverage(pts: np.ndarray, width: int, height: int) -> float:
+def _coverage(pts: np.ndarray, width: int, height: int, mask: np.ndarray | None = None) -> float:
+    """Fraction of the 8x6 cells holding a keypoint; with a mask, of the cells at least half unmasked (a monitor
+    that knows the mask measures what is left to see, or it alerts forever on what the mask discards)."""
     if not len(pts):
         return 0.0
     cells = set(zip((pts[:, 0] * 8 // width).astype(int).tolist(), (pts[:, 1] * 6 // height).astype(int).tolist()))
-    return len(cells) / 48.0
+    if mask is None:
+        return len(cells) / 48.0
+    seen = (1 - mask.reshape(6, height // 6, 8, width // 8).mean(axis=(1, 3))) >= 0.5      # (row, column) of cells
+    return len({c for c in cells if seen[c[1], c[0]]}) / max(int(seen.sum()), 1)
 
 
 def _depth_at(depth: np.ndarray, pts: np.ndarray) -> np.ndarray:
@@ -107,12 +112,14 @@ def _stereo_points(st, I_l, I_r, pts, K, B, m):
     return np.asarray(X, float).reshape(-1, 3), keep
 
 
-def _frame(st, seq, k, m):
+def _frame(st, seq, k, m, mask=None):
     """Stage metrics of frame k into m (dict). Returns the estimated motion T_{k, k-1} (or None)."""
     fr0, fr1, K, B = seq["frames"][k - 1], seq["frames"][k], seq["K"], seq["baseline"]
     w, h = seq["width"], seq["height"]
     pts = np.asarray(st["features"](fr0["left"]), float).reshape(-1, 2)[:, :2]
-    m["features"], m["coverage"] = len(pts), _coverage(pts, w, h)
+    if mask is not None and len(pts):           # keypoints on masked pixels are discarded
+        pts = pts[~mask[np.clip(np.rint(pts[:, 1]).astype(int), 0, h - 1), np.clip(np.rint(pts[:, 0]).astype(int), 0, w - 1)]]
+    m["features"], m["coverage"] = len(pts), _coverage(pts, w, h, mask)
     pts = _grid_cap(pts, w, h)
     if len(pts) < 8:
         return None
@@ -148,19 +155,21 @@ def _frame(st, seq, k, m):
     return T
 
 
-def _dense(st, seq, k, m):
+def _dense(st, seq, k, m, mask=None):
     fr = seq["frames"][k]
     D = np.asarray(st["stereo"](fr["left"] / 255.0, fr["right"] / 255.0, 32), float)
     D_gt = seq["K"][0, 0] * seq["baseline"] / seq["depth"][k]
-    judged = np.isfinite(D_gt) & (D_gt < 32)
+    judged = np.isfinite(D_gt) & (D_gt < 32) & (True if mask is None else ~mask)
     has = judged & np.isfinite(D)
     m["stereo_density"] = float(has.sum() / max(judged.sum(), 1))
     m["stereo_bad_pct"] = float(100 * np.mean(np.abs(D[has] - D_gt[has]) > 1.0)) if has.any() else 100.0
 
 
-def run_pipeline(seq: dict, stages: dict | None = None, frames: tuple[int, int] | None = None) -> dict:
+def run_pipeline(seq: dict, stages: dict | None = None, frames: tuple[int, int] | None = None,
+                 mask: np.ndarray | None = None) -> dict:
     """Run the pipeline on a `scene.rig_sequence` (frames (a, b): only frames a..b-1 are measured, a >= 1):
-    stages override STANDINS by name. Returns
+    stages override STANDINS by name; mask (H, W) bool, True = ignore (a dirty lens, the sky): keypoints there
+    are discarded and dense stereo is judged outside it. Returns
     {"metrics": {name: (n_frames,) float, NaN where a stage had nothing to measure}, "T_cw": (n, 4, 4)
     the chained estimate (the true first pose; a failed frame repeats the previous motion), "faults":
     per frame the active fault kinds}."""
@@ -175,8 +184,8 @@ def run_pipeline(seq: dict, stages: dict | None = None, frames: tuple[int, int] 
             T_est.append(T_est[-1])
             continue
         m: dict = {}
-        T = _frame(st, seq, k, m)
-        _dense(st, seq, k, m)
+        T = _frame(st, seq, k, m, mask)
+        _dense(st, seq, k, m, mask)
         last = last if T is None else T
         T_est.append(last @ T_est[-1])
         for name, v in m.items():
@@ -201,6 +210,15 @@ def fault_table(seed: int = 0, kinds=None, stages: dict | None = None) -> dict:
     return table
 
 
+def out_of_range(name: str, value: float, clean: float) -> bool:
+    """The table's line: worse than the clean run of the same route by more than 25 % (or 0.5 px / deg for values
+    near zero), in the metric's bad direction. NaN (nothing to measure) is out of range."""
+    bad = next(m[3] for m in METRICS if m[1] == name)
+    if not np.isfinite(value):
+        return True
+    return bool(bad * (value - clean) > max(0.25 * abs(clean), 0.5 if "px" in name or "deg" in name else 0))
+
+
 def format_fault_table(table: dict) -> str:
     """The table as Markdown: a row per metric (stage, unit), a column per fault; changes beyond 25 % (or
     0.5 px / deg for values near zero) in the bad direction are marked with '!'."""
@@ -211,7 +229,7 @@ def format_fault_table(table: dict) -> str:
         cells = []
         for kd in kinds:
             v = table[kd][name]
-            worse = kd != "clean" and np.isfinite(v) and bad * (v - c) > max(0.25 * abs(c), 0.5 if "px" in name or "deg" in name else 0)
+            worse = kd != "clean" and np.isfinite(v) and out_of_range(name, v, c)
             cells.append(("nan" if not np.isfinite(v) else f"{v:.3g}") + (" !" if worse else ""))
         rows.append(f"| {stage} | {name} ({unit}) | " + " | ".join(cells) + " |")
     return "\n".join(rows)

@@ -320,7 +320,7 @@ def sync_from_columns(x_left, x_right, v_left):
 MUTANTS += [
     ("11.10", "left minus right", sync_left_minus_right, "the sign"),
     ("11.10", "frames, not ms", sync_in_frames, "offset in frames"),
-    ("11.10", "columns", sync_from_columns, None),
+    ("11.10", "columns", sync_from_columns, "you fitted the columns"),
 ]
 
 
