@@ -185,15 +185,37 @@ def prove_fix(exercise_id: str, fix, seed: int = 0, how: str = "settings") -> di
             "fixed": medians(_fixed_run(exercise_id, fix, seed, how))}
     out = {k: [name for _, name, _, _ in METRICS if out_of_range(name, runs[k][name], clean[name])]
            for k in ("faulty", "fixed")}
-    return {"fault": FAULT_OF[exercise_id], "fix": fix, **runs, "out": out}
+    return {"row": exercise_id, "fault": FAULT_OF[exercise_id], "how": how, "fix": fix, **runs, "out": out}
+
+
+def describe_fix(exercise_id: str, fix) -> str:
+    """The fix in words (a rotation as pitch / yaw / roll in degrees)."""
+    f = np.asarray(fix, float)
+    if exercise_id == "11.9":
+        from scipy.spatial.transform import Rotation
+        p, y, r = np.degrees(Rotation.from_matrix(f.reshape(3, 3)).as_euler("xyz"))
+        return f"mount pitch {p:.3f}°, yaw {y:.3f}°, roll {r:.3f}° (the fault: pitch 1°)"
+    if exercise_id == "11.10":
+        return f"right camera {float(f):.2f} ms late (the fault: {FAULTS['time_offset']['ms']:g} ms)"
+    if exercise_id == "11.11":
+        return "mask the disc ({:.0f}, {:.0f}), r {:.0f} px (the smudge: (96, 132), r 80)".format(*f.ravel()[:3])
+    if exercise_id == "11.12":
+        return f"mask the top {int(np.rint(f.ravel()[0]))} rows (the sky: {int(FAULTS['saturated_sky']['rows'] * 240)})"
+    return "gain {:.3f}, smear L {:.1f} px (the fault: {gain}, {length_px})".format(*f.ravel()[:2], **FIRMWARE)
 
 
 def format_proof(proof: dict) -> str:
     """Markdown: metric | clean | faulty | fixed | in normal range? (of the fixed run; '!' marks the faulty run's)."""
-    rows = ["| stage | metric | clean | faulty | fixed | fixed in normal range? |", "|---|---|---|---|---|---|"]
+    how = f", {proof['how']}" if proof["row"] == "11.13" else ""
+    rows = [f"**{proof['row']} — {proof['fault']}**: {describe_fix(proof['row'], proof['fix'])}{how}", "",
+            "| stage | metric | clean | faulty | fixed | fixed in normal range? |", "|---|---|---|---|---|---|"]
     for stage, name, unit, _ in METRICS:
         c, f, x = (proof[k][name] for k in ("clean", "faulty", "fixed"))
         fmt = lambda v: "nan" if not np.isfinite(v) else f"{v:.3g}"  # noqa: E731
         rows.append(f"| {stage} | {name} ({unit}) | {fmt(c)} | {fmt(f)}{' !' if name in proof['out']['faulty'] else ''}"
                     f" | {fmt(x)} | {'no' if name in proof['out']['fixed'] else 'yes'} |")
+    key = proof["row"] + (" digital gain" if proof["row"] == "11.13" and proof["how"] == "digital gain" else "")
+    for name in proof["out"]["fixed"]:
+        if name in NOT_RESTORED.get(key, {}):
+            rows.append(f"\n- {name} not back: {NOT_RESTORED[key][name]}")
     return "\n".join(rows)
