@@ -9,7 +9,8 @@ Modules: `questions` (11.1-11.4), `monitor` (11.5), `degradation` (11.6), `rootc
 DEBUG a loose sync cable), `design` (11.14, the compute
 budget; 11.15-11.16, the monitor's thresholds and each alert's action), `frontier` (11.17, a learned model of normal flags an
 overconfident learned stage), `demo`
-(the notebook's drawings and the widget's runs), `pipeline` (part B: the course's own stages from graders.oracles, or the
+(the notebook's drawings and the widget's runs: a sensor fault, one stage faulted in isolation), `autorun` (the
+widget's drive with scheduled faults through the pipeline, the monitor and the degradation machine), `pipeline` (part B: the course's own stages from graders.oracles, or the
 learner's, run on `scene.rig_sequence`'s faulted stereo sequence, with per-stage metrics and the fault x
 stage table). `lens` (11.11, DEBUG a dirty lens), `sky` (11.12, DEBUG the sky saturates), `exposure` (11.13, DEBUG a firmware exposure change), `proof` (11.9-11.13's fix applied to the pipeline: clean / faulty /
 fixed stage metrics against the table's line). Importing the package registers the chapter; the names
@@ -27,8 +28,9 @@ from .hybrid import gt_hybrid_choice, gt_hybrid_odometry, hybrid_run
 from .remount import gt_fix_right_mount, remount_problem, repaired_rows
 from .sync import depth_error, gt_sync_offset, sync_problem
 from .degradation import COMPONENT_OF, MODES, fault_scenario, gt_degradation_modes
-from .demo import (PIPELINE, alert_states, cascade_curves, cascade_run, draw_cascade, draw_cascade_run,
-                   severity_params)
+from .demo import (PIPELINE, STAGE_FAULTS, alert_states, cascade_curves, cascade_run, draw_cascade, draw_cascade_run,
+                   draw_stage_run, severity_params, stage_run)
+from .autorun import DRIVE_FRAMES, MONITORED, SCHEDULES, draw_drive_run, drive_run, mode_changes
 from .monitor import MONITOR_TABLE, gt_health_monitor, metric_streams
 from .pipeline import (FAULTS, METRICS, STANDINS, WINDOW, fault_sequence, fault_table, format_fault_table,
                        run_pipeline)
