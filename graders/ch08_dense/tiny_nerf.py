@@ -118,8 +118,9 @@ def _torch_render(sigma, rgb, t, far, torch):
 
 
 def gt_train_tiny_nerf(rays_o, rays_d, rgb, near, far, steps=STEPS, seed=0, L=4, width=48, S=24, batch=128):
-    """8.13's stand-in: γ with L = 4, MLP (3 + 6L) → 48 → 48 → 4 (softplus σ, sigmoid rgb), Adam lr 1e-2,
-    `batch` random rays × S stratified samples per step. Returns the field F(X) -> (σ (N,), rgb (N, 3))."""
+    """8.13's stand-in: γ with L = 4, MLP (3 + 6L) → 48 → 48 → 4 (softplus σ, sigmoid rgb), Adam lr 1e-2 annealed
+    linearly to 1e-3 over the last quarter of the steps, `batch` random rays × S stratified samples per step.
+    Returns the field F(X) -> (σ (N,), rgb (N, 3))."""
     import torch
     with single_thread():
         torch.manual_seed(seed)
@@ -135,7 +136,9 @@ def gt_train_tiny_nerf(rays_o, rays_d, rgb, near, far, steps=STEPS, seed=0, L=4,
             return torch.nn.functional.softplus(h[..., 0]), torch.sigmoid(h[..., 1:])
 
         edges = torch.linspace(float(near), float(far), S + 1)
-        for _ in range(int(steps)):
+        for k in range(int(steps)):
+            for group in opt.param_groups:
+                group["lr"] = 1e-2 * (1.0 - 0.9 * max(0.0, (k - 0.75 * steps) / (0.25 * steps)))
             i = torch.randint(0, len(o), (batch,))
             t = edges[:-1] + torch.rand(batch, S) * (edges[1] - edges[0])     # stratified: one jittered sample per bin
             sigma, col = F(o[i, None] + t[..., None] * d[i, None])
@@ -192,9 +195,12 @@ def _tiny_nerf_cases(rng):
     p_ref = psnr(render_field(ref, O.reshape(-1, 3), D.reshape(-1, 3), sc["near"], sc["far"]), GT.reshape(-1, 3))
     info["psnr_ref"] = p_ref
     probe_bar = min(PROBE_DB, psnr(render_field(ref, PROBE_R * n, -n, 0.0, PROBE_R), info["probe_gt"]) - PROBE_SLACK)
-    # 3.5 dB below the stand-in: 400 Adam steps on 128 rays leave a noisy field; the reference's held-out PSNR
-    # spreads over 22.2-26.2 dB with the training seed alone (the stand-in's 23.0-25.5), worst seen 3.4 dB
-    # under the stand-in. A field trained with T_i including α_i lands 4-8 dB below, 25 steps 9-13 dB below.
+    # 3.5 dB below the stand-in. Both train with the lr annealed over the last quarter (the spec's schedule). At
+    # a constant lr 1e-2 the field returned was wherever Adam's last jump left it: on fairness draw 216705033
+    # the reference gave 20.3-24.7 dB over 8 training seeds and the stand-in 22.7-25.0 dB, so 2 draws in ~200
+    # failed at 4.2 dB under. Annealed, the same draw gives 25.5-27.0 dB (sd 0.5 dB on both failing draws),
+    # the reference 0-1.1 dB under the stand-in on 5 draws. A field trained with T_i including α_i lands
+    # 6.7-10.3 dB below, 25 steps 11.8-13.1 dB below (grades of seeds 216705033, 2479407978, 0-2).
     yield Case(f"held-out PSNR (the grader renders your field) ≥ the stand-in's {p_ref:.1f} dB − 3.5 dB", args, p_ref,
                lambda o, e: max(0.0, e - psnr(o["images"], GT)), 3.5, "dB", convert=_convert, call=run, info=info,
                key="psnr")
@@ -222,6 +228,12 @@ TINY_NERF_HINTS = [
          lambda c, o: c.key == "psnr" and abs(o["images"].mean() - c.info["test_images"].mean()) > 0.02),
     Hint("the field has hardly learnt the scene: does the loop take `steps` Adam steps on batches of rays, with "
          "loss.backward() and opt.step() each time?", lambda c, o: c.key == "psnr" and psnr(o["images"], c.info["test_images"]) < 15),
+    Hint("the field is sharp and bright enough but noisy: anneal the learning rate (1e-2 falling linearly to 1e-3 "
+         "over the last quarter of the steps); at a constant 1e-2 the last Adam steps jump around the minimum and "
+         "the field you return is wherever the last jump left it.",
+         lambda c, o: c.key == "psnr" and psnr(o["images"], c.info["test_images"]) >= 15
+         and _sharpness(o["images"]) >= 0.92 * c.info["sharp_gt"]
+         and abs(o["images"].mean() - c.info["test_images"].mean()) <= 0.02),
 ]
 
 register(Exercise(

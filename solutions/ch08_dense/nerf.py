@@ -67,12 +67,20 @@ class TinyField(torch.nn.Module):
         return torch.nn.functional.softplus(h[..., 0]), torch.sigmoid(h[..., 1:])
 
 
+def annealed(k: int, steps: int) -> float:
+    """The learning-rate factor at step k of `steps`: 1 for the first three quarters, then linear down to 0.1."""
+    return 1.0 - 0.9 * max(0.0, (k - 0.75 * steps) / (0.25 * steps))
+
+
 def train_tiny_nerf(rays_o, rays_d, rgb, near: float, far: float, steps: int = 400, seed: int = 0, L: int = 4,
                     n_samples: int = 24, batch: int = 128, lr: float = 1e-2):
     """Exercise 8.13: fit a TinyField to training rays rays_o, rays_d: (R, 3), rgb: (R, 3) with `steps` Adam steps,
     each on `batch` random rays × `n_samples` stratified depths in [near, far] (one uniform draw per bin, so the
     field is asked everywhere along the ray, not at fixed depths), rendered with volume_render (8.12) and
-    an MSE loss. Returns field(X: (N, 3)) -> (σ (N,), rgb (N, 3)) as numpy arrays."""
+    an MSE loss. The learning rate stays at `lr` for the first three quarters and falls linearly to lr / 10 over
+    the last quarter: at a constant 1e-2 the last Adam steps jump around the basin and the field returned is
+    wherever the last jump left it (held-out PSNR 20.3-26.6 dB on one draw over 8 seeds; annealed 25.5-27.0).
+    Returns field(X: (N, 3)) -> (σ (N,), rgb (N, 3)) as numpy arrays."""
     g = torch.Generator().manual_seed(int(seed))
     torch.manual_seed(int(seed))
     o, d, c = (torch.as_tensor(np.asarray(a), dtype=torch.float32) for a in (rays_o, rays_d, rgb))
@@ -80,7 +88,9 @@ def train_tiny_nerf(rays_o, rays_d, rgb, near: float, far: float, steps: int = 4
     opt = torch.optim.Adam(net.parameters(), lr=lr)
     bins = torch.linspace(float(near), float(far), n_samples + 1)
     u_mid = torch.full((batch, 1), 0.5)                                      # volume_render's t_fine, unused here
-    for _ in range(int(steps)):
+    for k in range(int(steps)):
+        for group in opt.param_groups:
+            group["lr"] = lr * annealed(k, int(steps))
         i = torch.randint(0, len(o), (batch,), generator=g)
         t = bins[:-1] + torch.rand(batch, n_samples, generator=g) * (bins[1] - bins[0])    # (B, S)
         sigma, col = net(o[i, None] + t[..., None] * d[i, None])                            # (B, S), (B, S, 3)

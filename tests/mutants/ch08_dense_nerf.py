@@ -28,7 +28,10 @@ def _train(rays_o, rays_d, rgb, near, far, steps, seed, *, density="softplus", t
 
     opt = torch.optim.Adam(net.parameters(), lr=1e-2)
     bins = torch.linspace(float(near), float(far), S + 1)
-    for _ in range(int(steps if train_steps is None else train_steps)):
+    n = int(steps if train_steps is None else train_steps)
+    for k in range(n):
+        for group in opt.param_groups:      # the spec's schedule: 1e-2, annealed to 1e-3 over the last quarter
+            group["lr"] = 1e-2 * (1.0 - 0.9 * max(0.0, (k - 0.75 * n) / (0.25 * n)))
         i = torch.randint(0, len(o), (B,))
         t = bins[:-1] + torch.rand(B, S) * (bins[1] - bins[0])
         sigma, col = F(o[i, None] + t[..., None] * d[i, None])
