@@ -122,21 +122,21 @@ TRUE_FIX = {"11.9": np.array([[1, 0, 0], [0, np.cos(np.radians(1)), -np.sin(np.r
             "11.11": (0.3 * 320, 0.55 * 240, 0.25 * 320),  # scene's default smudge: centre (0.3 w, 0.55 h), r 0.25 w
             "11.12": int(0.45 * 240) + 3,                  # FAULTS["saturated_sky"]["rows"] x 240 + FAST's ring radius
             "11.13": (0.25, 9.0)}                          # proof.FIRMWARE
-# 6-frame medians of these move from seed to seed of the *clean* route by more than the table's 25 % (vo_trans_pct
-# 2.3-3.2 %, depth_err_pct 1.43-1.53 %), so they are held to 50 % of the clean run (worst measured on seeds 0-3
-# with the truth fixes and the stand-ins: +29 % VO translation after the remount, +33 % depth after a 0.36 ms sync
-# residual).
-NOISY = {"vo_trans_pct": 0.5, "depth_err_pct": 0.5}
+# A fix measured by a function (stand-in, reference) rather than known: 11.10's offset comes out 0.18-0.36 ms low on
+# the route (seeds 0-5, stand-in and reference alike: the tracked velocities carry the tracker's noise, which flattens a
+# fitted slope), and that residual leaves the depth error at up to 2.07 % against the clean runs' 1.41-1.53 % (seed 3).
+# Held to 50 % above the clean run there; every other metric to the line.
+ESTIMATED = {"11.10": {"depth_err_pct": 0.5}}
 
 
-def _assert_proof(p, row):
+def _assert_proof(p, row, allow=None):
     from graders.ch11_capstone.proof import NOT_RESTORED
     assert p["out"]["faulty"], f"{row}: the fault moved no metric out of range"
     for name in p["out"]["fixed"]:
         if name in NOT_RESTORED.get(row, {}):
             continue
-        c, x = p["clean"][name], p["fixed"][name]
-        assert name in NOISY and abs(x - c) <= NOISY[name] * abs(c), (row, name, c, p["faulty"][name], x)
+        c, x, margin = p["clean"][name], p["fixed"][name], (allow or {}).get(name)
+        assert margin is not None and abs(x - c) <= margin * abs(c), (row, name, c, p["faulty"][name], x)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -154,7 +154,7 @@ def test_the_stand_in_s_diagnosis_on_the_faulted_run_fixes_it(row):
     from graders.ch11_capstone import proof
     fn = {"11.9": ch11.gt_fix_right_mount, "11.10": ch11.gt_sync_offset, "11.11": ch11.gt_smudge,
           "11.12": ch11.cv_sky_rows, "11.13": ch11.cv_exposure_change}[row]
-    _assert_proof(proof.prove_fix(row, fn, 1), row)
+    _assert_proof(proof.prove_fix(row, fn, 1), row, ESTIMATED.get(row))
 
 
 def test_a_digital_gain_alone_does_not_undo_the_firmware_change():
@@ -173,3 +173,15 @@ def test_an_unfixed_or_wrong_fix_leaves_the_metrics_out():
     for row, nothing in (("11.9", np.eye(3)), ("11.10", 0.0), ("11.12", 0)):
         p = proof.prove_fix(row, nothing, SEED)
         assert p["out"]["fixed"] == p["out"]["faulty"] != [], row
+
+
+@pytest.mark.parametrize("row", list(TRUE_FIX))
+def test_the_course_s_reference_passes_the_proof(row):
+    # The solved notebook's tables: the references of 11.9-11.13 measure a fix on the faulted run that brings the
+    # metrics back (11.9's holds yaw at 0: a yaw fitted to row noise, ~0.02°, took the depth error 1.4 -> 1.9-2.2 %).
+    # Seed 3: the largest 11.10 residual of seeds 0-5.
+    import solutions.ch11_capstone as ref
+    from graders.ch11_capstone import proof
+    fn = {"11.9": ref.fix_right_mount, "11.10": ref.sync_offset, "11.11": ref.find_smudge, "11.12": ref.sky_rows,
+          "11.13": ref.exposure_change}[row]
+    _assert_proof(proof.prove_fix(row, fn, 3), row, ESTIMATED.get(row))

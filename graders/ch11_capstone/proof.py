@@ -3,8 +3,9 @@
 11.9-11.13 grade the diagnosed fix (a rotation, an offset, a disc, a row count, a (gain, L) pair) on problems of
 their own. The proof runs the pipeline (`pipeline.run_pipeline`) on the capstone route three times, on the same
 frames and the same sensor noise: clean, faulted (the fault as the exercise's symptoms describe it) and faulted
-with the fix applied, and lists each stage metric's median over the frames beside the clean run's and the table's
-line (`pipeline.out_of_range`: > 25 % worse than clean, or 0.5 px / deg for values near zero).
+with the fix applied, and lists each stage metric's median over the frames beside the clean run's. The normal range
+is the table's line (`pipeline.out_of_range`: > 25 % worse, or 0.5 px / deg for values near zero) beyond the worst
+of BASELINE_DRAWS clean runs of the route (`baseline`).
 
 The learner's function gives the fix from the faulted run itself (`debug_inputs` builds the exercise's arguments
 from it: left-right matches, image velocities, keypoints of the stored clean run of the route, images), and the fix
@@ -61,10 +62,23 @@ def sequence(exercise_id: str | None, seed: int = 0, residual: dict | None = Non
     return scene.rig_sequence(np.random.default_rng(seed), FRAMES[1] + 1, faults)
 
 
-@lru_cache(maxsize=8)
+@lru_cache(maxsize=16)
 def _clean(seed: int) -> tuple[dict, dict]:
+    """The clean route (same noise draw as the faulted runs of this seed) and its medians."""
     seq = sequence(None, seed)
     return seq, medians(run_pipeline(seq, None, FRAMES))
+
+
+BASELINE_DRAWS = 3               # clean runs of the route (other sensor noise) that set the normal range
+
+
+@lru_cache(maxsize=8)
+def baseline(seed: int = 0) -> dict:
+    """{metric: the worst value (in its bad direction) over BASELINE_DRAWS clean runs of the route}: the seed's
+    own and noise draws seed + 1000, + 2000. A 6-frame median moves between noise draws by more than the table's
+    25 % for some metrics (20 draws: vo_trans_pct 1.9-3.0 %, ransac_samples 1-3), so one clean run is no baseline."""
+    runs = [_clean(seed)[1]] + [_clean(seed + 1000 * i)[1] for i in range(1, BASELINE_DRAWS)]
+    return {name: (max if bad > 0 else min)(r[name] for r in runs) for _, name, _, bad in METRICS}
 
 
 def medians(run: dict) -> dict:
@@ -115,11 +129,12 @@ def debug_inputs(exercise_id: str, seed: int = 0) -> tuple:
     raise KeyError(f"no proof for {exercise_id!r}; DEBUG rows: {', '.join(FAULT_OF)}")
 
 
-# What a fix does not bring back, and why (measured on seeds 0-3; the tests hold every other metric to the line).
+# What a fix does not bring back, and why (measured on seeds 0-5; the tests hold every other metric to the line).
 NOT_RESTORED: dict[str, dict[str, str]] = {
     "11.11": {"features": "the corners inside the masked disc are gone until the lens is cleaned (-26 %)",
-              "ransac_samples": "the inlier ratio comes back to 0.99-1.0 but not quite to clean: the tracker's "
-                                "coarse pyramid levels still read the smudge from outside the disc (1-2 -> 2-3 samples)"},
+              "ransac_samples": "sometimes: the inlier ratio comes back to 0.99-0.997, not quite clean (the tracker's "
+                                "coarse pyramid levels still read the smudge from outside the disc): 2-3 samples where "
+                                "clean runs need 1-3"},
     "11.12": {"features": "the sky has nothing to detect: the count stays down by the masked share (-25 %)"},
     "11.13 digital gain": {
         "features": "x 1 / gain brightens the noise with the signal and cannot undo the smear: half the corners",
@@ -183,7 +198,8 @@ def prove_fix(exercise_id: str, fix, seed: int = 0, how: str = "settings") -> di
     clean = _clean(seed)[1]
     runs = {"clean": clean, "faulty": medians(run_pipeline(sequence(exercise_id, seed), None, FRAMES)),
             "fixed": medians(_fixed_run(exercise_id, fix, seed, how))}
-    out = {k: [name for _, name, _, _ in METRICS if out_of_range(name, runs[k][name], clean[name])]
+    line = baseline(seed)
+    out = {k: [name for _, name, _, _ in METRICS if out_of_range(name, runs[k][name], line[name])]
            for k in ("faulty", "fixed")}
     return {"row": exercise_id, "fault": FAULT_OF[exercise_id], "how": how, "fix": fix, **runs, "out": out}
 
