@@ -76,10 +76,13 @@ def _arc_score(d: np.ndarray, arc: int = 9) -> np.ndarray:
     """FAST score from the 16 circle-minus-centre differences d (16, ...) (circle along axis 0): the
     largest t for which `arc` contiguous circle pixels are all > t or all < -t."""
     d = np.concatenate([d, d[:arc - 1]])  # the circle wraps around
-    lo, hi = d[:16].copy(), d[:16].copy()
-    for j in range(1, arc):  # running min / max over each arc of `arc` consecutive pixels
-        lo, hi = np.minimum(lo, d[j:j + 16]), np.maximum(hi, d[j:j + 16])
-    return np.maximum(lo.max(axis=0), (-hi).max(axis=0))  # brighter arc, darker arc
+    lo, hi, k = d, d, 1
+    while 2 * k <= arc:  # doubling: lo[j] = min(d[j], ..., d[j + 2k - 1]) from two windows of k
+        lo, hi, k = np.minimum(lo[:-k], lo[k:]), np.maximum(hi[:-k], hi[k:]), 2 * k
+    # an arc of `arc` pixels = two overlapping windows of k (k <= arc < 2k): its min / max over them
+    lo = np.minimum(lo[:16], lo[arc - k:arc - k + 16])
+    hi = np.maximum(hi[:16], hi[arc - k:arc - k + 16])
+    return np.maximum(lo.max(axis=0), -hi.min(axis=0))  # brighter arc, darker arc
 
 
 def fast_score(img: np.ndarray, arc: int = 9) -> np.ndarray:
@@ -102,32 +105,33 @@ def fast_detect(img: np.ndarray, threshold: int = 20, nms: bool = True) -> np.nd
     < I_p - threshold. With nms, a corner survives only if its score beats all 8 neighbours'
     (non-corners score 0), as cv2.FastFeatureDetector does.
 
-    Speed (Rosten & Drummond's high-speed test, widened): any 9 contiguous circle pixels include 4
-    consecutive even-numbered ones (0, 2, 4, 6 or 2, 4, 6, 8 or ...), so a pixel without 4 such
-    pixels all brighter or all darker cannot be a corner. That whole-image test on 8 of the 16
-    pixels leaves about one pixel in ten; only those get the full 16-pixel score (the value
-    fast_score gives them), read through flat indices p + dy W + dx.
+    Speed (the pre-test of OpenCV's FAST): the 7 circle pixels an arc of 9 leaves out are contiguous,
+    so they never hold both pixel i and its opposite i + 8; an arc of 9 brighter (darker) pixels
+    thus has one brighter (darker) pixel in every opposite pair. That whole-image test on the 8
+    pairs leaves about one pixel in ten; only those get the full 16-pixel score (the value
+    fast_score gives them), read through flat indices p = y W + x. The test stays in uint8:
+    I_p + t is capped at 255 and I_p - t floored at 0 (no uint8 pixel is > 255 or < 0, so the
+    capped comparisons give the same answers as exact ones).
     """
-    I = np.asarray(img).astype(np.int16)
+    I = np.asarray(img, np.uint8)
     H, W = I.shape
     c = I[3:H - 3, 3:W - 3]
-    even = CIRCLE16[::2]  # circle pixels 0, 2, ..., 14
-    brighter, darker = c + threshold, c - threshold
-    maybe = np.zeros(c.shape, bool)
-    for side in ([I[3 + dy:H - 3 + dy, 3 + dx:W - 3 + dx] > brighter for dx, dy in even],
-                 [I[3 + dy:H - 3 + dy, 3 + dx:W - 3 + dx] < darker for dx, dy in even]):
-        two = [side[j] & side[(j + 1) % 8] for j in range(8)]  # even pixels j, j+1 (circle 2j, 2j+2)
-        for j in range(8):
-            maybe |= two[j] & two[(j + 2) % 8]  # four in a row
-    ys, xs = np.nonzero(maybe)
-    p = (ys + 3) * W + (xs + 3)  # flat index of each candidate
+    ring = [I[3 + dy:H - 3 + dy, 3 + dx:W - 3 + dx] for dx, dy in CIRCLE16]  # views, no copies
+    maybe = np.zeros(I.shape, bool)
+    for bar, beyond in ((np.minimum(c, 255 - threshold) + np.uint8(threshold), np.greater),  # min(I_p + t, 255)
+                        (np.maximum(c, threshold) - np.uint8(threshold), np.less)):  # max(I_p - t, 0)
+        side = beyond(ring[0], bar) | beyond(ring[8], bar)
+        for i in range(1, 8):  # one of each opposite pair (i, i + 8) beyond the bar
+            side &= beyond(ring[i], bar) | beyond(ring[i + 8], bar)
+        maybe[3:H - 3, 3:W - 3] |= side
+    p = np.flatnonzero(maybe)  # flat index of each candidate
     flat = I.ravel()
-    d = flat[p + (CIRCLE16[:, 1] * W + CIRCLE16[:, 0])[:, None]] - flat[p]  # (16, candidates)
-    score = _arc_score(d)
+    circle = flat[p + (CIRCLE16[:, 1] * W + CIRCLE16[:, 0])[:, None]]  # (16, candidates) uint8
+    score = _arc_score(circle.astype(np.int16) - flat[p])
     corner = score > threshold
     p, score = p[corner], score[corner]
     if nms:  # compare each corner's score with its 8 neighbours' (0 where there is no corner)
-        s = np.zeros(H * W, np.int32)
+        s = np.zeros(H * W, np.int16)
         s[p] = score
         around = np.array([dy * W + dx for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dx or dy])
         p = p[np.all(score[:, None] > s[p[:, None] + around], axis=1)]
