@@ -41,21 +41,28 @@ SCHEDULES: dict[str, list[dict]] = {
     # the lens goes dark (features lost: direct VO), light comes back (VIO again after `hold` frames); then the
     # right mount drifts (stereo lost: mono + IMU) while the IMU link drops out (mono VO), and both recover
     "features lost, then the mount drifts and the IMU drops out": [
-        {"kind": "exposure_drop", "start": 8, "stop": 16, "gain": (0.6, 0.03)},
-        {"kind": "calibration_drift", "start": 24, "stop": 32, "deg": 1.0},
-        {"kind": "imu_dropout", "start": 28, "stop": 36},
+        {"kind": "exposure_drop", "start": 6, "stop": 12, "gain": (0.6, 0.03)},
+        {"kind": "calibration_drift", "start": 18, "stop": 24, "deg": 0.8},
+        {"kind": "imu_dropout", "start": 21, "stop": 28},
     ],
     # a 5 ms sync offset: no monitored metric moves, the depth (not monitored) is 30 % off — a blind spot
     "a loose sync cable (the monitor's blind spot)": [
-        {"kind": "time_offset", "start": 8, "stop": 24, "ms": 5.0},
+        {"kind": "time_offset", "start": 6, "stop": 22, "ms": 5.0},
     ],
     # a growing smudge and a blur: features fall, but stay above the alert line
     "a dirty lens growing, then motion blur": [
-        {"kind": "dirty_lens", "start": 6, "stop": 18, "radius": (30.0, 110.0)},
-        {"kind": "motion_blur", "start": 20, "stop": 30, "length_px": 15},
+        {"kind": "dirty_lens", "start": 5, "stop": 15, "radius": (30.0, 110.0)},
+        {"kind": "motion_blur", "start": 17, "stop": 25, "length_px": 15},
     ],
 }
-DRIVE_FRAMES = 44
+DRIVE_FRAMES = 38
+
+
+DENSE_METRICS = ("stereo_bad_pct", "stereo_density")
+
+
+def _no_dense(I_l, I_r, d_max):
+    return np.full(np.shape(I_l), np.nan)
 
 
 def scene_faults(schedule: list[dict]) -> list[dict]:
@@ -108,7 +115,7 @@ def drive_run(schedule: list[dict] | str, monitor: Callable = gt_health_monitor,
             seed: int = 0, stages: dict | None = None) -> dict:
     """The drive under `schedule` (a list of segments or a key of SCHEDULES), frames 1..n_frames-1 (frame 0
     only starts the tracking), through the pipeline, `monitor(stream, table, k)` and `modes(alerts, names,
-    hold)`. Returns {"frames" (T,), "metrics" {pipeline metric: (T,)}, "stream" (T, M), "names" (M,),
+    hold)`. Returns {"frames" (T,), "metrics" {pipeline metric but dense stereo's: (T,)}, "stream" (T, M), "names" (M,),
     "table" (M rows), "events" [(t, metric, action)] with t an index into "frames", "alerts" (T, M) bool, "modes" (T,) str, "faults" per frame the active kinds,
     "images" (T, h, w) u8 left images, "schedule"}, T = n_frames - 1."""
     from graders import scene
@@ -116,8 +123,9 @@ def drive_run(schedule: list[dict] | str, monitor: Callable = gt_health_monitor,
 
     sched = SCHEDULES[schedule] if isinstance(schedule, str) else list(schedule)
     seq = scene.rig_sequence(np.random.default_rng(seed), n_frames, scene_faults(sched))
-    run = run_pipeline(seq, stages)
-    metrics = {name: v[1:] for name, v in run["metrics"].items()}
+    # dense stereo feeds nothing downstream and is not monitored: skipped (a quarter of the run's time)
+    run = run_pipeline(seq, {"stereo": _no_dense, **(stages or {})})
+    metrics = {name: v[1:] for name, v in run["metrics"].items() if name not in DENSE_METRICS}
     gaps = imu_gaps(sched, n_frames)
     names = [m[0] for m in MONITORED]
     table = [next(dict(r) for r in MONITOR_TABLE if r["metric"] == n) for n in names]
@@ -141,6 +149,8 @@ def mode_changes(modes: list[str]) -> list[str]:
 # ---------------------------------------------------------------- drawing (matplotlib only inside: grading never draws)
 TRACES = [("features", "log", 1.0), ("inlier_ratio", "linear", None), ("reprojection_px", "log", 0.01),
           ("vo_error_deg", "log", 0.005), ("imu_gap_ms", "log", 1.0)]     # (stream column, y scale, floor)
+TRACE_NOTES = {"reprojection_px": "\n(stereo row error)", "vo_error_deg": "\n(rotation)",
+               "imu_gap_ms": "\n(scheduled)"}
 UNMONITORED = ("depth_err_pct", "map depth error, % (not monitored)")
 
 
@@ -175,7 +185,7 @@ def _trace(ax, run: dict, j: int, scale: str, floor, upto: int) -> None:
             ax.plot(t[f], y[f], "v" if a == "clear" else "^", color="g" if a == "clear" else "r", ms=7)
     ax.set_yscale(scale)
     ax.set_ylim(lo, hi)
-    ax.set_ylabel(row["metric"], fontsize=7, rotation=0, ha="right", va="center")
+    ax.set_ylabel(row["metric"] + TRACE_NOTES.get(row["metric"], ""), fontsize=7, rotation=0, ha="right", va="center")
 
 
 def _mode_band(ax, run: dict, upto: int) -> None:
@@ -224,7 +234,7 @@ def draw_drive_run(fig, run: dict, upto: int | None = None) -> None:
     upto = int(t[-1] if upto is None else np.clip(upto, t[0], t[-1]))
     n = len(TRACES) + 3
     gs = fig.add_gridspec(n, 2, width_ratios=[2.4, 1], height_ratios=[0.7] + [1] * (n - 2) + [0.45], hspace=0.12,
-                          wspace=0.04, left=0.13, right=0.99, top=0.97, bottom=0.07)
+                          wspace=0.04, left=0.14, right=0.99, top=0.97, bottom=0.07)
     axes = [fig.add_subplot(gs[i, 0]) for i in range(n)]
     for ax in axes[1:]:
         ax.sharex(axes[0])
