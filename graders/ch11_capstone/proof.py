@@ -36,7 +36,7 @@ from graders.oracles.features import cv_fast
 
 from .pipeline import FAULTS, METRICS, STANDINS, _grid_cap, out_of_range, run_pipeline
 
-FRAMES = (9, 15)                 # the measured frames (6); frame 8 is the first faulted one, k - 1 is read too
+FRAMES = (9, 15)                 # the measured frames (6); frame k reads frame k - 1 (and 11.10 frame k + 1)
 FIRMWARE = {"gain": 0.25, "length_px": 9}      # 11.13: both of the table's image faults at once
 LENS_MARGIN = 0                  # px around the disc (measured: 10-25 px more mask brings nothing back, seeds 0-3)
 FAULT_OF = {"11.9": "calibration_drift", "11.10": "time_offset", "11.11": "dirty_lens", "11.12": "saturated_sky",
@@ -46,7 +46,7 @@ FAULT_OF = {"11.9": "calibration_drift", "11.10": "time_offset", "11.11": "dirty
 def _faults(exercise_id: str, residual: dict | None = None) -> list[dict]:
     """The fault of a DEBUG row over the whole run (residual: its parameters after a fix at the source)."""
     kind = FAULT_OF[exercise_id]
-    n = FRAMES[1] + 1
+    n = FRAMES[1]
     if kind == "firmware":
         p = {**FIRMWARE, **(residual or {})}
         return [{"kind": "exposure_drop", "gain": p["gain"]}, {"kind": "motion_blur", "length_px": p["length_px"]}]
@@ -57,12 +57,18 @@ def _faults(exercise_id: str, residual: dict | None = None) -> list[dict]:
 
 
 def sequence(exercise_id: str | None, seed: int = 0, residual: dict | None = None) -> dict:
-    """The capstone route up to FRAMES[1], clean (None) or with the row's fault; the same seed = the same noise."""
-    faults = [] if exercise_id is None else _faults(exercise_id, residual)
-    return scene.rig_sequence(np.random.default_rng(seed), FRAMES[1] + 1, faults)
+    """The capstone route up to frame FRAMES[1] - 1, clean (None) or with the row's fault; the same seed = the same
+    noise. Memoised (a proof reads the faulted run 2-3 times): treat it as read-only."""
+    return _sequence(exercise_id, seed, tuple(sorted((residual or {}).items())))
 
 
-@lru_cache(maxsize=16)
+@lru_cache(maxsize=4)
+def _sequence(exercise_id, seed, residual):
+    faults = [] if exercise_id is None else _faults(exercise_id, dict(residual))
+    return scene.rig_sequence(np.random.default_rng(seed), FRAMES[1], faults)
+
+
+@lru_cache(maxsize=12)
 def _clean(seed: int) -> tuple[dict, dict]:
     """The clean route (same noise draw as the faulted runs of this seed) and its medians."""
     seq = sequence(None, seed)
