@@ -3,9 +3,9 @@ and the degradation machine (11.6) (graders/ch11_capstone/autorun.py), and one s
 (graders/ch11_capstone/demo.py: stage_run).
 
 Not skipped while chapter 11 is planned (like test_ch11_capstone_pipeline.py): the notebook's section 6 runs
-them. The sequences are deterministic for a seed (sensor noise, OpenCV's seeded RANSAC); the event frames and
-state sequences below were measured on seeds 0-3 (identical on all four) and follow from the rules stated in
-monitor.py / degradation.py, as each test says.
+them. The sequences are deterministic for a seed (sensor noise, OpenCV's seeded RANSAC); the dark run's event
+frames and modes were measured identical on seeds 0-3, the default drive's story on seeds 0-3, the sync drive on
+seeds 0-2, the stage isolation on seeds 0-2; the frames follow from the rules of monitor.py / degradation.py.
 """
 from __future__ import annotations
 
@@ -115,19 +115,20 @@ def test_no_fault_no_flag_and_the_stand_ins_untouched(clean):
     assert not any(r["flag"] for r in clean["rows"]) and clean["faulted"] == [] and clean["moved"] == []
 
 
-# Which stages move when one is faulted at level 1 follows the data flow (FLOW); measured on seed 0:
-# features 2,450 -> 76 (stereo matches and landmarks follow, VO translation 3.3 -> 4.2 %); stereo matching
+# Which stages move when one is faulted at level 1 follows the data flow (FLOW): at least `must`, nothing that is
+# not downstream. Measured on seeds 0-2: features 2,450 -> 76 (stereo matches and landmarks follow; VO's
+# translation error 3.3 -> 4.2 % on seed 0 only crosses the 25 % line, so VO is not required); stereo matching
 # (1.5, 1) px off -> depth 1.3 -> 29 %, VO translation 3.3 -> 15 %; tracking jitter -> RANSAC samples 1 -> 17,
-# VO reprojection 0.11 -> 1.2 px; RANSAC, VO and dense stereo feed nothing downstream; the map's 10 % longer
-# depth -> VO translation 3.3 -> 6.9 %.
-@pytest.mark.parametrize("stage, moved", [
-    ("features", {"stereo matching", "map", "VO"}), ("stereo matching", {"map", "VO"}),
-    ("tracking", {"RANSAC", "VO"}), ("RANSAC", set()), ("VO", set()), ("dense stereo", set()), ("map", {"VO"})])
-def test_one_stage_in_isolation_moves_its_own_metrics_and_only_downstream(clean, stage, moved):
+# VO reprojection 0.11 -> 1.2 px; the map's 10 % longer depth -> VO translation 3.3 -> 6.9 %; RANSAC, VO and dense
+# stereo feed nothing downstream.
+@pytest.mark.parametrize("stage, must", [
+    ("features", {"stereo matching", "map"}), ("stereo matching", {"map", "VO"}), ("tracking", {"RANSAC", "VO"}),
+    ("RANSAC", set()), ("VO", set()), ("dense stereo", set()), ("map", {"VO"})])
+def test_one_stage_in_isolation_moves_its_own_metrics_and_only_downstream(clean, stage, must):
     r = D.stage_run({stage: 1.0}, seed=SEED, clean=clean["clean"])
-    assert r["faulted"] == [stage] and set(r["moved"]) == moved
+    assert r["faulted"] == [stage]
+    assert must <= set(r["moved"]) <= D.downstream_of(stage)                 # reachable through the data flow
     assert any(row["flag"] for row in r["rows"] if row["own"])                # the fault shows at its own stage
-    assert moved <= D.downstream_of(stage)                                   # reachable through the data flow
 
 
 def test_the_drawings_run(dark_run, clean):
@@ -140,5 +141,5 @@ def test_the_drawings_run(dark_run, clean):
     assert A.drive_status(dark_run, 9).startswith("frame 9: direct VO")
     fig2 = plt.figure(figsize=(10, 3.8))
     D.draw_stage_run(fig2, D.stage_run({"features": 1.0}, seed=SEED, clean=clean["clean"]))
-    assert "moves stereo matching, VO, map" in fig2.axes[1].get_title()
+    assert fig2.axes[1].get_title().startswith("fault at features -> moves stereo matching")
     plt.close("all")
