@@ -142,11 +142,12 @@ def harris_at(img: np.ndarray, pts: np.ndarray, radius: int = 3, k: float = 0.04
     """Harris response R = det M - k tr(M)^2 at integer points only (ORB's re-ranking of FAST corners),
     M summed over the (2 radius + 1)^2 block around each point of central-difference gradients
     computed in a window one pixel wider. pts: (N, 2) (x, y), at least radius + 1 px inside. (N,)."""
+    img = np.asarray(img)
     r = np.arange(-radius - 1, radius + 2)
-    dx, dy = np.meshgrid(r, r)
-    xs = np.rint(np.asarray(pts, float)[:, 0]).astype(int)[:, None, None] + dx  # (N, w, w) windows
-    ys = np.rint(np.asarray(pts, float)[:, 1]).astype(int)[:, None, None] + dy
-    P = gray(np.asarray(img)[ys, xs])  # only the windows are converted
+    window = (r[:, None] * img.shape[1] + r).ravel()  # flat offsets dy W + dx of the (w, w) window
+    xy = np.rint(np.asarray(pts, float)[:, :2]).astype(int)
+    P = gray(img.ravel()[(xy[:, 1] * img.shape[1] + xy[:, 0])[:, None] + window])  # only the windows
+    P = P.reshape(len(xy), len(r), len(r))  # (N, w, w)
     gx = 0.5 * (P[:, 1:-1, 2:] - P[:, 1:-1, :-2])  # (N, 2 radius + 1, 2 radius + 1)
     gy = 0.5 * (P[:, 2:, 1:-1] - P[:, :-2, 1:-1])
     Sxx, Sxy, Syy = (gx * gx).sum((1, 2)), (gx * gy).sum((1, 2)), (gy * gy).sum((1, 2))
