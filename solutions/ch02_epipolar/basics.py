@@ -62,8 +62,12 @@ def sampson_distance(F: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> np.ndarra
     d = |x2h^T F x1h| / sqrt((F x1h)_1^2 + (F x1h)_2^2 + (F^T x2h)_1^2 + (F^T x2h)_2^2).
     Its square is what cv2.sampsonDistance returns. F: (..., 3, 3); x1, x2: (N, 2) -> (..., N).
     """
+    return sampson_h(F, to_h(x1), to_h(x2))
+
+
+def sampson_h(F: np.ndarray, x1h: np.ndarray, x2h: np.ndarray) -> np.ndarray:
+    """`sampson_distance` on homogeneous points x1h, x2h: (N, 3) (RANSAC converts its matches once)."""
     F = np.asarray(F, float)
-    x1h, x2h = to_h(x1), to_h(x2)                    # (N, 3)
     Fs = F.reshape(-1, 3, 3)
     out = np.empty((len(Fs), len(x1h)))
     for block in model_blocks(len(Fs), len(x1h)):

@@ -44,14 +44,19 @@ def denormalise_homography(Hn: np.ndarray, T1: np.ndarray, T2: np.ndarray) -> np
 
 def transfer_error(H: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
     """Distance in image 2 between x2 and H x1, in pixels. H: (..., 3, 3); x1, x2: (N, 2) -> (..., N)."""
+    return transfer_h(H, to_h(x1), np.asarray(x2, float))
+
+
+def transfer_h(H: np.ndarray, x1h: np.ndarray, x2: np.ndarray) -> np.ndarray:
+    """`transfer_error` with x1 already homogeneous, x1h: (N, 3) (RANSAC converts its matches once)."""
     H = np.asarray(H, float)
-    x1h, x2 = to_h(x1), np.asarray(x2, float)
     Hs = H.reshape(-1, 3, 3)
     out = np.empty((len(Hs), len(x1h)))
     for block in model_blocks(len(Hs), len(x1h)):
         y = (Hs[block].reshape(-1, 3) @ x1h.T).reshape(-1, 3, len(x1h))   # (M, 3, N)
         with np.errstate(divide="ignore", invalid="ignore"):
-            d = np.hypot(y[:, 0] / y[:, 2] - x2[:, 0], y[:, 1] / y[:, 2] - x2[:, 1])
+            dx, dy = y[:, 0] / y[:, 2] - x2[:, 0], y[:, 1] / y[:, 2] - x2[:, 1]
+            d = np.sqrt(dx * dx + dy * dy)          # (np.hypot is ~10x slower and pixels cannot overflow)
         out[block] = np.where(np.isfinite(d), d, np.inf)
     return out.reshape(H.shape[:-2] + (len(x1h),))
 

@@ -24,13 +24,25 @@ def _real_cubic_roots(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return roots.real, valid
 
 
-def _seven_point_batch(x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """7-point solver for a batch. x1, x2: (B, 7, 2) -> (F: (B, 3, 3, 3), valid: (B, 3))."""
-    n1, T1 = normalise_points(x1)
-    n2, T2 = normalise_points(x2)
-    A = epipolar_rows(n1, n2)                                    # (B, 7, 9)
-    _, _, Vt = np.linalg.svd(A, full_matrices=True)               # (B, 9, 9)
-    F1, F2 = Vt[:, -1].reshape(-1, 3, 3), Vt[:, -2].reshape(-1, 3, 3)
+def null_space(A: np.ndarray, dim: int) -> np.ndarray:
+    """An orthonormal basis of the null space of A: (..., m, 9) -> (..., dim, 9), one vector a row.
+
+    For m + dim = 9 (a minimal sample: 7 rows for F, 5 for E) the null space is exactly the orthogonal
+    complement of A's rows: the last dim columns of the complete QR decomposition of Aᵀ (about 3x
+    cheaper than an SVD for a batch of small matrices). With more rows it is the least-squares null
+    space: the right singular vectors of the dim smallest singular values (the last one the smallest)."""
+    m = A.shape[-2]
+    if m + dim == A.shape[-1]:
+        Q, _ = np.linalg.qr(np.swapaxes(A, -1, -2), mode="complete")       # (..., 9, 9)
+        return np.swapaxes(Q[..., m:], -1, -2)
+    return np.linalg.svd(A, full_matrices=True)[2][..., -dim:, :]
+
+
+def _seven_point_rows(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The 7-point solver on the rows of A f = 0 (Hartley-normalised): A: (B, 7, 9) ->
+    (Fn: (B, 3, 3, 3) in the normalised coordinates, valid: (B, 3))."""
+    N = null_space(A, 2)                                          # (B, 2, 9)
+    F1, F2 = N[:, 1].reshape(-1, 3, 3), N[:, 0].reshape(-1, 3, 3)
     # det(a F1 + (1 - a) F2) = det(F2 + a D) is a cubic in a; its 4 coefficients follow exactly
     # from 4 evaluations (the Vandermonde system of a cubic through 4 points).
     D = F1 - F2
@@ -39,7 +51,14 @@ def _seven_point_batch(x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.n
     V = np.vander(a, 4)                                           # columns a^3, a^2, a, 1
     coeffs = np.linalg.solve(V, dets.T).T                         # (B, 4)
     roots, valid = _real_cubic_roots(coeffs)
-    Fn = F2[:, None] + roots[:, :, None, None] * D[:, None]       # (B, 3, 3, 3)
+    return F2[:, None] + roots[:, :, None, None] * D[:, None], valid   # (B, 3, 3, 3)
+
+
+def _seven_point_batch(x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """7-point solver for a batch. x1, x2: (B, 7, 2) -> (F: (B, 3, 3, 3), valid: (B, 3))."""
+    n1, T1 = normalise_points(x1)
+    n2, T2 = normalise_points(x2)
+    Fn, valid = _seven_point_rows(epipolar_rows(n1, n2))          # rows: (B, 7, 9)
     F = np.swapaxes(T2, -1, -2)[:, None] @ Fn @ T1[:, None]
     return unit(F), valid
 
@@ -88,9 +107,13 @@ _X_TIMES_B = [(3, 0, 0), (2, 1, 0), (2, 0, 1), (1, 2, 0), (1, 1, 1), (1, 0, 2), 
 def _five_point_batch(x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """5-point solver for a batch. x1, x2: (B, N, 2) normalised coordinates, N >= 5 (least squares
     null space for N > 5). Returns (E: (B, 10, 3, 3) unit norm, valid: (B, 10) real solutions)."""
-    A = epipolar_rows(x1, x2)                                    # (B, N, 9)
-    _, _, Vt = np.linalg.svd(A, full_matrices=True)               # (B, 9, 9)
-    basis = Vt[:, -4:].reshape(-1, 4, 3, 3)                       # E0..E3, the 4-D null space
+    return _five_point_rows(epipolar_rows(x1, x2))                # rows: (B, N, 9)
+
+
+def _five_point_rows(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The 5-point solver on the rows of A e = 0 (normalised coordinates): A: (B, N, 9) ->
+    (E: (B, 10, 3, 3), valid: (B, 10)), as `_five_point_batch`."""
+    basis = null_space(A, 4).reshape(-1, 4, 3, 3)                 # E0..E3, the 4-D null space
     # E as a 3 x 3 matrix of linear polynomials: coefficients over (x, y, z, 1), shape (B, 3, 3, 4)
     Ep = np.moveaxis(basis, 1, -1)
     B = len(Ep)

@@ -11,10 +11,10 @@ from typing import Callable
 import numpy as np
 
 from ..geometry import rodrigues, skew, to_h
-from .basics import sampson_distance
+from .basics import sampson_h
 from .eight_point import eight_point, epipolar_rows, normalise_points, rank2, unit
-from .homography import denormalise_homography, dlt_rows, homography_dlt, transfer_error
-from .minimal import _five_point_batch, _seven_point_batch
+from .homography import denormalise_homography, dlt_rows, transfer_h
+from .minimal import _five_point_rows, _seven_point_rows
 from .pose import decompose_essential, recover_pose
 
 
@@ -52,7 +52,8 @@ class _LocalOptimiser:
        pair, a basin 1.7 px better on the wall);
     3. plain refits from the best model while they lower its MSAC cost by more than 0.1 %.
     Only models with a lower cost are ever kept. With `batched` (a refit that takes a stack of
-    masks (B, n) and returns B models), stage 2 fits and scores all its subsets at once."""
+    masks (B, n), or of point indices (B, k), and returns B models), stage 2 fits and scores all its
+    subsets at once."""
 
     def __init__(self, n, sample_size, residuals, threshold, refit, rng, lo_scales, lo_polish,
                  subset=None, batched=False):
@@ -65,7 +66,8 @@ class _LocalOptimiser:
         return np.minimum(r * r, self.tau2).sum(-1)
 
     def _attempt(self, best, inliers):
-        """Refit on `inliers`; keep the refit in `best` if its cost is lower. Returns its residuals."""
+        """Refit on `inliers`; keep the refit in `best` (model, cost, residuals, the mask it was
+        fitted on) if its cost is lower. Returns its residuals."""
         if inliers.sum() < self.s:
             return None
         m = self.refit(inliers)
@@ -74,7 +76,7 @@ class _LocalOptimiser:
         rm = self.residuals(np.asarray(m)[None])[0]
         cm = self.cost_of(rm)
         if cm < best[1]:
-            best[:] = [np.asarray(m), cm, rm]
+            best[:] = [np.asarray(m), cm, rm, inliers]
         return rm
 
     def _inner_batched(self, best, inner):
@@ -83,28 +85,30 @@ class _LocalOptimiser:
         pool = np.flatnonzero(best[2] < self.threshold)
         if len(pool) <= self.subset:
             return
-        picks = np.argsort(self.rng.random((inner, len(pool))), axis=1)[:, :self.subset]   # (inner, size)
-        masks = np.zeros((inner, self.n), bool)
-        masks[np.arange(inner)[:, None], pool[picks]] = True
+        masks = pool[_draw_samples(self.rng, len(pool), self.subset, inner)]   # (inner, size) point indices
         for _ in range(2):                      # the subsets' models, then their refits on their inliers
             models = np.asarray(self.refit(masks))
             r = self.residuals(models)                                   # (inner, n)
             costs = self.cost_of(r)
             j = int(np.argmin(costs))
             if costs[j] < best[1]:
-                best[:] = [models[j], costs[j], r[j]]
+                best[:] = [models[j], costs[j], r[j], None]
             masks = r < self.threshold
             masks[masks.sum(1) < self.s] = True  # too few inliers: refit on everything (its cost will say)
 
-    def __call__(self, model, cost, r, inner: int, chained: bool = True):
-        best = [model, cost, r]
+    def __call__(self, model, cost, r, inner: int, chained: bool = True, known: np.ndarray | None = None):
+        """`known`: the inliers of the best model so far; a chain that reaches exactly that inlier set
+        is converging to that model, and stops (no polish either)."""
+        best = [model, cost, r, None]
         if self.refit is None:
-            return best[0], best[1], best[2] < self.threshold
+            return best[0], best[1], best[2]
         if chained:
             for scale in self.scales:
                 r = self._attempt(best, r < scale * self.threshold)
                 if r is None:
                     break
+                if known is not None and np.array_equal(r < self.threshold, known):
+                    return best[0], best[1], best[2]
         size = self.subset
         if self.batched and inner > 0:
             self._inner_batched(best, inner)
@@ -119,18 +123,21 @@ class _LocalOptimiser:
             if r is not None:
                 self._attempt(best, r < self.threshold)     # one refit: the subset's model is already close
         for _ in range(self.polish):
-            before = best[1]
-            self._attempt(best, best[2] < self.threshold)
+            before, inliers = best[1], best[2] < self.threshold
+            if best[3] is not None and np.array_equal(inliers, best[3]):
+                break                                         # the refit would give the same model
+            self._attempt(best, inliers)
             if not best[1] < (1.0 - 1e-3) * before:          # gains below 0.1 % do not move the model
                 break
-        return best[0], best[1], best[2] < self.threshold
+        return best[0], best[1], best[2]                      # the model, its cost, its residuals
 
 
 def ransac(n: int, sample_size: int, solve: Callable, residuals: Callable, threshold: float,
            refit: Callable | None = None, confidence: float = 0.99, max_iters: int = 10_000,
            rng: np.random.Generator | int | None = None, batch: int = 32,
            lo_scales: tuple[float, ...] = (3.0, 2.0, 1.5, 1.0), lo_inner: int = 5, lo_polish: int = 5,
-           lo_subset: int | None = None, batched_refit: bool = False, preview: int = 0, preview_keep: int = 4):
+           lo_subset: int | None = None, batched_refit: bool = False, preview: int = 0, preview_keep: int = 4,
+           lo_stop_known: bool = False):
     """Exercise 2.16: generic LO-RANSAC with MSAC scoring and an adaptive number of samples.
 
     n: number of data points; sample_size: s, points per minimal sample.
@@ -149,6 +156,9 @@ def ransac(n: int, sample_size: int, solve: Callable, residuals: Callable, thres
     on m random points, and only the `preview_keep` best of them on all n (residuals(models, idx)
     must then accept point indices idx: (m,)). A model as good as the best is rarely beaten on m
     points by a poor one, and scoring m = 64 instead of n = 500 points is ~8x cheaper.
+    `lo_stop_known`: the chain of a new best minimal model stops
+    as soon as its model has exactly the best model's inliers (it is converging to the same model;
+    on the benchmark's F scenes most later chains do).
     Returns (model, inliers: (n,) bool); (None, all False) if no model was found.
     """
     rng = np.random.default_rng(rng)
@@ -175,49 +185,70 @@ def ransac(n: int, sample_size: int, solve: Callable, residuals: Callable, thres
         # time, and a first basin that happens to be a poor one would stick.
         if costs[j] < best_minimal:
             best_minimal = costs[j]
-            model, cost, inl = local_optimise(models[j], costs[j], r[j], inner=0)
+            model, cost, rm = local_optimise(models[j], costs[j], r[j], inner=0,
+                                             known=best_inl if lo_stop_known and best_model is not None else None)
             # The inner RANSAC (the expensive stage) only for a model that is about to become the
             # best: most chained hypotheses are not, and an inner RANSAC on them is wasted work.
             # With the one-refit inner chain and the 0.1 % polish stop: 38 % (F), 16 % (E) and 33 %
             # (H) fewer refits than an inner RANSAC on every new best, at the same accuracy
             # (benchmark scenes, 32 seeds).
             if cost < best_cost and lo_inner > 0 and refit is not None:
-                model, cost, inl = local_optimise(model, cost, residuals(np.asarray(model)[None])[0],
-                                                  inner=lo_inner, chained=False)
+                model, cost, rm = local_optimise(model, cost, rm, inner=lo_inner, chained=False)
             if cost < best_cost:
-                best_model, best_cost, best_inl = model, cost, inl
-                needed = ransac_iterations(inl.mean(), sample_size, confidence)
+                best_model, best_cost, best_inl = model, cost, rm < threshold
+                needed = ransac_iterations(best_inl.mean(), sample_size, confidence)
     return best_model, best_inl
 
 
 # ------------------------------------------------------------ RANSAC for F, E and H ----
 # Local optimisation refits one model to many different inlier sets. Rather than rebuild the
 # linear system A h = 0 for each set, the matches are Hartley-normalised once (all of them) and each
-# match's share of the 9 x 9 normal matrix AᵀA is stored: for any inlier mask (or weights) w the
-# normal matrix is then w @ blocks, one (n,) x (n, 81) product, and the fit is its eigenvector
-# of the smallest eigenvalue, exactly as in eight_point and homography_dlt. A stack of masks
-# (B, n) gives B fits in one call: the batched inner RANSAC of `_LocalOptimiser`.
+# match's share of the 9 x 9 normal matrix AᵀA is stored (its 45 distinct entries): for any inlier
+# mask (or weights) w the normal matrix is then w @ blocks, one (n,) x (n, 45) product, and the fit
+# is its eigenvector of the smallest eigenvalue, exactly as in eight_point and homography_dlt. A
+# stack of masks (B, n) gives B fits in one call: the batched inner RANSAC of `_LocalOptimiser`.
+# The minimal solvers take the same rows: a sample's linear system is its matches' rows.
 
 # The estimators' options for `ransac` (issue 20, measured on the benchmark's scenes): the batched
-# inner RANSAC and preemptive scoring on 64 points halve F's and E's CPU time at the same accuracy.
+# inner RANSAC and preemptive scoring on 64 points halve F's and E's CPU time at the same accuracy;
+# a chain that reaches the best model's inliers stops (most later chains on F do). F and H need
+# ~70-110 samples at the benchmark's inlier ratios: batches of 64 take 2 passes of the loop instead
+# of 3-4 (fewer superseded chains), with the same accuracy (F: 30 scenes; H: runs over 1.5 px 31
+# in 1000 seeds; with 32-sample batches 31, and 29 before this round of changes). E needs ~25-35 samples
+# and keeps batches of 32: its 5-point solves are the expensive part.
 # For H the inner RANSAC draws 24 subsets of 6 inliers instead of 5 of 12, after a shorter chain
 # (2, 1 x threshold): on the Graffiti pair 12 matches rarely avoid the 83 of a competing structure
-# (~2 % of subsets), 6 do ~17 % of the time; runs that settle on it (2.2 px): 1 in 4 -> 1 in 100.
-FAST = dict(batched_refit=True, preview=64)
+# (~2 % of subsets), 6 do ~17 % of the time. The inner RANSAC is what leaves that structure: with
+# 16 or 12 subsets, 6 % or 10 % of 1000 seeds end on it (2.2 px off), with 24 3 %.
+FAST = dict(batched_refit=True, preview=64, lo_stop_known=True)
+FAST_FH = dict(batch=64)
 FAST_H = dict(lo_subset=6, lo_inner=24, lo_scales=(2.0, 1.0))
 
 
+_UPPER = np.triu_indices(9)                      # AᵀA is symmetric: 45 distinct entries of 81
+_FULL = np.zeros((9, 9), int)
+_FULL[_UPPER] = np.arange(45)
+_FULL = np.maximum(_FULL, _FULL.T).ravel()       # entry (i, j) of the 9 x 9 matrix -> its index among the 45
+
+
 def normal_blocks(rows: np.ndarray) -> np.ndarray:
-    """Each match's share of AᵀA. rows: (n, r, 9), the r rows of A one match gives -> (n, 81)."""
-    return np.einsum("nri,nrj->nij", rows, rows).reshape(len(rows), 81)
+    """Each match's share of AᵀA, its 45 upper-triangle entries. rows: (n, r, 9), the r rows of A one
+    match gives -> (n, 45)."""
+    return np.einsum("nri,nrj->nij", rows, rows)[:, _UPPER[0], _UPPER[1]]
 
 
 def weighted_null_vector(blocks: np.ndarray, w: np.ndarray) -> np.ndarray:
     """The unit h minimising sum_i w_i |A_i h|^2: the eigenvector of AᵀWA = sum_i w_i (A_iᵀA_i) with
-    the smallest eigenvalue. blocks: (n, 81); w: (..., n) weights (boolean inlier masks work) -> (..., 9)."""
-    # einsum rather than w @ blocks: for a stack of masks that product is large enough for BLAS to
-    # split it over threads, which on a busy machine costs ~10x more than one core's loop.
-    AtWA = np.einsum("...n,nk->...k", np.asarray(w, float), blocks).reshape(np.shape(w)[:-1] + (9, 9))
+    the smallest eigenvalue. blocks: (n, 45) from `normal_blocks`; w: (..., n) weights (boolean inlier
+    masks work), or (B, k) integer point indices (B subsets) -> (..., 9)."""
+    w = np.asarray(w)
+    if np.issubdtype(w.dtype, np.integer):
+        AtWA = blocks[w].sum(-2)                     # each subset's normal matrix
+    else:
+        # einsum rather than w @ blocks: the product is large enough for BLAS to split it over
+        # threads, which on a busy machine costs far more than one core's loop.
+        AtWA = np.einsum("...n,nk->...k", w.astype(float), blocks)
+    AtWA = AtWA[..., _FULL].reshape(AtWA.shape[:-1] + (9, 9))
     return np.linalg.eigh(AtWA)[1][..., :, 0]
 
 
@@ -230,23 +261,27 @@ def ransac_fundamental(x1: np.ndarray, x2: np.ndarray, threshold: float = 1.0, c
     s = 7 if minimal == "7pt" else 8
     n1, T1 = normalise_points(x1)
     n2, T2 = normalise_points(x2)
-    blocks = normal_blocks(epipolar_rows(n1, n2)[:, None])          # (n, 81)
+    rows = epipolar_rows(n1, n2)                                   # (n, 9): A f = 0, one row a match
+    blocks = normal_blocks(rows[:, None])                           # (n, 45)
+    x1h, x2h = to_h(x1), to_h(x2)
 
-    def solve(idx):
+    def to_pixels(Fn):                                              # undo the normalisation
+        return unit(np.swapaxes(T2, -1, -2) @ Fn @ T1)
+
+    def solve(idx):                      # a sample's system is its matches' rows, normalised once
         if s == 7:
-            F, ok = _seven_point_batch(x1[idx], x2[idx])
-            return F[ok]
+            Fn, ok = _seven_point_rows(rows[idx])
+            return to_pixels(Fn[ok])
         return eight_point(x1[idx], x2[idx])
 
     def refit(inliers):                                             # the 8-point on the inliers
-        Fn = rank2(weighted_null_vector(blocks, inliers).reshape(np.shape(inliers)[:-1] + (3, 3)))
-        return unit(T2.T @ Fn @ T1)
+        return to_pixels(rank2(weighted_null_vector(blocks, inliers).reshape(np.shape(inliers)[:-1] + (3, 3))))
 
     def residuals(F, idx=slice(None)):
-        return sampson_distance(F, x1[idx], x2[idx])
+        return sampson_h(F, x1h[idx], x2h[idx])
 
     return ransac(len(x1), s, solve, residuals, threshold, refit=refit, confidence=confidence,
-                  max_iters=max_iters, rng=rng, **{**FAST, **options})
+                  max_iters=max_iters, rng=rng, **{**FAST, **FAST_FH, **options})
 
 
 def to_normalised(x: np.ndarray, K: np.ndarray) -> np.ndarray:
@@ -266,7 +301,7 @@ def refine_essential(E: np.ndarray, x1: np.ndarray, x2: np.ndarray, K1: np.ndarr
 
     Parameters: a rotation increment w (3) and a step of t in the tangent plane of the unit sphere
     (2): E(p) = [t(p)]x Exp(w) R0. The Jacobian is taken by central differences, all points at
-    once (5 parameters: 10 residual evaluations per step). An 8-point fit projected onto the
+    once (5 parameters: 10 residual evaluations, batched with each trial step's own). An 8-point fit projected onto the
     essential manifold is the starting point; this polish makes it 2-5x more accurate in rotation.
     x1, x2: (N, 2) pixels. Returns E: (3, 3), unit norm.
     """
@@ -288,19 +323,23 @@ def refine_essential(E: np.ndarray, x1: np.ndarray, x2: np.ndarray, K1: np.ndarr
         num = np.sum(x2h * Fx1, -1)
         return num / np.sqrt(Fx1[..., 0] ** 2 + Fx1[..., 1] ** 2 + Ftx2[..., 0] ** 2 + Ftx2[..., 1] ** 2)
 
-    p, lam, h = np.zeros(5), 1e-3, 1e-6
-    r = residuals(p)
+    h = 1e-6
+    steps = np.concatenate([np.zeros((1, 5)), h * np.eye(5), -h * np.eye(5)])   # (11, 5): p, p ± h e_k
+
+    def probe(p):          # residuals at p and the central differences around it, in one batched call
+        rs = residuals(p + steps)
+        return rs[0], ((rs[1:6] - rs[6:]) / (2 * h)).T                            # r: (N,), J: (N, 5)
+
+    p, lam = np.zeros(5), 1e-3
+    r, J = probe(p)
     for _ in range(iters):
         before = r @ r
-        steps = np.concatenate([p + h * np.eye(5), p - h * np.eye(5)])          # (10, 5)
-        rs = residuals(steps)
-        J = ((rs[:5] - rs[5:]) / (2 * h)).T                                     # (N, 5)
         g, A = J.T @ r, J.T @ J
         while True:
             dp = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-12), -g)
-            r_new = residuals(p + dp)
-            if r_new @ r_new < r @ r:
-                p, r, lam = p + dp, r_new, lam / 10
+            r_new, J_new = probe(p + dp)        # a trial step comes with its Jacobian: nearly all are accepted
+            if r_new @ r_new < before:
+                p, r, J, lam = p + dp, r_new, J_new, lam / 10
                 break
             lam *= 10
             if lam > 1e8:
@@ -318,13 +357,15 @@ def ransac_essential(x1: np.ndarray, x2: np.ndarray, K1: np.ndarray, K2: np.ndar
     x1, x2: (N, 2) pixels. Returns (E, R, t, inliers)."""
     n1, n2 = to_normalised(x1, K1), to_normalised(x2, K2)
     K1i, K2it = np.linalg.inv(K1), np.linalg.inv(K2).T
+    rows = epipolar_rows(n1, n2)                    # (n, 9): A e = 0, one row a match
+    x1h, x2h = to_h(x1), to_h(x2)
 
     def solve(idx):
-        E, ok = _five_point_batch(n1[idx], n2[idx])
+        E, ok = _five_point_rows(rows[idx])
         return E[ok]
 
     def residuals(E, idx=slice(None)):
-        return sampson_distance(K2it @ E @ K1i, x1[idx], x2[idx])
+        return sampson_h(K2it @ E @ K1i, x1h[idx], x2h[idx])
 
     h1, T1 = normalise_points(n1)
     h2, T2 = normalise_points(n2)
@@ -353,38 +394,42 @@ def ransac_essential(x1: np.ndarray, x2: np.ndarray, K1: np.ndarray, K2: np.ndar
     return E, R, t, inl
 
 
-def four_point_homography(x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
-    """The minimal solver of H for a batch of 4-point samples: with H[2, 2] = 1 the DLT's 8 x 9 system
-    is square (8 unknowns), one batched linear solve instead of homography_dlt's eigen-decomposition.
-    x1, x2: (B, 4, 2) pixels -> H: (B, 3, 3). (A sample with a repeated point or three collinear
-    points has no unique H: then the whole batch goes to homography_dlt.)"""
-    n1, T1 = normalise_points(x1)
-    n2, T2 = normalise_points(x2)
-    A = dlt_rows(n1, n2).reshape(len(x1), 8, 9)                   # (B, 8, 9)
+def four_point_homography(A: np.ndarray) -> np.ndarray:
+    """The minimal solver of H for a batch of 4-point samples, on their DLT rows A: (B, 8, 9) (in
+    normalised coordinates). With H[2, 2] = 1 the 8 x 9 system is square (8 unknowns): one batched
+    linear solve instead of an eigen-decomposition. -> Hn: (B, 3, 3). (A sample with a repeated point
+    or three collinear points has no unique H: then the whole batch takes the DLT's null vectors.)"""
     try:
-        h8 = np.linalg.solve(A[:, :, :8], -A[:, :, 8:])[..., 0]   # (B, 8)
+        h8 = np.linalg.solve(A[:, :, :8], -A[:, :, 8:])[..., 0]     # (B, 8)
     except np.linalg.LinAlgError:
-        return homography_dlt(x1, x2)
-    Hn = np.concatenate([h8, np.ones((len(x1), 1))], axis=1).reshape(-1, 3, 3)
-    return denormalise_homography(Hn, T1, T2)
+        return np.linalg.eigh(np.swapaxes(A, -1, -2) @ A)[1][..., :, 0].reshape(-1, 3, 3)
+    return np.concatenate([h8, np.ones((len(A), 1))], axis=1).reshape(-1, 3, 3)
 
 
 def ransac_homography(x1: np.ndarray, x2: np.ndarray, threshold: float = 2.0, confidence: float = 0.99,
                       max_iters: int = 10_000, rng=None, **options):
     """H by LO-RANSAC: 4-point DLT samples, MSAC on the transfer error (px), DLT on the inliers.
-    Returns (H, inliers)."""
+    Returns (H, inliers).
+
+    The search runs on Hartley-normalised matches and homographies Hn (n2 ~ Hn n1): the normalisation
+    scales image 2 by the same factor s2 in x and y, so a transfer error in image 2 is s2 times its
+    length in pixels; only the final Hn is taken back to pixels."""
     x1, x2 = np.asarray(x1, float), np.asarray(x2, float)
     n1, T1 = normalise_points(x1)
     n2, T2 = normalise_points(x2)
-    blocks = normal_blocks(dlt_rows(n1, n2))                        # (n, 81)
+    rows = dlt_rows(n1, n2)                                         # (n, 2, 9): each match's 2 rows of A h = 0
+    blocks = normal_blocks(rows)                                    # (n, 45)
+    n1h, s2 = to_h(n1), T2[0, 0]
+
+    def solve(idx):                      # a sample's system is its matches' rows, normalised once
+        return four_point_homography(rows[idx].reshape(len(idx), 8, 9))
 
     def refit(inliers):                                             # the DLT on the inliers
-        Hn = weighted_null_vector(blocks, inliers).reshape(np.shape(inliers)[:-1] + (3, 3))
-        return denormalise_homography(Hn, T1, T2)
+        return weighted_null_vector(blocks, inliers).reshape(np.shape(inliers)[:-1] + (3, 3))
 
-    def residuals(H, idx=slice(None)):
-        return transfer_error(H, x1[idx], x2[idx])
+    def residuals(Hn, idx=slice(None)):                             # pixels of image 2
+        return transfer_h(Hn, n1h[idx], n2[idx]) / s2
 
-    return ransac(len(x1), 4, lambda idx: four_point_homography(x1[idx], x2[idx]), residuals, threshold, refit=refit,
-                  confidence=confidence, max_iters=max_iters, rng=rng, **{**FAST, **FAST_H, **options})
-
+    Hn, inliers = ransac(len(x1), 4, solve, residuals, threshold, refit=refit,
+                         confidence=confidence, max_iters=max_iters, rng=rng, **{**FAST, **FAST_FH, **FAST_H, **options})
+    return (None if Hn is None else denormalise_homography(Hn, T1, T2)), inliers
