@@ -44,4 +44,6 @@ from .floaters import debug_floaters, render_gaussians  # noqa: E402
 from . import diverge, neural_debug  # noqa: F401,E402 (register 8.20, 8.21)
 from .diverge import debug_diverging  # noqa: E402
 from .neural_debug import debug_blurry, neural_debug_case  # noqa: E402
-__all__ += ["debug_blurry", "debug_diverging", "debug_floaters", "neural_debug_case", "render_gaussians"]
+from . import reflect  # noqa: F401,E402 (register 8.18)
+from .reflect import reflect_case, reflect_scene  # noqa: E402
+__all__ += ["debug_blurry", "debug_diverging", "debug_floaters", "neural_debug_case", "render_gaussians", "reflect_case", "reflect_scene"]

@@ -30,3 +30,5 @@ from .neural_questions import __all__ as _neural_questions  # noqa: E402
 __all__ += list(_neural_questions)
 from .neural_debug import fix_blurry_splats, fix_diverging_splats, fix_floaters  # noqa: E402
 __all__ += ["fix_blurry_splats", "fix_diverging_splats", "fix_floaters"]
+from .reflect import fix_reflections  # noqa: E402
+__all__ += ["fix_reflections"]

@@ -600,3 +600,7 @@ MUTANTS += _DIVERGE_MUTANTS
 # 8.19 (3DGS floaters) lives in its own file like 8.20
 from mutants.ch08_dense_floaters import MUTANTS as _FLOATER_MUTANTS  # noqa: E402
 MUTANTS += _FLOATER_MUTANTS
+
+# 8.18 (NeRF on a reflective surface) lives in its own file like 8.19
+from mutants.ch08_dense_reflect import MUTANTS as _REFLECT_MUTANTS  # noqa: E402
+MUTANTS += _REFLECT_MUTANTS
