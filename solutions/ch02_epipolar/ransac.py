@@ -237,10 +237,11 @@ def normal_blocks(rows: np.ndarray) -> np.ndarray:
     return np.einsum("nri,nrj->nij", rows, rows)[:, _UPPER[0], _UPPER[1]]
 
 
-def weighted_null_vector(blocks: np.ndarray, w: np.ndarray) -> np.ndarray:
+def weighted_null_vector(blocks: np.ndarray, w: np.ndarray, inhomogeneous: bool = False) -> np.ndarray:
     """The unit h minimising sum_i w_i |A_i h|^2: the eigenvector of AᵀWA = sum_i w_i (A_iᵀA_i) with
     the smallest eigenvalue. blocks: (n, 45) from `normal_blocks`; w: (..., n) weights (boolean inlier
-    masks work), or (B, k) integer point indices (B subsets) -> (..., 9)."""
+    masks work), or (B, k) integer point indices (B subsets) -> (..., 9). `inhomogeneous`: minimise
+    with h[8] = 1 instead (then scaled to unit length)."""
     w = np.asarray(w)
     if np.issubdtype(w.dtype, np.integer):
         AtWA = blocks[w].sum(-2)                     # each subset's normal matrix
@@ -249,6 +250,15 @@ def weighted_null_vector(blocks: np.ndarray, w: np.ndarray) -> np.ndarray:
         # threads, which on a busy machine costs far more than one core's loop.
         AtWA = np.einsum("...n,nk->...k", w.astype(float), blocks)
     AtWA = AtWA[..., _FULL].reshape(AtWA.shape[:-1] + (9, 9))
+    if inhomogeneous:
+        # h[8] = 1 instead of |h| = 1 (the inhomogeneous DLT, HZ 4.1.2): the 8 x 8 normal equations,
+        # one batched solve, ~8x cheaper than the eigen-decompositions of a stack of 9 x 9 matrices.
+        try:
+            h8 = np.linalg.solve(AtWA[..., :8, :8], -AtWA[..., :8, 8:])[..., 0]
+            h = np.concatenate([h8, np.ones(h8.shape[:-1] + (1,))], axis=-1)
+            return h / np.linalg.norm(h, axis=-1, keepdims=True)
+        except np.linalg.LinAlgError:
+            pass
     return np.linalg.eigh(AtWA)[1][..., :, 0]
 
 
@@ -425,7 +435,12 @@ def ransac_homography(x1: np.ndarray, x2: np.ndarray, threshold: float = 2.0, co
         return four_point_homography(rows[idx].reshape(len(idx), 8, 9))
 
     def refit(inliers):                                             # the DLT on the inliers
-        return weighted_null_vector(blocks, inliers).reshape(np.shape(inliers)[:-1] + (3, 3))
+        # The inner RANSAC's stacks of fits by the inhomogeneous DLT (H[2, 2] = 1 in normalised
+        # coordinates): its models only have to land in the right basin, and the chain and polish
+        # refits that settle the final model stay the homogeneous DLT. 1000 seeds on the Graffiti
+        # pair: runs over 1.5 px 28 (31 with eigen-decompositions), 6 % less CPU time.
+        stacked = np.ndim(inliers) == 2
+        return weighted_null_vector(blocks, inliers, inhomogeneous=stacked).reshape(np.shape(inliers)[:-1] + (3, 3))
 
     def residuals(Hn, idx=slice(None)):                             # pixels of image 2
         return transfer_h(Hn, n1h[idx], n2[idx]) / s2
