@@ -89,7 +89,12 @@ CHAPTERS: tuple[Chapter, ...] = (
             "pycolmap), merging sub-reconstructions, DUSt3R-style global alignment of pointmaps, a Dask map/reduce "
             "matching pipeline with retries and atomic results, disconnected components, the domain gap, "
             "out-of-memory chunking, the focal length a pointmap knows"),
-    Chapter(11, "capstone", "Capstone: cascading pipeline failures", ready=False),
+    Chapter(11, "capstone", "Capstone: cascading pipeline failures",
+            "one stereo + IMU pipeline built from the course's own stages on a rendered corridor, with injectable "
+            "faults; the error-propagation rule checked on its triangulation; a health monitor with hysteresis, a "
+            "graceful-degradation state machine, upstream-first root-cause isolation and a hybrid classical/direct "
+            "switch; the five cascade rows (shifted mount, loose sync, dirty lens, saturated sky, exposure change) "
+            "diagnosed, fixed and proved by the pipeline's metrics; a learned model of normal"),
 )
 
 def _released() -> set[int] | None:
