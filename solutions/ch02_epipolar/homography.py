@@ -52,11 +52,12 @@ def transfer_h(H: np.ndarray, x1h: np.ndarray, x2: np.ndarray) -> np.ndarray:
     H = np.asarray(H, float)
     Hs = H.reshape(-1, 3, 3)
     out = np.empty((len(Hs), len(x1h)))
-    for block in model_blocks(len(Hs), len(x1h)):
-        y = (Hs[block].reshape(-1, 3) @ x1h.T).reshape(-1, 3, len(x1h))   # (M, 3, N)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            dx, dy = y[:, 0] / y[:, 2] - x2[:, 0], y[:, 1] / y[:, 2] - x2[:, 1]
-            d = np.sqrt(dx * dx + dy * dy)          # (np.hypot is ~10x slower and pixels cannot overflow)
-        out[block] = np.where(np.isfinite(d), d, np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for block in model_blocks(len(Hs), len(x1h)):
+            y = (Hs[block].reshape(-1, 3) @ x1h.T).reshape(-1, 3, len(x1h))   # (M, 3, N)
+            d = y[:, :2] / y[:, 2:] - x2.T                                    # (M, 2, N): H x1 - x2
+            d *= d
+            d = np.sqrt(d[:, 0] + d[:, 1])      # (np.hypot is ~10x slower and pixels cannot overflow)
+            d[np.isnan(d)] = np.inf             # a point mapped to infinity (0 / 0): never an inlier
+            out[block] = d
     return out.reshape(H.shape[:-2] + (len(x1h),))
-
