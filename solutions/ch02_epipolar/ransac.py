@@ -89,8 +89,8 @@ class _LocalOptimiser:
         pool = np.flatnonzero(best[2] < self.threshold)
         if len(pool) <= self.subset:
             return
-        near = np.flatnonzero(best[2] < self.band * self.threshold) if self.band else np.arange(self.n)
-        far_cost = (self.n - len(near)) * self.tau2
+        near = np.flatnonzero(best[2] < self.band * self.threshold) if self.band else None
+        far_cost = (self.n - len(near)) * self.tau2 if self.band else 0.0
         masks = pool[_draw_samples(self.rng, len(pool), self.subset, inner)]   # (inner, size) point indices
         for _ in range(2):                      # the subsets' models, then their refits on their inliers
             models = np.asarray(self.refit(masks))
@@ -100,8 +100,10 @@ class _LocalOptimiser:
             if costs[j] < best[1]:
                 rj = self.residuals(models[j][None])[0] if self.band else r[j]
                 best[:] = [models[j], self.cost_of(rj), rj, None]
-            masks = np.zeros((len(models), self.n), bool)
-            masks[:, near] = r < self.threshold
+            masks = r < self.threshold
+            if self.band:                       # back to all n matches: the far ones are no model's inliers
+                masks = np.zeros((len(models), self.n), bool)
+                masks[:, near] = r < self.threshold
             masks[masks.sum(1) < self.s] = True  # too few inliers: refit on everything (its cost will say)
 
     def __call__(self, model, cost, r, inner: int, chained: bool = True, known: np.ndarray | None = None):
