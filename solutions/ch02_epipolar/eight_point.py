@@ -19,16 +19,23 @@ def normalise_points(x: np.ndarray, w: np.ndarray | None = None) -> tuple[np.nda
     Returns (xn: (..., N, 2), T: (..., 3, 3)) with xnh = T xh.
     """
     x = np.asarray(x, float)
-    w = np.ones(x.shape[:-1]) if w is None else np.asarray(w, float)
-    wsum = np.maximum(w.sum(-1, keepdims=True), 1e-300)
-    mu = np.sum(w[..., None] * x, axis=-2) / wsum                     # (..., 2)
-    d = np.sum(w * np.linalg.norm(x - mu[..., None, :], axis=-1), -1, keepdims=True) / wsum  # (..., 1)
+    if w is None:                   # unweighted: plain means (no weight arrays; RANSAC calls this per fit)
+        wsum = max(x.shape[-2], 1)
+        mu = x.sum(-2) / wsum                                         # (..., 2)
+        xc = x - mu[..., None, :]                                     # centred
+        d = np.sqrt((xc * xc).sum(-1)).sum(-1, keepdims=True) / wsum  # (..., 1) mean distance
+    else:
+        w = np.asarray(w, float)
+        wsum = np.maximum(w.sum(-1, keepdims=True), 1e-300)
+        mu = np.sum(w[..., None] * x, axis=-2) / wsum
+        xc = x - mu[..., None, :]
+        d = np.sum(w * np.sqrt((xc * xc).sum(-1)), -1, keepdims=True) / wsum
     s = np.sqrt(2.0) / np.maximum(d, 1e-300)
     T = np.zeros(x.shape[:-2] + (3, 3))
     T[..., 0, 0] = T[..., 1, 1] = s[..., 0]
     T[..., :2, 2] = -s * mu
     T[..., 2, 2] = 1.0
-    return (x - mu[..., None, :]) * s[..., None], T
+    return xc * s[..., None], T
 
 
 def epipolar_rows(x1: np.ndarray, x2: np.ndarray) -> np.ndarray:

@@ -27,11 +27,11 @@ def dlt_rows(n1: np.ndarray, n2: np.ndarray) -> np.ndarray:
     """The two rows of A h = 0 that each correspondence gives (x2h x H x1h = 0), h = H.ravel().
     n1, n2: (..., N, 2) -> (..., N, 2, 9)."""
     p = to_h(n1)                                                     # (..., N, 3)
-    z = np.zeros_like(p)
     u, v = n2[..., 0:1], n2[..., 1:2]
-    rows1 = np.concatenate([z, -p, v * p], axis=-1)                # (..., N, 9)
-    rows2 = np.concatenate([p, z, -u * p], axis=-1)
-    return np.stack([rows1, rows2], axis=-2)
+    rows = np.zeros(p.shape[:-1] + (2, 9))                          # filled in place: no concatenations
+    rows[..., 0, 3:6], rows[..., 0, 6:] = -p, v * p                 # [0ᵀ, -pᵀ, v pᵀ]
+    rows[..., 1, :3], rows[..., 1, 6:] = p, -u * p                  # [pᵀ, 0ᵀ, -u pᵀ]
+    return rows
 
 
 def denormalise_homography(Hn: np.ndarray, T1: np.ndarray, T2: np.ndarray) -> np.ndarray:
@@ -52,12 +52,15 @@ def transfer_h(H: np.ndarray, x1h: np.ndarray, x2: np.ndarray) -> np.ndarray:
     H = np.asarray(H, float)
     Hs = H.reshape(-1, 3, 3)
     out = np.empty((len(Hs), len(x1h)))
+    x1t, x2t = x1h.T, x2.T
     with np.errstate(divide="ignore", invalid="ignore"):
         for block in model_blocks(len(Hs), len(x1h)):
-            y = (Hs[block].reshape(-1, 3) @ x1h.T).reshape(-1, 3, len(x1h))   # (M, 3, N)
-            d = y[:, :2] / y[:, 2:] - x2.T                                    # (M, 2, N): H x1 - x2
+            y = (Hs[block].reshape(-1, 3) @ x1t).reshape(-1, 3, len(x1h))     # (M, 3, N)
+            d = y[:, :2] / y[:, 2:]                                           # (M, 2, N): H x1 ...
+            d -= x2t                                                          # ... - x2, in place
             d *= d
-            d = np.sqrt(d[:, 0] + d[:, 1])      # (np.hypot is ~10x slower and pixels cannot overflow)
-            d[np.isnan(d)] = np.inf             # a point mapped to infinity (0 / 0): never an inlier
-            out[block] = d
+            o = out[block]                      # written in place: no (M, N) temporaries
+            np.add(d[:, 0], d[:, 1], out=o)
+            np.sqrt(o, out=o)                   # (np.hypot is ~10x slower and pixels cannot overflow)
+            o[np.isnan(o)] = np.inf             # a point mapped to infinity (0 / 0): never an inlier
     return out.reshape(H.shape[:-2] + (len(x1h),))
