@@ -100,20 +100,30 @@ def essential_methods(s):
 ACCURACY_SLACK, TIME_GOAL, F1_SLACK = 1.10, 3.0, 0.01
 
 
-def wall_and_cpu(fn, repeat: int = 9) -> tuple[float, float]:
-    """Median wall time and median process CPU time of `fn()` in seconds over `repeat` runs (after one
-    warm-up run). 9 repeats per scene or seed (5 until issue 20's last round): with 5, the H row's
-    ratio to USAC_MAGSAC (a ~1 ms call) moved by about ±10 % between runs at a load of ~2 (3.06-3.35x
-    for the same code), more than the changes being measured; the median of 9 is steadier (its spread
-    shrinks roughly as 1/sqrt(repeats)) for ~1.6x the benchmark's run time (~10 s)."""
-    fn()
-    wall, cpu = [], []
-    for _ in range(repeat):
-        w, c = time.perf_counter(), time.process_time()
+def wall_and_cpu(methods: dict, repeat: int = 9) -> dict[str, tuple[float, float]]:
+    """name -> (median wall time, median process CPU time) in seconds of each `fn()` of `methods`, over
+    `repeat` rounds (after one warm-up call each). The methods take turns within a round, so a load
+    spike on the machine falls on all of them alike instead of on whichever was being timed: timed one
+    after the other, the H row's ratio to USAC_MAGSAC (a ~1 ms call) moved by ±10 % between runs at a
+    load of ~2, more than the changes being measured. 9 rounds (5 until issue 20's last round): the
+    median's spread shrinks roughly as 1/sqrt(repeat)."""
+    for fn in methods.values():
         fn()
-        wall.append(time.perf_counter() - w)
-        cpu.append(time.process_time() - c)
-    return float(np.median(wall)), float(np.median(cpu))
+    wall = {name: [] for name in methods}
+    cpu = {name: [] for name in methods}
+    for _ in range(repeat):
+        for name, fn in methods.items():
+            w, c = time.perf_counter(), time.process_time()
+            fn()
+            wall[name].append(time.perf_counter() - w)
+            cpu[name].append(time.process_time() - c)
+    return {name: (float(np.median(wall[name])), float(np.median(cpu[name]))) for name in methods}
+
+
+def _add_times(per: dict, times: dict) -> None:
+    for name, (wall, cpu) in times.items():
+        per[name]["time"].append(wall)
+        per[name]["cpu"].append(cpu)
 
 
 def _rows(task, per_method, ref_name, err_key):
@@ -152,15 +162,14 @@ def run() -> list[dict]:
     per = {}
     for seed in range(SCENES):
         s = ch2.two_view(np.random.default_rng(seed), N, noise=NOISE, outliers=OUTLIERS, held_out=300)
-        for name, fn in fundamental_methods(s).items():
+        methods = fundamental_methods(s)
+        for name, fn in methods.items():
             F, inl = fn()
             m = per.setdefault(name, {"time": [], "cpu": [], "held-out px": [], "inlier F1": [],
                                       "fmt": {"held-out px": "{:.3f}", "inlier F1": "{:.3f}"}})
             m["held-out px"].append(sampson_rms_px(F, *s["held_out"]))
             m["inlier F1"].append(_f1(inl, s["is_outlier"]))
-            wall, cpu = wall_and_cpu(fn)
-            m["time"].append(wall)
-            m["cpu"].append(cpu)
+        _add_times(per, wall_and_cpu(methods))
     rows += _rows(f"F: {N} matches, {OUTLIERS:.0%} outliers", per, "reference LO-RANSAC (7-pt, MSAC)",
                   "held-out px")
 
@@ -168,16 +177,15 @@ def run() -> list[dict]:
     per = {}
     for seed in range(SCENES):
         s = ch2.two_view(np.random.default_rng(100 + seed), N, noise=NOISE, outliers=OUTLIERS, same_K=True, held_out=1)
-        for name, fn in essential_methods(s).items():
+        methods = essential_methods(s)
+        for name, fn in methods.items():
             R, t, inl = fn()
             m = per.setdefault(name, {"time": [], "cpu": [], "rot err °": [], "t dir °": [], "inlier F1": [],
                                       "fmt": {"rot err °": "{:.3f}", "t dir °": "{:.3f}", "inlier F1": "{:.3f}"}})
             m["rot err °"].append(rotation_angle_deg(R, s["R"]))
             m["t dir °"].append(max_angle_deg(np.asarray(t, float).reshape(1, 3), s["t"][None]))
             m["inlier F1"].append(_f1(inl, s["is_outlier"]))
-            wall, cpu = wall_and_cpu(fn)
-            m["time"].append(wall)
-            m["cpu"].append(cpu)
+        _add_times(per, wall_and_cpu(methods))
     rows += _rows(f"E: {N} matches, {OUTLIERS:.0%} outliers", per, "reference LO-RANSAC (5-pt, MSAC)",
                   "rot err °")
 
@@ -212,9 +220,7 @@ def run() -> list[dict]:
                                           "fmt": {"held-out px": "{:.2f}", "inlier F1": "{:.3f}"}})
                 m["held-out px"].append(ch2.rms_transfer(H, grid))
                 m["inlier F1"].append(_f1(inl, truth_out))
-                wall, cpu = wall_and_cpu(fn)
-                m["time"].append(wall)
-                m["cpu"].append(cpu)
+            _add_times(per, wall_and_cpu(methods))
         rows += _rows(f"H: real graf1→graf3, {len(a)} SIFT matches ({truth_out.mean():.0%} off the true H)", per,
                       "reference LO-RANSAC (4-pt DLT, MSAC)", "held-out px")
         for row in rows[-len(per):]:
