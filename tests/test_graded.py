@@ -31,8 +31,9 @@ def test_solved_chapter_gets_full_marks_in_graded_mode(ch, tmp_path):
     path = ROOT / ch.notebook
     nbformat.write(_solved(path), tmp_path / path.name)
     tests = _grade(tmp_path / path.name, tmp_path / "r.json")
-    lost = {k: t["output"][:300] for k, t in tests.items() if t["score"] < t["max_score"]}
-    assert not lost, lost
+    # Whole reports: the rows say which case lost points, the last line the seed that replays it.
+    lost = [f"{k}: {t['score']}/{t['max_score']}\n{t['output']}" for k, t in tests.items() if t["score"] < t["max_score"]]
+    assert not lost, "\n\n".join(lost)
 
 
 OPENCV_ANSWERS = """
