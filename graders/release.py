@@ -29,9 +29,10 @@ from .chapters import READY, by_number
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ("__init__.py", "__main__.py", "batch.py", "chapters.py", "cli.py", "compare.py", "convert.py",
-          "datasets.py", "engine.py", "extract.py", "fairness.py", "geometry.py", "isolation.py", "lab.py",
-          "learner.py", "notebook_tools.py", "release.py", "report.py", "sandbox.py", "scene.py", "viz3d.py",
-          "worker.py", "progress.py", "drill.py", "cards.py", "reference.py", "srs.py", "mock.py", "home.py")
+          "corridor.py", "datasets.py", "engine.py", "extract.py", "fairness.py", "geometry.py", "isolation.py",
+          "lab.py", "learner.py", "notebook_tools.py", "release.py", "report.py", "sandbox.py", "scene.py",
+          "viz3d.py", "worker.py", "progress.py", "drill.py", "cards.py", "reference.py", "srs.py", "mock.py",
+          "home.py")
 HOME_NOTEBOOK = "notebooks/00_start_here.ipynb"
 RELEASED = "released.json"     # beside chapters.py in a release: the chapters it holds
 

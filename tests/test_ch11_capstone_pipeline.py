@@ -1,7 +1,7 @@
 """Chapter 11, part B's pipeline: it runs the course's own stages (graders.oracles, one copy each), a clean run
 is healthy, and each injected fault moves the metrics of the stage it hits (the fault x stage table).
 
-Not skipped while chapter 11 is planned: the pipeline and graders/scene.py's faulted sequence are shared code
+Not skipped while chapter 11 is planned: the pipeline and graders/corridor.py's faulted sequence are shared code
 that CI should hold to this now. One seed, fixed (the table is deterministic for a seed: the images' noise
 comes from it and OpenCV's RANSAC is seeded); the margins below were measured on seeds 0-3 (see each).
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from graders import scene
+from graders import corridor, scene
 from graders.ch11_capstone import pipeline as P
 from graders.oracles import camera, features, flow, stereo, two_view
 
@@ -31,10 +31,10 @@ def test_the_stages_are_the_course_stand_ins_not_copies():
 
 def test_rig_sequence_depth_is_the_planes_depth():
     """render_corridor's affine inverse depth against scene.plane_depth (the exact ray-plane intersection)."""
-    seq = scene.rig_sequence(np.random.default_rng(SEED), 3)
+    seq = corridor.rig_sequence(np.random.default_rng(SEED), 3)
     K, T = seq["K"], seq["T_cw"][2]
     d = np.full((seq["height"], seq["width"]), np.inf)
-    for _, size, Rp, tp in scene._CORRIDOR:
+    for _, size, Rp, tp in corridor._CORRIDOR:
         Rp, tp = np.asarray(Rp, float).T, np.asarray(tp, float)
         d = np.minimum(d, scene.plane_depth(K, T[:3, :3] @ Rp, T[:3, :3] @ tp + T[:3, 3], size, seq["width"],
                                             seq["height"]))

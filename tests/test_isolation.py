@@ -41,8 +41,8 @@ def test_graders_import_and_grade_with_solutions_hidden():
     assert out.stdout.strip().endswith("passed")
 
 
-ALLOWED_GRADERS = {"engine", "convert", "report", "compare", "geometry", "scene", "oracles", "datasets", "viz3d",
-                   "sandbox", "chapters"}
+ALLOWED_GRADERS = {"engine", "convert", "report", "compare", "geometry", "scene", "corridor", "oracles", "datasets",
+                   "viz3d", "sandbox", "chapters"}
 
 
 def _imports(path: Path) -> list[str]:

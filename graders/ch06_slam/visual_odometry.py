@@ -22,7 +22,7 @@ from graders.geometry import so3_exp, umeyama
 from graders.oracles.flow import klt_tracks
 from graders.oracles.two_view import SOLVERS
 from graders.oracles.vo import centres, standin_vo
-from graders.scene import render_corridor
+from graders.corridor import render_corridor
 
 F, W, H = 500.0, 640, 480
 K = np.array([[F, 0, W / 2], [0, F, H / 2], [0, 0, 1.0]])

@@ -11,7 +11,7 @@ budget; 11.15-11.16, the monitor's thresholds and each alert's action), `frontie
 overconfident learned stage), `demo`
 (the notebook's drawings and the widget's runs: a sensor fault, one stage faulted in isolation), `autorun` (the
 widget's drive with scheduled faults through the pipeline, the monitor and the degradation machine), `pipeline` (part B: the course's own stages from graders.oracles, or the
-learner's, run on `scene.rig_sequence`'s faulted stereo sequence, with per-stage metrics and the fault x
+learner's, run on `corridor.rig_sequence`'s faulted stereo sequence, with per-stage metrics and the fault x
 stage table). `lens` (11.11, DEBUG a dirty lens), `sky` (11.12, DEBUG the sky saturates), `exposure` (11.13, DEBUG a firmware exposure change), `proof` (11.9-11.13's fix applied to the pipeline: clean / faulty /
 fixed stage metrics against the table's line). Importing the package registers the chapter; the names
 below are the API of the notebook and the tests.

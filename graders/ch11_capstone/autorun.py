@@ -1,7 +1,7 @@
 """Notebook-only: the widget's auto-run — a drive with scheduled faults, frame by frame through the pipeline,
 the health monitor (11.5) and the degradation state machine (11.6).
 
-A schedule is a list of segments {"kind", "start", "stop" (exclusive), parameters}: any of the scene's fault
+A schedule is a list of segments {"kind", "start", "stop" (exclusive), parameters}: any of the corridor's fault
 kinds (pipeline.FAULTS; a parameter given as a pair (first, last) ramps geometrically over the segment, e.g.
 the gain of an exposure drop), or "imu_dropout" (the IMU link goes silent; the pipeline has no IMU, so this is
 the one scheduled reading: the time since the last IMU sample). `drive_run` renders the drive, runs
@@ -66,7 +66,7 @@ def _no_dense(I_l, I_r, d_max):
 
 
 def scene_faults(schedule: list[dict]) -> list[dict]:
-    """The schedule's image/rig faults as scene.rig_sequence faults (a ramped parameter: one segment a frame)."""
+    """The schedule's image/rig faults as corridor.rig_sequence faults (a ramped parameter: one segment a frame)."""
     out = []
     for seg in schedule:
         if seg["kind"] == "imu_dropout":
@@ -118,11 +118,11 @@ def drive_run(schedule: list[dict] | str, monitor: Callable = gt_health_monitor,
     hold)`. Returns {"frames" (T,), "metrics" {pipeline metric but dense stereo's: (T,)}, "stream" (T, M), "names" (M,),
     "table" (M rows), "events" [(t, metric, action)] with t an index into "frames", "alerts" (T, M) bool, "modes" (T,) str, "faults" per frame the active kinds,
     "images" (T, h, w) u8 left images, "schedule"}, T = n_frames - 1."""
-    from graders import scene
+    from graders import corridor
     from .pipeline import run_pipeline
 
     sched = SCHEDULES[schedule] if isinstance(schedule, str) else list(schedule)
-    seq = scene.rig_sequence(np.random.default_rng(seed), n_frames, scene_faults(sched))
+    seq = corridor.rig_sequence(np.random.default_rng(seed), n_frames, scene_faults(sched))
     # dense stereo feeds nothing downstream and is not monitored: skipped (a quarter of the run's time)
     run = run_pipeline(seq, {"stereo": _no_dense, **(stages or {})})
     metrics = {name: v[1:] for name, v in run["metrics"].items() if name not in DENSE_METRICS}

@@ -6,7 +6,7 @@ box of L px, the exposure-time blur) — the firmware lowered the sensor gain an
 the exposure back to the old time (L px of smear at this speed) and the gain up by 1 / gain; the graded answer is the
 measured change, (gain, L).
 
-Problem: the capstone rig (scene.rig_sequence) drives the same stretch twice: the baseline, and today with scene's
+Problem: the capstone rig (corridor.rig_sequence) drives the same stretch twice: the baseline, and today with corridor's
 exposure_drop (gain 0.2-0.6) and motion_blur (length L = 3-15 px) faults on; the learner gets N left images (uint8)
 of each. Stand-in `cv_exposure_change`: for every L, cv2.blur the baseline and fit the gain by least squares; the
 (gain, L) with the smallest residual (16 px off each side border, where the box meets the image edge).
@@ -16,7 +16,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from graders import scene
+from graders import corridor
 from graders.engine import Case, Exercise, Hint, register
 
 
@@ -25,8 +25,8 @@ def exposure_problem(rng: np.random.Generator, n: int = 3) -> dict:
     truth (gain, L)."""
     a = int(rng.integers(0, 16))
     gain, length = rng.uniform(0.2, 0.6), int(rng.integers(3, 16))
-    clean = scene.rig_sequence(rng, a + n)
-    now = scene.rig_sequence(rng, a + n, [{"kind": "exposure_drop", "gain": gain},
+    clean = corridor.rig_sequence(rng, a + n)
+    now = corridor.rig_sequence(rng, a + n, [{"kind": "exposure_drop", "gain": gain},
                                          {"kind": "motion_blur", "length_px": length}])
     return {"before": [f["left"] for f in clean["frames"][a:]], "now": [f["left"] for f in now["frames"][a:]],
             "truth": np.array([gain, float(length)])}

@@ -3,8 +3,8 @@ dense stereo 5 -> 10 % bad, every geometric metric normal. Diagnosis: a feature 
 the same route — the loss sits in one disc. Fix until the lens is cleaned: mask the smudge (features and disparities
 inside it are discarded), so the graded answer is the smudge's centre and radius in px.
 
-Problem: the capstone rig drives the same stretch of corridor twice (scene.rig_sequence): the stored clean run
-(the baseline) and today's run with a smudge (scene's dirty_lens: a blurred, dimmed disc of radius r, soft over its
+Problem: the capstone rig drives the same stretch of corridor twice (corridor.rig_sequence): the stored clean run
+(the baseline) and today's run with a smudge (corridor's dirty_lens: a blurred, dimmed disc of radius r, soft over its
 outer fifth) on the left camera; the learner gets the FAST keypoints (oracles.features.cv_fast, the pipeline's
 detector) of N frames of each. Stand-in `gt_smudge`: 16-px cells whose count fell below 30 % of the baseline's,
 the largest connected blob, its centroid and its equivalent-area radius scaled by 1.1 (the features die inside
@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from graders import scene
+from graders import corridor
 from graders.engine import Case, Exercise, Hint, like, register
 from graders.oracles.features import cv_fast
 
@@ -29,7 +29,7 @@ def smudge_problem(rng: np.random.Generator, n: int = 5, min_hidden: float = 0.0
     no symptom, and nothing to locate it by (fairness sweep: every failure of a correct fit, 5 in 220 seeds, hid
     0.3-2.2 %), so it is drawn again."""
     a = int(rng.integers(1, 16))
-    clean = scene.rig_sequence(rng, a + n)
+    clean = corridor.rig_sequence(rng, a + n)
     before = [cv_fast(f["left"], 20, True) for f in clean["frames"][a:]]
     b = np.concatenate(before)
     for _ in range(50):
@@ -37,7 +37,7 @@ def smudge_problem(rng: np.random.Generator, n: int = 5, min_hidden: float = 0.0
         cx, cy = rng.uniform(r + 8, W - r - 8), rng.uniform(r + 8, H - r - 8)
         if np.mean(np.hypot(b[:, 0] - cx, b[:, 1] - cy) < 0.9 * r) >= min_hidden:
             break
-    dirty = scene.rig_sequence(rng, a + n, [{"kind": "dirty_lens", "start": 0, "stop": a + n, "centre": (cx, cy),
+    dirty = corridor.rig_sequence(rng, a + n, [{"kind": "dirty_lens", "start": 0, "stop": a + n, "centre": (cx, cy),
                                              "radius": r}])
     return {"before": before, "now": [cv_fast(f["left"], 20, True) for f in dirty["frames"][a:]],
             "shape": (H, W), "truth": np.array([cx, cy, r]), "image": dirty["frames"][a]["left"]}

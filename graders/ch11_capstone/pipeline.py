@@ -28,7 +28,7 @@ from typing import Callable
 
 import numpy as np
 
-from graders import scene
+from graders import corridor
 from graders.geometry import so3_log
 from graders.oracles.camera import cv_project
 from graders.oracles.features import cv_fast
@@ -167,7 +167,7 @@ def _dense(st, seq, k, m, mask=None):
 
 def run_pipeline(seq: dict, stages: dict | None = None, frames: tuple[int, int] | None = None,
                  mask: np.ndarray | None = None) -> dict:
-    """Run the pipeline on a `scene.rig_sequence` (frames (a, b): only frames a..b-1 are measured, a >= 1):
+    """Run the pipeline on a `corridor.rig_sequence` (frames (a, b): only frames a..b-1 are measured, a >= 1):
     stages override STANDINS by name; mask (H, W) bool, True = ignore (a dirty lens, the sky): keypoints there
     are discarded and dense stereo is judged outside it. Returns
     {"metrics": {name: (n_frames,) float, NaN where a stage had nothing to measure}, "T_cw": (n, 4, 4)
@@ -196,7 +196,7 @@ def run_pipeline(seq: dict, stages: dict | None = None, frames: tuple[int, int] 
 def fault_sequence(seed: int, kind: str | None, n_frames: int = WINDOW[1], **params) -> dict:
     """The capstone's sequence with one fault of FAULTS (or none) over WINDOW, same seed = same noise."""
     faults = [] if kind is None else [{"kind": kind, "start": WINDOW[0], "stop": WINDOW[1], **FAULTS[kind], **params}]
-    return scene.rig_sequence(np.random.default_rng(seed), n_frames, faults)
+    return corridor.rig_sequence(np.random.default_rng(seed), n_frames, faults)
 
 
 def fault_table(seed: int = 0, kinds=None, stages: dict | None = None) -> dict:

@@ -31,7 +31,7 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from graders import scene
+from graders import corridor
 from graders.oracles.features import cv_fast
 
 from .pipeline import FAULTS, METRICS, STANDINS, _grid_cap, out_of_range, run_pipeline
@@ -65,7 +65,7 @@ def sequence(exercise_id: str | None, seed: int = 0, residual: dict | None = Non
 @lru_cache(maxsize=4)
 def _sequence(exercise_id, seed, residual):
     faults = [] if exercise_id is None else _faults(exercise_id, dict(residual))
-    return scene.rig_sequence(np.random.default_rng(seed), FRAMES[1], faults)
+    return corridor.rig_sequence(np.random.default_rng(seed), FRAMES[1], faults)
 
 
 @lru_cache(maxsize=12)

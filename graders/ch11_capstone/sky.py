@@ -5,7 +5,7 @@ corners on the boundary row of one 320-px frame): they sit on no 3D point, move 
 Fix until the exposure is metered on the ground: mask the sky for every stage, and with it the rows where FAST's
 16-pixel ring (radius 3) still reaches a clipped pixel. The graded answer is the number of top rows to mask.
 
-Problem: the capstone rig (scene.rig_sequence) with scene's saturated_sky fault (the top `rows` fraction of both
+Problem: the capstone rig (corridor.rig_sequence) with corridor's saturated_sky fault (the top `rows` fraction of both
 images bright and clipped), the learner gets N of today's left images (uint8). Truth: sky rows + 3. Stand-in
 `cv_sky_rows`: cv2.threshold at 250, cv2.reduce to the saturated fraction of each row, the leading rows more than
 half saturated, + 3.
@@ -15,7 +15,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from graders import scene
+from graders import corridor
 from graders.engine import Case, Exercise, Hint, register
 from graders.oracles.features import cv_fast
 
@@ -29,7 +29,7 @@ def sky_problem(rng: np.random.Generator, n: int = 3) -> dict:
     pipeline's FAST keypoints (x, y) of the last image (for the notebook's drawing)."""
     a = int(rng.integers(0, 16))
     frac = rng.uniform(0.15, 0.55)
-    seq = scene.rig_sequence(rng, a + n, [{"kind": "saturated_sky", "start": 0, "stop": a + n, "rows": frac}])
+    seq = corridor.rig_sequence(rng, a + n, [{"kind": "saturated_sky", "start": 0, "stop": a + n, "rows": frac}])
     sky = int(frac * H)
     images = [f["left"] for f in seq["frames"][a:]]
     return {"images": images, "sky": sky, "truth": sky + FAST_RADIUS, "keypoints": cv_fast(images[-1], 20, True)}
