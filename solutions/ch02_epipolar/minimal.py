@@ -113,7 +113,11 @@ def _five_point_batch(x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.nd
 def _five_point_rows(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The 5-point solver on the rows of A e = 0 (normalised coordinates): A: (B, N, 9) ->
     (E: (B, 10, 3, 3), valid: (B, 10)), as `_five_point_batch`."""
-    basis = null_space(A, 4).reshape(-1, 4, 3, 3)                 # E0..E3, the 4-D null space
+    return _five_point_basis(null_space(A, 4).reshape(-1, 4, 3, 3))   # E0..E3, the 4-D null space
+
+
+def _five_point_basis(basis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The 5-point solver on the null space basis E0..E3: (B, 4, 3, 3) -> (E, valid) as above."""
     # E as a 3 x 3 matrix of linear polynomials: coefficients over (x, y, z, 1), shape (B, 3, 3, 4)
     Ep = np.moveaxis(basis, 1, -1)
     B = len(Ep)
@@ -170,18 +174,18 @@ def _polish(E: np.ndarray, basis: np.ndarray, steps: int = 2) -> np.ndarray:
     E = x E0 + y E1 + z E2 + E3. The action matrix's eigenvectors give a root to ~1e-6 only when
     its eigenvalues crowd (seen: tr constraint 1.2e-6 where OpenCV's root has 1e-14); two steps
     bring it to machine precision. A step is kept only if it lowers the residual."""
+    def E_at(xyz):
+        return np.tensordot(xyz, basis[:3], 1) + basis[3]
     c = basis.reshape(4, 9) @ E.ravel()                           # E's coordinates (orthonormal basis)
     xyz = c[:3] / c[3]
-    best = xyz @ basis[:3].reshape(3, 9) + basis[3].ravel()
-    g, J = _constraints(best.reshape(3, 3), basis[:3])
+    g, J = _constraints(E_at(xyz), basis[:3])
     for _ in range(steps):
         trial = xyz - np.linalg.lstsq(J, g, rcond=None)[0]
-        E_t = (trial @ basis[:3].reshape(3, 9) + basis[3].ravel()).reshape(3, 3)
-        g_t, J_t = _constraints(E_t, basis[:3])
+        g_t, J_t = _constraints(E_at(trial), basis[:3])
         if np.linalg.norm(g_t) >= np.linalg.norm(g):
             break
-        xyz, g, J, best = trial, g_t, J_t, E_t
-    return unit(best.reshape(3, 3))
+        xyz, g, J = trial, g_t, J_t
+    return unit(E_at(xyz))
 
 
 def five_point(x1: np.ndarray, x2: np.ndarray) -> list[np.ndarray]:
@@ -193,7 +197,7 @@ def five_point(x1: np.ndarray, x2: np.ndarray) -> list[np.ndarray]:
     refitted on their inliers anyway.
     """
     A = epipolar_rows(np.asarray(x1, float)[None], np.asarray(x2, float)[None])
-    E, ok = _five_point_rows(A)
-    basis = null_space(A, 4)[0].reshape(4, 3, 3)                  # the same basis _five_point_rows used
-    return [_polish(e, basis) for e, good in zip(E[0], ok[0]) if good]
+    basis = null_space(A, 4).reshape(1, 4, 3, 3)                  # E0..E3, the 4-D null space
+    E, ok = _five_point_basis(basis)
+    return [_polish(e, basis[0]) for e, good in zip(E[0], ok[0]) if good]
 
