@@ -208,11 +208,22 @@ def _cases_F(rng) -> list[Case]:
     out = [_ransac_case(f"F, 500 matches, 30 % outliers: 1 − inlier F1 (USAC_MAGSAC: {1 - f1_cv:.3f})", pF,
                         lambda o, e: 1.0 - inlier_f1(o[1], e["is_outlier"]), (1 - f1_cv) + 0.03, "", exp,
                         key="F-inlier-f1")]
-    # The same F on held-out matches: 1.3 x USAC_MAGSAC's + 0.05 px.
+    # The same F on held-out matches, against the better of two anchors: USAC_MAGSAC's error, and
+    # the error of this problem's own refit (8-point) on the matches the true F puts within the
+    # threshold — a learner's model can be no better than that refit, while USAC_MAGSAC polishes its
+    # F by a weighted nonlinear fit the callbacks do not offer (on 2,000 seeds it is 0.55-2.8x the
+    # refit's error). Both are ~0.02-0.24 px estimates from ~340 noisy matches, so one lucky anchor
+    # is no bar: against 1.3 x USAC_MAGSAC's alone the reference lost this case on 2 seeds in 519
+    # (1677648531: 0.126 px vs 0.121). Tolerance 2 x the larger anchor + 0.05 px: the reference
+    # reaches at most 0.76 of it on seeds 0-1999; a model from a minimal sample without local
+    # optimisation (0.14-3 px, median 0.55) is over it on 98.9 % of them.
     err_cv = sampson_rms_px(F_cv[:3], *s["held_out"])
-    out.append(_ransac_case(f"F: held-out Sampson RMS (USAC_MAGSAC: {err_cv:.3f} px)", pF,
-                            lambda o, e: sampson_rms_px(o[0].reshape(3, 3), *e["held_out"]), 1.3 * err_cv + 0.05,
-                            "px", exp, key="F-held-out"))
+    F_fit = pF["refit"](gt_sampson(s["F"], s["x1"], s["x2"]).ravel() < pF["threshold"])
+    err_fit = sampson_rms_px(F_fit, *s["held_out"])
+    out.append(_ransac_case(f"F: held-out Sampson RMS (USAC_MAGSAC: {err_cv:.3f} px, 8-point on the true "
+                            f"inliers: {err_fit:.3f} px)", pF,
+                            lambda o, e: sampson_rms_px(o[0].reshape(3, 3), *e["held_out"]),
+                            2 * max(err_cv, err_fit) + 0.05, "px", exp, key="F-held-out"))
     return out
 
 
