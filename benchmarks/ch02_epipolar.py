@@ -6,9 +6,10 @@ Graffiti pair graf1 -> graf3 (SIFT, ratio test 0.85, about half the matches wron
 published homography, fifteen RANSAC seeds; threshold 2 px on the transfer error. (H is bimodal on
 this pair: a competing structure — 83 matches in the bottom-left corner that sit 4-8 px off the
 published H — is a local optimum of the MSAC cost 6 % above the right one and 2.2 px off on the wall.
-The reference settled on it in ~1 run in 4 until its inner RANSAC drew 24 subsets of 6 inliers
-instead of 5 of 12: 12 matches rarely avoid the 83 (~2 %), 6 do ~17 % of the time; now ~3 runs in 100
-(31 of seeds 0-999; seeds 0-99 alone showed 0-3, so "1 in 100" on those was luck). "runs over 1.5 px"
+The reference settled on it in ~1 run in 4 until its inner RANSAC drew subsets of 6 inliers
+instead of 5 of 12: 12 matches rarely avoid the 83 (~2 %), 6 do ~17 % of the time; with 24 such
+subsets ~3 runs in 100 (26-31 of seeds 0-999), with 32 subsets after one batch of 128 samples 19 of
+seeds 0-999 (seeds 0-99 alone showed 0-3, so "1 in 100" on those was luck). "runs over 1.5 px"
 counts them.) Accuracy: rotation error (°), inlier F1 against
 the planted outliers (for graf: against the matches within 3 px of the true H), held-out Sampson
 or transfer error (px); time: median wall time per call over the scenes; ratio = reference time /

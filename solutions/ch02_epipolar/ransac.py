@@ -223,24 +223,27 @@ def ransac(n: int, sample_size: int, solve: Callable, residuals: Callable, thres
 
 # The estimators' options for `ransac` (issue 20, measured on the benchmark's scenes): the batched
 # inner RANSAC and preemptive scoring on 64 points halve F's and E's CPU time at the same accuracy;
-# a chain that reaches the best model's inliers stops (most later chains on F do). F and H need
-# ~70-110 samples at the benchmark's inlier ratios: batches of 64 take 2 passes of the loop instead
-# of 3-4 (fewer superseded chains), with the same accuracy (F: 30 scenes; H: runs over 1.5 px 31
-# in 1000 seeds; with 32-sample batches 31, and 29 before this round of changes). E needs ~25-35 samples
-# and keeps batches of 32: its 5-point solves are the expensive part.
-# For H the inner RANSAC draws 24 subsets of 6 inliers instead of 5 of 12, after a shorter chain
+# a chain that reaches the best model's inliers stops (most later chains on F do). E needs ~25-35
+# samples and keeps batches of 32: its 5-point solves are the expensive part.
+# F (~70-110 samples at the benchmark's inlier ratio) takes batches of 64, 2 passes of the loop
+# instead of 3-4, and keeps the chain and the polish but no inner RANSAC: on the F scenes (one
+# structure) it never moves the model out of its basin. 300 scenes: held-out Sampson RMS 0.0872 px
+# without it, 0.0869 with it (p95 0.132 vs 0.133), inlier F1 0.976 both; 29 % less CPU time.
+# For H the inner RANSAC draws 32 subsets of 6 inliers instead of 5 of 12, after a shorter chain
 # (2, 1 x threshold): on the Graffiti pair 12 matches rarely avoid the 83 of a competing structure
-# (~2 % of subsets), 6 do ~17 % of the time. The inner RANSAC is what leaves that structure: with
-# 16 or 12 subsets, 6 % or 10 % of 1000 seeds end on it (2.2 px off), with 24 3 %. Its models are
-# scored on the matches within 3 x threshold (6 px) of the best model only, ~60 % of them: same runs
-# over 1.5 px (27 of 1000 seeds, 28 on all matches), ~7 % less CPU time. A band of 2 x threshold
-# misses wall matches 4-6 px off a model on the competing structure: 56 of 1000 seeds end on it.
-# The inner RANSAC's winner is already a refit on its own inliers: one polish refit after it (not up
-# to 5) gives the same accuracy (26 of 1000 seeds over 1.5 px, median 0.501 px) for ~3 % less time.
-# (The polish after the chain stays: without it fewer chains reach the inner RANSAC, 43 of 1000.)
+# (~2 % of subsets), 6 do ~17 % of the time. The inner RANSAC is what leaves that structure. Its
+# models are scored on the matches within 3 x threshold (6 px) of the best model only, ~60 % of
+# them: same accuracy, ~7 % less CPU time (a band of 2 x threshold misses wall matches 4-6 px off
+# a model on the competing structure: 56 of 1000 seeds end on it). H draws its ~70-110 samples in
+# one batch of 128: one pass of the loop, so mostly one chain and one inner RANSAC a run, and the
+# time saved pays for more inner subsets (32) and up to 3 polish refits after them. 1000 seeds on
+# the Graffiti pair, runs over 1.5 px / median / CPU time: 19 / 0.498 px / 0.87x, against 26 /
+# 0.501 px / 1x with batches of 64, 24 subsets and one polish refit (with 128 and 24: 39 / 0.510
+# px / 0.81x). (The polish after the chain stays: without it fewer chains reach the inner
+# RANSAC, 43 of 1000.)
 FAST = dict(batched_refit=True, preview=64, lo_stop_known=True)
-FAST_FH = dict(batch=64)
-FAST_H = dict(lo_subset=6, lo_inner=24, lo_scales=(2.0, 1.0), lo_band=3.0, lo_polish_inner=1)
+FAST_F = dict(batch=64, lo_inner=0)
+FAST_H = dict(batch=128, lo_subset=6, lo_inner=32, lo_scales=(2.0, 1.0), lo_band=3.0, lo_polish_inner=3)
 
 
 _UPPER = np.triu_indices(9)                      # AᵀA is symmetric: 45 distinct entries of 81
@@ -319,7 +322,7 @@ def ransac_fundamental(x1: np.ndarray, x2: np.ndarray, threshold: float = 1.0, c
         return sampson_h(F, x1h[idx], x2h[idx])
 
     return ransac(len(x1), s, solve, residuals, threshold, refit=refit, confidence=confidence,
-                  max_iters=max_iters, rng=rng, **{**FAST, **FAST_FH, **options})
+                  max_iters=max_iters, rng=rng, **{**FAST, **FAST_F, **options})
 
 
 def to_normalised(x: np.ndarray, K: np.ndarray) -> np.ndarray:
@@ -477,5 +480,5 @@ def ransac_homography(x1: np.ndarray, x2: np.ndarray, threshold: float = 2.0, co
         return transfer_h(to_px * Hn, n1h[idx], x2c[idx])
 
     Hn, inliers = ransac(len(x1), 4, solve, residuals, threshold, refit=refit,
-                         confidence=confidence, max_iters=max_iters, rng=rng, **{**FAST, **FAST_FH, **FAST_H, **options})
+                         confidence=confidence, max_iters=max_iters, rng=rng, **{**FAST, **FAST_H, **options})
     return (None if Hn is None else denormalise_homography(Hn, T1, T2)), inliers
