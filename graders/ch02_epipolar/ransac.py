@@ -208,7 +208,7 @@ def _cases_F(rng) -> list[Case]:
     out = [_ransac_case(f"F, 500 matches, 30 % outliers: 1 − inlier F1 (USAC_MAGSAC: {1 - f1_cv:.3f})", pF,
                         lambda o, e: 1.0 - inlier_f1(o[1], e["is_outlier"]), (1 - f1_cv) + 0.03, "", exp,
                         key="F-inlier-f1")]
-    # The same F on held-out matches, against the better of two anchors: USAC_MAGSAC's error, and
+    # The same F on held-out matches, against the larger of two anchors: USAC_MAGSAC's error, and
     # the error of this problem's own refit (8-point) on the matches the true F puts within the
     # threshold — a learner's model can be no better than that refit, while USAC_MAGSAC polishes its
     # F by a weighted nonlinear fit the callbacks do not offer (on 2,000 seeds it is 0.55-2.8x the
