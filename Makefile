@@ -37,4 +37,4 @@ fetch-data: install
 	$(BIN)/python -m graders.datasets fetch --all
 
 clean-notebooks: install
-	$(BIN)/python -m graders.notebook_tools strip notebooks/*.ipynb
+	$(BIN)/python -m tools.notebook_tools strip notebooks/*.ipynb

@@ -22,11 +22,11 @@ _notebook_seconds: dict[str, float] = defaultdict(float)
 
 
 def pytest_ignore_collect(collection_path, config):
-    """A planned chapter's notebook (ready=False in graders/chapters.py) is work in progress: nbval
+    """A planned chapter's notebook (ready=False in graders/core/chapters.py) is work in progress: nbval
     skips it, as the chapter tests do, until its row says ready."""
     if collection_path.suffix != ".ipynb":
         return None
-    from graders.chapters import CHAPTERS
+    from graders.core.chapters import CHAPTERS
     planned = {c.notebook.split("/")[-1] for c in CHAPTERS if not c.ready}
     return True if collection_path.name in planned else None
 

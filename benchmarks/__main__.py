@@ -3,7 +3,7 @@ with the library it is compared against, in one run."""
 import argparse
 import importlib
 
-from graders.chapters import READY
+from graders.core.chapters import READY
 
 ap = argparse.ArgumentParser(prog="python -m benchmarks")
 ap.add_argument("chapters", nargs="*", help="chapter numbers, e.g. 1 or 01; default: all")

@@ -10,8 +10,8 @@ import numpy as np
 
 from benchmarks.timing import median_time, table
 from graders import ch01_camera_models as ch1
-from graders import scene
-from graders.compare import max_angle_deg, max_distance
+from graders.kit import scene
+from graders.core.compare import max_angle_deg, max_distance
 import solutions.ch01_camera_models as ref
 
 N = 100_000

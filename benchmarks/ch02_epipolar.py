@@ -33,8 +33,8 @@ import time
 
 from benchmarks.timing import table
 from graders import ch02_epipolar as ch2
-from graders import datasets
-from graders.compare import max_angle_deg, rotation_angle_deg, sampson_rms_px
+from graders.kit import datasets
+from graders.core.compare import max_angle_deg, rotation_angle_deg, sampson_rms_px
 import solutions.ch02_epipolar as ref
 
 N, OUTLIERS, NOISE, SCENES, H_SEEDS = 500, 0.3, 0.5, 5, 15

@@ -18,7 +18,7 @@ import numpy as np
 
 from benchmarks.timing import median_time, table
 from graders import ch03_features as ch3
-from graders import datasets, scene
+from graders.kit import datasets, scene
 from solutions import ch03_features as ref
 
 N_FEATURES = 1000

@@ -140,7 +140,7 @@ def focal_errors(cams: dict, f_true: float) -> tuple[float, float]:
 
 def run_set(name: str) -> list[dict]:
     """Both pipelines on one photo set, side by side; prints the table and the goals, returns the rows."""
-    from graders import datasets
+    from graders.kit import datasets
 
     if not datasets.available(name):
         print(f"{SETS[name]} photos not available: python -m graders.datasets fetch {name} (or set COURSE_DATA)")

@@ -153,7 +153,7 @@ def _run_isolated(name: str):
 
 def run() -> list[dict]:
     from graders import ch05_bundle_adjustment as ch5
-    from graders import datasets
+    from graders.kit import datasets
 
     if not datasets.available("bal"):
         print("BAL data not available: python -m graders.datasets fetch bal (or set COURSE_DATA)")

@@ -73,7 +73,7 @@ def _run(name: str, graph: str):
 
 def pose_graph_table() -> str:
     from graders import ch06_slam as ch6
-    from graders import datasets
+    from graders.kit import datasets
     if not datasets.available("posegraph"):
         return "pose_graph_table: pose graphs not available (python -m graders.datasets fetch posegraph)"
     rows = []
@@ -113,7 +113,7 @@ def trajectory_table() -> str:
     estimate vs its ground truth, side by side: the figures (must agree to 1e-6 m) and the time per
     evaluation (association + alignment + metrics; evo's through its PoseTrajectory3D objects)."""
     from benchmarks.timing import median_time, table
-    from graders import datasets
+    from graders.kit import datasets
     from graders.ch06_slam import evo_trajectory_errors, load_tum_pair
     from solutions.ch06_slam import trajectory_errors
 

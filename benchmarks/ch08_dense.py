@@ -98,11 +98,12 @@ def _brute_torch(m, cn, col, o, d, W, H):
 def neural_rows(repeat: int = 3) -> list[dict]:
     import numpy as np
     import torch
-    from graders.ch08_dense import (initial_gaussians, psnr, render_splats, single_thread, splat_batch,
+    from graders.kit.threads import torch_threads
+    from graders.ch08_dense import (initial_gaussians, psnr, render_splats, splat_batch,
                                     target_image)
     from solutions.ch08_dense import fit_splats, rasterize
     rows = []
-    with single_thread():
+    with torch_threads(1):
         target = target_image(np.random.default_rng(0))
         init = initial_gaussians(*target.shape[:2])
         fitted, s = _best_time(lambda: fit_splats(target, init, 150, 64), repeat)
@@ -148,7 +149,8 @@ def nerf_rows(repeat: int = 3, steps: int = 400) -> list[dict]:
     (the same network and schedule, its own inline quadrature) on one scene: held-out PSNR (the grader's
     renderer, 64 samples, exact quadrature, 2 views) per CPU second, and ms per training step."""
     import numpy as np
-    from graders.ch08_dense import gt_train_tiny_nerf, nerf_scene, psnr, render_field, single_thread
+    from graders.kit.threads import torch_threads
+    from graders.ch08_dense import gt_train_tiny_nerf, nerf_scene, psnr, render_field
     from solutions.ch08_dense import train_tiny_nerf
     sc = nerf_scene(np.random.default_rng(0))
     O, D, _ = sc["test"]
@@ -156,7 +158,7 @@ def nerf_rows(repeat: int = 3, steps: int = 400) -> list[dict]:
     for name, trainer in (("8.13 tiny NeRF, ours (through volume_render)", train_tiny_nerf),
                           ("plain-torch baseline (grader's stand-in)", gt_train_tiny_nerf)):
         def run(trainer=trainer):
-            with single_thread():     # as the grader runs it: torch's thread pool spins on a busy machine
+            with torch_threads(1):     # as the grader runs it: torch's thread pool spins on a busy machine
                 return trainer(*sc["train"], sc["near"], sc["far"], steps, seed=0)
         field, s = _cpu(run, repeat)
         p = psnr(render_field(field, O.reshape(-1, 3), D.reshape(-1, 3), sc["near"], sc["far"]),

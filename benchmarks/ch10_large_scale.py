@@ -54,7 +54,7 @@ def merge() -> list[dict]:
     import pycolmap
 
     from graders import ch10_large_scale as ch10
-    from graders.compare import rotation_angle_deg
+    from graders.core.compare import rotation_angle_deg
     from solutions.ch10_large_scale import merge_reconstructions, sim3_ransac
 
     rows = []
@@ -101,7 +101,7 @@ def merge() -> list[dict]:
         opts = pycolmap.RANSACOptions()
         opts.max_error = 0.5 * float(np.median(np.linalg.norm(Xa - Xa.mean(0), axis=1)))
         sc = pycolmap.estimate_sim3d_robust(Xb, Xa, opts)["tgt_from_src"]
-        from graders.geometry import umeyama
+        from graders.kit.geometry import umeyama
         su = umeyama(Xb, Xa)
         for name, (e, dt) in res.items():
             mrows.append({"shared": n_shared, "merge": name, "centres mm": f"{1e3 * e[0]:.1f}", "points mm": f"{1e3 * e[1]:.1f}",

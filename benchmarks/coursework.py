@@ -47,18 +47,18 @@ HOSTILE = {   # name -> body of the attacked function (the exercise is the chapt
                   "    raise RuntimeError('no expected in reach')",
     "patch_numpy": "import numpy as np\n    np.linalg.norm = lambda *a, **k: 0.0\n    np.max = lambda *a, **k: 0.0\n"
                    "    return np.zeros((len(args[0]), 2))",
-    "patch_grader": "import graders.engine as e\n    e.grade = lambda *a, **k: None\n"
+    "patch_grader": "import graders.core.engine as e\n    e.grade = lambda *a, **k: None\n"
                     "    e._judge_case = lambda *a, **k: None\n    return None",
 }
 
 
 def _chapters(numbers):
-    from graders.chapters import by_number
+    from graders.core.chapters import by_number
     return [by_number(n) for n in numbers]
 
 
 def _first_code(ch):
-    from graders.engine import chapter
+    from graders.core.engine import chapter
     return next(ex for ex in chapter(ch.key) if ex.kind == "code")
 
 
@@ -99,7 +99,7 @@ def build(out: Path, numbers, per_chapter: int, seed: int = 0) -> dict[str, dict
             nbformat.write(_with_stub(ch, target.name, src), out / f"{sid}.ipynb")
             plan[sid] = {"chapter": ch.number, "category": "hostile", "exercise": target.id}
         picks = rng.sample(catalogue, min(len(catalogue), max(per_chapter - 1 - len(HOSTILE), 0)))
-        from graders.engine import get
+        from graders.core.engine import get
         for exercise_id, short, fn in picks:
             name = get(exercise_id).name
             sid = f"{ch.prefix}-mutant-{exercise_id}-{short}".replace(" ", "_").replace("/", "_")[:90]

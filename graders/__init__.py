@@ -23,8 +23,8 @@ _os.environ.setdefault("GLOG_minloglevel", "2")
 if "pycolmap" in _sys.modules:   # loaded before the graders: its flag was read already
     _sys.modules["pycolmap"].logging.minloglevel = int(_os.environ["GLOG_minloglevel"])
 
-from .engine import Case, Exercise, Hint, chapter, get, grade, like, raised
-from .report import ExerciseResult
+from .core.engine import Case, Exercise, Hint, chapter, get, grade, like, raised
+from .core.report import ExerciseResult
 
 __all__ = ["check", "use", "answer_key", "Case", "Exercise", "Hint", "chapter", "get", "grade", "like", "raised"]
 
@@ -44,9 +44,9 @@ def check(exercise_id: str, attempt: Any, seed: int | None = None) -> ExerciseRe
 
 
 def _record(result: ExerciseResult) -> None:
-    """Append this check to the learner's progress file (see graders.progress); never raises."""
+    """Append this check to the learner's progress file (see graders.study.progress); never raises."""
     try:
-        from .progress import record_result
+        from .study.progress import record_result
         record_result(result, source="check")
     except Exception as exc:   # progress is a convenience: a check must never fail because of it
         import warnings

@@ -13,7 +13,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from graders import grade
-from graders.engine import Exercise
+from graders.core.engine import Exercise
 
 
 def show(result) -> str:

@@ -12,9 +12,10 @@ import pytest
 
 import grader_checks as checks
 import solutions.ch01_camera_models as ref
-from graders import chapter, get, scene
+from graders import chapter, get
+from graders.kit import scene
 from graders import ch01_camera_models as ch1
-from graders.geometry import angle_between_deg
+from graders.kit.geometry import angle_between_deg
 from mutants.ch01_camera_models import MUTANTS
 
 SEEDS = [0, 1, 2]

@@ -2,7 +2,7 @@
 
 Seeds are fixed so a failure here is reproducible; the graders themselves draw fresh seeds for
 learners. Three seeds per exercise: the hidden-case generators are random, and a grader that only
-works for a lucky draw is a bug. Also tests the two helpers this chapter added to graders.compare
+works for a lucky draw is a bug. Also tests the two helpers this chapter added to graders.core.compare
 (`sampson_rms_px`, `unordered`) and the engine's `Case.call` hook.
 """
 from __future__ import annotations
@@ -17,8 +17,8 @@ import grader_checks as checks
 import solutions.ch02_epipolar as ref
 from graders import ch02_epipolar as ch2
 from graders import chapter, get, grade
-from graders.compare import rotation_angle_deg, sampson_rms_px, unordered, up_to_scale
-from graders.engine import Case, Exercise
+from graders.core.compare import rotation_angle_deg, sampson_rms_px, unordered, up_to_scale
+from graders.core.engine import Case, Exercise
 from mutants.ch02_epipolar import MUTANTS
 
 SEEDS = [0, 1, 2]

@@ -19,9 +19,9 @@ import solutions.ch04_sfm as REF
 from graders import ch04_sfm as ch4
 from graders import chapter, get, grade
 from graders.ch04_sfm.debug import _metric_traj
-from graders.compare import rotation_angle_deg
-from graders import scene
-from graders.geometry import to_h, umeyama
+from graders.core.compare import rotation_angle_deg
+from graders.kit import scene
+from graders.kit.geometry import to_h, umeyama
 from graders.oracles.colmap import colmap_K
 from mutants.ch04_sfm import MUTANTS
 
@@ -325,7 +325,7 @@ def test_frontier_reference_recovers_the_pose_from_pointmaps():
 # ----------------------------------------------------------------- 4.14 with K unknown and on real photos
 
 def _need_sacre_coeur():
-    from graders import datasets
+    from graders.kit import datasets
     try:
         datasets.path("sacre_coeur")
     except datasets.DatasetMissing as exc:
@@ -363,7 +363,7 @@ def _rows_tagged(result, ex, seed, tag):
 
 def _n_photo_rows():
     """4 rows for the Sacré-Cœur (registered, reprojection, rotations median and max), 5 for Sceaux Castle (+ focal)."""
-    from graders import datasets
+    from graders.kit import datasets
     return 4 * datasets.available("sacre_coeur") + 5 * datasets.available("sceaux_castle")
 
 
@@ -377,7 +377,7 @@ def test_real_photo_rows_pass_for_reference_and_stand_in():
 
 
 def _need_sceaux():
-    from graders import datasets
+    from graders.kit import datasets
     try:
         datasets.path("sceaux_castle")
     except datasets.DatasetMissing as exc:

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import grader_checks as checks
-from graders import chapter, datasets, get
+from graders import chapter, get
+from graders.kit import datasets
 from graders import ch05_bundle_adjustment as ch5
 from graders.ch05_bundle_adjustment.common import column_relative
 from mutants.ch05_bundle_adjustment import MUTANTS

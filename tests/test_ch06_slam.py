@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import grader_checks as checks
-from graders import chapter, datasets, get
+from graders import chapter, get
+from graders.kit import datasets
 from graders import ch06_slam as ch6
 from mutants.ch06_slam import MUTANTS
 from solutions import ch06_slam as slam

@@ -1,7 +1,7 @@
 """Chapter 11, part B's pipeline: it runs the course's own stages (graders.oracles, one copy each), a clean run
 is healthy, and each injected fault moves the metrics of the stage it hits (the fault x stage table).
 
-Not skipped while chapter 11 is planned: the pipeline and graders/corridor.py's faulted sequence are shared code
+Not skipped while chapter 11 is planned: the pipeline and graders/kit/corridor.py's faulted sequence are shared code
 that CI should hold to this now. One seed, fixed (the table is deterministic for a seed: the images' noise
 comes from it and OpenCV's RANSAC is seeded); the margins below were measured on seeds 0-3 (see each).
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from graders import corridor, scene
+from graders.kit import corridor, scene
 from graders.ch11_capstone import pipeline as P
 from graders.oracles import camera, features, flow, stereo, two_view
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from graders.chapters import CHAPTERS, READY, by_number, readme_table
+from graders.core.chapters import CHAPTERS, READY, by_number, readme_table
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -33,7 +33,7 @@ def test_no_stray_chapter_files():
     stray = {f for f in found if not any(f == s or f.startswith(s + "_") for s in stems)}
     assert not stray, stray
     # Every ready chapter has its notebook; a planned chapter may have one in progress (not run by the tests).
-    # notebooks/00_start_here.ipynb is the course home (graders/home.py), not a chapter
+    # notebooks/00_start_here.ipynb is the course home (graders/study/home.py), not a chapter
     notebooks = {p.name for p in (ROOT / "notebooks").glob("[0-9][0-9]_*.ipynb")} - {"00_start_here.ipynb"}
     assert {c.notebook.split("/")[1] for c in READY} <= notebooks <= {c.notebook.split("/")[1] for c in CHAPTERS}
 

@@ -1,4 +1,4 @@
-"""graders.datasets: the manifest matches the real files, a missing dataset explains itself, and
+"""graders.kit.datasets: the manifest matches the real files, a missing dataset explains itself, and
 fetch checks sha256 (tested offline with file:// URLs)."""
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from graders import datasets
+from graders.kit import datasets
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -14,10 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from graders import Case, Exercise, drill, progress, srs
-from graders.cards import Card, deck, export_anki, grade
-from graders.compare import max_abs
-from graders.reference import CORRECTIONS, TABLES, pipeline_numbers, reference_cards
+from graders import Case, Exercise
+from graders.study import commands, drill, progress, srs
+from graders.study.cards import Card, grade
+from graders.study.deck import deck, export_anki
+from graders.core.compare import max_abs
+from graders.study.reference import CORRECTIONS, TABLES, pipeline_numbers, reference_cards
 
 # The course's source text, outside the repo: ../shared beside the checkout (as in CI and the workplace).
 SEED_LESSON = Path(__file__).resolve().parents[2] / "shared" / "seed" / "000_222a4a16e5d953e6.txt"
@@ -82,9 +84,9 @@ def test_only_code_exercises_are_drills(store):
 
 
 def test_drill_command_picks_by_chapter_and_refuses_unknown_ids_in_one_line(store, capsys):
-    assert drill.main(["3"]) == 0 and "Drill 3." in capsys.readouterr().out        # a chapter: one of its drills
+    assert commands.main(["3"]) == 0 and "Drill 3." in capsys.readouterr().out        # a chapter: one of its drills
     for argv, says in ((["1.x"], "no exercise '1.x'"), (["2.1"], "not a CODE exercise"), (["42"], "chapter '42'")):
-        assert drill.main(argv) == 2
+        assert commands.main(argv) == 2
         err = capsys.readouterr().err
         assert says in err and "Traceback" not in err, err
 
@@ -258,7 +260,7 @@ def test_wrong_lesson_numbers_are_corrected_and_said_so():
 
 
 # The lesson's advice that the course's chapters refute: card id -> (the lesson's cell, a phrase the right answer
-# carries, the chapter exercise that shows it). Written out here, apart from graders.reference.CORRECTIONS, so a
+# carries, the chapter exercise that shows it). Written out here, apart from graders.study.reference.CORRECTIONS, so a
 # regeneration of the tables or the cards cannot drop one of these corrections without this test failing.
 CHAPTER_CORRECTIONS = {
     # 02_epipolar, section 3: "'about 1' is not what normalisation achieves; single digits to a few tens is"
@@ -300,8 +302,8 @@ def test_lesson_advice_the_chapters_refute_is_corrected_on_its_card():
 
 
 def test_a_correction_no_card_carries_is_refused(monkeypatch):
-    from graders import reference
-    from graders.reference import Correction
+    from graders.study import reference
+    from graders.study.reference import Correction
     # a correction of the monitoring table: its builder does not read CORRECTIONS, so the deck must refuse it
     monkeypatch.setitem(reference.CORRECTIONS, ("monitoring", 2, 3), Correction("x", "y", "chapter 99"))
     with pytest.raises(ValueError, match="carried by no card"):
@@ -337,7 +339,7 @@ def test_anki_export_reads_back(tmp_path):
 
 
 def test_mock_interview_runs_cards_a_debug_scenario_and_a_drill_then_reports(store):
-    from graders.mock import mock_interview
+    from graders.study.mock import mock_interview
 
     def ask(prompt: str) -> str:
         if prompt.startswith("your rating"):
@@ -359,7 +361,7 @@ def test_mock_interview_runs_cards_a_debug_scenario_and_a_drill_then_reports(sto
 
 
 def test_home_notebook_helpers_show_progress_and_the_tables():
-    from graders import home
+    from graders.study import home
     events = [_attempt("1.5", 4, 4, "passed"), _attempt("1.6", 1, 4, "partial")]
     chapters, kinds, grid = home.progress_grid(events, totals={("1", "code"): (6, 20.0), ("2", "code"): (12, 31.0)})
     assert chapters[0] == "1" and kinds.index("code") == 1
@@ -369,13 +371,13 @@ def test_home_notebook_helpers_show_progress_and_the_tables():
     shelving = home.reference_markdown("symptoms_3")    # a refuted cell is shown corrected, the lesson's in a note
     assert "Tighten ratio test to 0.6" not in shelving.split("[1] Corrected")[0]
     assert "Corrected: the lesson prints “Tighten ratio test to 0.6" in shelving
-    from graders.chapters import CHAPTERS
+    from graders.core.chapters import CHAPTERS
     assert all(c.title in home.course_map() for c in CHAPTERS)
 
 
 def test_a_chapter_adds_cards_as_data_in_its_own_package(monkeypatch):
     import importlib
-    from graders.chapters import READY
+    from graders.core.chapters import READY
     module = importlib.import_module(READY[0].grader)
     extra = Card(id="ch-own-card", prompt="a chapter's own question?", answer="42", kind="choice", options=("41", "42"),
                  source="chapter 1 notebook", chapter=1)

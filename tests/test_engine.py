@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from graders import Case, Exercise, Hint, check, grade, like, use
-from graders.engine import choice_question
-from graders.compare import max_abs, max_distance, up_to_scale, rotation_angle_deg, max_angle_deg
-from graders.sandbox import safe_call
+from graders.core.engine import choice_question
+from graders.core.compare import max_abs, max_distance, up_to_scale, rotation_angle_deg, max_angle_deg
+from graders.core.sandbox import safe_call
 
 
 def _double_cases(rng):
@@ -180,7 +180,7 @@ def test_a_case_generator_that_breaks_is_reported_as_our_error():
 
 
 def test_a_mistake_can_be_recognised_by_the_error_it_causes():
-    from graders.engine import raised
+    from graders.core.engine import raised
 
     ex = Exercise(id="0.6", title="double", name="double", kind="code", points=1, cases=_double_cases, timeout=1.0,
                   hints=[raised(r"LinAlgError", "a singular system: drop the failed points first."),
@@ -252,7 +252,7 @@ def test_case_key_is_stable_and_separate_from_the_display_name():
 
 
 def test_shared_run_runs_the_learner_once_per_draw():
-    from graders.engine import shared_run
+    from graders.core.engine import shared_run
     calls = []
     call = shared_run(lambda fn: fn(3))
 
@@ -269,7 +269,7 @@ def test_shared_run_runs_the_learner_once_per_draw():
 
 
 def test_debug_cases_and_practice():
-    from graders.engine import debug_cases, debug_practice
+    from graders.core.engine import debug_cases, debug_practice
 
     def generator(rng):
         truth = rng.normal(size=3)
@@ -287,7 +287,7 @@ def test_debug_cases_and_practice():
 
 
 def test_converters_say_what_is_wrong():
-    from graders.convert import OutputError, as_mask, as_points, as_sim3
+    from graders.core.convert import OutputError, as_mask, as_points, as_sim3
     with pytest.raises(OutputError, match="homogeneous"):
         as_points(np.ones((4, 4)), 4)
     assert as_mask([0, 1, 1], 3).dtype == bool
@@ -314,7 +314,7 @@ def test_a_numpy_tolerance_still_gives_a_json_result():
 
 def test_the_time_limit_counts_cpu_time_and_the_wall_clock_stops_waiting():
     import time as _time
-    from graders.sandbox import WALL_FACTOR
+    from graders.core.sandbox import WALL_FACTOR
 
     def spin():
         while True:

@@ -1,4 +1,4 @@
-"""The shared primitives (graders.geometry for the judges, solutions.geometry for the references)
+"""The shared primitives (graders.kit.geometry for the judges, solutions.geometry for the references)
 against OpenCV and scipy, and against each other — written once, trusted everywhere."""
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from graders import geometry as g
+from graders.kit import geometry as g
 from solutions import geometry as s
 
 RNG = np.random.default_rng(7)

@@ -12,8 +12,8 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from graders.chapters import READY
-from graders.isolation import sandbox_level
+from graders.core.chapters import READY
+from graders.grading.isolation import sandbox_level
 from test_notebooks import OPENCV_STUBS_CH01, ROOT, _replace_stubs, _solved
 
 CH01 = ROOT / "notebooks" / "01_camera_models.ipynb"
@@ -90,8 +90,8 @@ def project_points(X, K, R, t, dist=None):
     return _steal()
 
 def undistort_points(uv, K, dist):
-    import graders.engine
-    graders.engine.grade = lambda ex, *a, **k: None
+    import graders.core.engine
+    graders.core.engine.grade = lambda ex, *a, **k: None
     return _steal()
 
 def fisheye_project(X_c, K, D):

@@ -15,7 +15,7 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from graders.chapters import READY
+from graders.core.chapters import READY
 from test_notebooks import ROOT, _replace_stubs
 
 MARKER = f"cv3d-hostile-{uuid.uuid4().hex[:8]}"

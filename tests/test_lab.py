@@ -12,7 +12,7 @@ import time
 import urllib.request
 from pathlib import Path
 
-from graders.chapters import READY
+from graders.core.chapters import READY
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -20,7 +20,7 @@ import nbformat
 import pytest
 from nbclient import NotebookClient
 
-from graders.chapters import READY
+from graders.core.chapters import READY
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = [ROOT / c.notebook for c in READY]

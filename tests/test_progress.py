@@ -12,8 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from graders import check, progress
-from graders.report import ExerciseResult
+from graders import check
+
+from graders.study import progress
+from graders.core.report import ExerciseResult
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -77,7 +79,7 @@ def test_an_unwritable_folder_never_fails_a_check(tmp_path, monkeypatch):
 
 def _appender(folder: str, tag: int, n: int) -> None:
     os.environ["CV3D_PROGRESS"] = folder
-    from graders import progress as p
+    from graders.study import progress as p
     for i in range(n):
         # a long line (several KB) makes torn or interleaved writes visible if appends were not atomic
         assert p.append({"event": "attempt", "id": f"{tag}.{i}", "pad": "x" * 3000 * (1 + i % 3)})

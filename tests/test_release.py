@@ -15,8 +15,8 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from graders.chapters import READY
-from graders.release import gradescope_bundle, student_release
+from graders.core.chapters import READY
+from graders.grading.release import gradescope_bundle, student_release
 from test_notebooks import ROOT, _solved
 
 SITE = next(p for p in sys.path if p.endswith("site-packages") and Path(p, "numpy").exists())
@@ -74,7 +74,7 @@ def test_release_installs_in_a_fresh_venv_and_every_notebook_runs(release, tmp_p
     py = str(venv / "bin" / "python")
     subprocess.run([py, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation", "--no-index", "-e", str(release)],
                    check=True, timeout=300, cwd=tmp_path)
-    probe = subprocess.run([py, "-c", "import graders, graders.chapters as c; print(graders.__file__, len(c.READY));"
+    probe = subprocess.run([py, "-c", "import graders, graders.core.chapters as c; print(graders.__file__, len(c.READY));"
                             "import solutions"], capture_output=True, text=True, cwd=tmp_path)
     assert "ModuleNotFoundError: No module named 'solutions'" in probe.stderr, probe.stderr + probe.stdout
     assert probe.stdout.startswith(str(release / "graders")), probe.stdout   # the release, not this checkout

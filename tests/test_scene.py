@@ -1,11 +1,11 @@
-"""graders.scene makes ground truth; these tests check it against OpenCV, not against itself."""
+"""graders.kit.scene makes ground truth; these tests check it against OpenCV, not against itself."""
 from __future__ import annotations
 
 import cv2
 import numpy as np
 import pytest
 
-from graders import scene
+from graders.kit import scene
 
 
 def project(X: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray, dist: np.ndarray | None = None) -> np.ndarray:

@@ -3,8 +3,8 @@ import matplotlib
 import numpy as np
 import pytest
 
-from graders import scene
-from graders.viz3d import frustum_wireframe, show_scene
+from graders.kit import scene
+from graders.kit.viz3d import frustum_wireframe, show_scene
 
 matplotlib.use("Agg")
 

@@ -10,10 +10,10 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from .. import scene
-from ..engine import (Exercise, Hint, OutputError, as_array, as_pose, as_poses, debug_cases, debug_practice, like,
+from graders.kit import scene
+from graders.core.engine import (Exercise, Hint, OutputError, as_array, as_pose, as_poses, debug_cases, debug_practice, like,
                       raised, register)
-from ..geometry import so3_exp, so3_log
+from graders.kit.geometry import so3_exp, so3_log
 from .frames import gt_frame_change
 from ..oracles.camera import cv_project
 
@@ -22,7 +22,7 @@ W, H = 1280, 960
 
 # ---------------------------------------------------------------- broken rigs and their hidden truths
 
-def _board_views(rng, K, width, height):
+def _board_views(rng: np.random.Generator, K, width, height):
     """A 9x6 chessboard (4 cm squares) in nine poses whose centres sit on a 3x3 grid of the image,
     corners included: the coverage a good calibration needs (and the fix for warped edges)."""
     X_board = scene.chessboard(rows=6, cols=9, square=0.04)
@@ -36,7 +36,7 @@ def _board_views(rng, K, width, height):
     return X_board, views
 
 
-def debug_distortion(rng) -> tuple[dict, dict]:
+def debug_distortion(rng: np.random.Generator) -> tuple[dict, dict]:
     """1.11 — edges warped: the calibration file carries another lens's distortion."""
     K = scene.random_intrinsics(rng, width=W, height=H, hfov_deg=(70, 90))
     dist_true = np.array([rng.uniform(-0.35, -0.2), rng.uniform(0.05, 0.12), 0, 0, 0])
@@ -47,7 +47,7 @@ def debug_distortion(rng) -> tuple[dict, dict]:
     return case, {"K": K, "dist": dist_true, "size": (W, H)}
 
 
-def debug_extrinsics(rng) -> tuple[dict, dict]:
+def debug_extrinsics(rng: np.random.Generator) -> tuple[dict, dict]:
     """1.12 — cameras disagree: the right camera's mount moved since calibration."""
     K1 = scene.random_intrinsics(rng, width=W, height=H)
     K2 = scene.random_intrinsics(rng, width=W, height=H)
@@ -60,7 +60,7 @@ def debug_extrinsics(rng) -> tuple[dict, dict]:
     return case, {"K1": K1, "K2": K2, "R": R_true, "t": t_true, "size": (W, H)}
 
 
-def debug_principal_point(rng) -> tuple[dict, dict]:
+def debug_principal_point(rng: np.random.Generator) -> tuple[dict, dict]:
     """1.13 — constant offset: the principal point in the file is wrong."""
     K_true = scene.random_intrinsics(rng, width=W, height=H)
     K_file = K_true.copy()
@@ -72,7 +72,7 @@ def debug_principal_point(rng) -> tuple[dict, dict]:
     return case, {"K": K_true, "size": (W, H)}
 
 
-def debug_frame_convention(rng) -> tuple[dict, dict]:
+def debug_frame_convention(rng: np.random.Generator) -> tuple[dict, dict]:
     """1.14 — mirrored: poses exported by a renderer as camera-to-world in OpenGL's camera frame."""
     K = scene.random_intrinsics(rng, width=W, height=H)
     target = rng.normal(0, 0.3, 3)
@@ -95,7 +95,7 @@ debug_case = debug_practice({"1.11": debug_distortion, "1.12": debug_extrinsics,
 
 # ---------------------------------------------------------------- metrics on held-out points
 
-def _held_out(rng, K, R, t, n, width, height):
+def _held_out(rng: np.random.Generator, K, R, t, n, width, height):
     return scene.random_points_in_view(rng, K, R, t, n, depth=(1.0, 8.0), width=width, height=height)
 
 

@@ -6,10 +6,10 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from .. import datasets, scene
-from ..compare import max_distance
-from ..engine import Case, Exercise, Hint, like, register
-from ..geometry import pixels_to_normalised
+from graders.kit import datasets, scene
+from graders.core.compare import max_distance
+from graders.core.engine import Case, Exercise, Hint, like, register
+from graders.kit.geometry import pixels_to_normalised
 from ..oracles.camera import cv_project, cv_undistort
 
 
@@ -44,7 +44,7 @@ def _in_pixels(fx: float):
     return lambda a, b: fx * max_distance(a, b)
 
 
-def cases_undistort(rng) -> list[Case]:
+def cases_undistort(rng: np.random.Generator) -> list[Case]:
     out = []
     real = real_chessboard_corners()
     if real is not None:

@@ -6,10 +6,10 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from .. import scene
-from ..compare import max_angle_deg, max_distance
-from ..engine import Case, Exercise, OutputError, as_array, like, raised, register
-from ..geometry import kb_theta_d, pixels_to_normalised
+from graders.kit import scene
+from graders.core.compare import max_angle_deg, max_distance
+from graders.core.engine import Case, Exercise, OutputError, as_array, like, raised, register
+from graders.kit.geometry import kb_theta_d, pixels_to_normalised
 from ..oracles.camera import cv_project
 
 
@@ -72,7 +72,7 @@ def _rays(theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
 
 # ---------------------------------------------------------------- 1.7 fisheye_project
 
-def cases_fisheye_project(rng) -> list[Case]:
+def cases_fisheye_project(rng: np.random.Generator) -> list[Case]:
     out = []
     for key, name, theta_max, n in [("60", "within 60°", 60, 100), ("80", "up to 80°", 80, 200),
                                     ("past-90", "beyond 90° (behind the lens plane)", 95, 100)]:
@@ -104,7 +104,7 @@ FISHEYE_PROJECT_HINTS = [
 
 # ---------------------------------------------------------------- 1.8 fisheye_unproject
 
-def _unproject_lens(rng, theta_max_deg: float) -> tuple[np.ndarray, np.ndarray]:
+def _unproject_lens(rng: np.random.Generator, theta_max_deg: float) -> tuple[np.ndarray, np.ndarray]:
     """A fisheye whose θ_d(θ) rises with slope > 0.3 over every angle the taught Newton visits for rays up
     to `theta_max_deg`: from the start θ = θ_d down to the root, i.e. up to max(θ_max, θ_d(θ_max)).
 
@@ -121,7 +121,7 @@ def _unproject_lens(rng, theta_max_deg: float) -> tuple[np.ndarray, np.ndarray]:
     raise RuntimeError(f"no fisheye rising up to the Newton start of a {theta_max_deg}° ray")
 
 
-def cases_fisheye_unproject(rng) -> list[Case]:
+def cases_fisheye_unproject(rng: np.random.Generator) -> list[Case]:
     out = []
     # OpenCV's fisheye.undistortPoints clamps theta_d to 90°, which real lenses reach near
     # theta = 80°: the last case (80°-95°) is beyond what OpenCV can answer.

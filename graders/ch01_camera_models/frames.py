@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..compare import max_abs
-from ..engine import Case, Exercise, Hint, like, register
+from graders.core.compare import max_abs
+from graders.core.engine import Case, Exercise, Hint, like, register
 
 # Camera-body axes of each convention: the physical forward, right and up directions written in
 # that convention's own coordinates. Unreal's frame is left-handed.
@@ -28,7 +28,7 @@ def gt_frame_change(src: str, dst: str) -> np.ndarray:
     return _axes(dst) @ _axes(src).T  # B is orthogonal (det ±1), so its inverse is its transpose
 
 
-def cases_frame_change(rng) -> list[Case]:
+def cases_frame_change(rng: np.random.Generator) -> list[Case]:
     names = list(CONVENTIONS)
     out = []
     for src in names:

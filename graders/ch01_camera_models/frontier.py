@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
-from .. import scene
-from ..engine import Case, Exercise, Hint, like, register
+from graders.kit import scene
+from graders.core.engine import Case, Exercise, Hint, like, register
 
 
 def scipy_fit_focal_k1(X_c: np.ndarray, uv: np.ndarray, cx: float, cy: float, f0: float) -> tuple[float, float]:
@@ -31,7 +31,7 @@ def _model_rms_px(x: np.ndarray):
     return metric
 
 
-def cases_fit_focal_k1(rng) -> list[Case]:
+def cases_fit_focal_k1(rng: np.random.Generator) -> list[Case]:
     out = []
     for i in range(3):
         w, h = 1280, 960

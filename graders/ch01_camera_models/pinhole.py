@@ -3,13 +3,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import scene
-from ..compare import max_distance
-from ..engine import Case, Exercise, like, register
+from graders.kit import scene
+from graders.core.compare import max_distance
+from graders.core.engine import Case, Exercise, like, register
 from ..oracles.camera import cv_project
 
 
-def cases_project_points(rng) -> list[Case]:
+def cases_project_points(rng: np.random.Generator) -> list[Case]:
     out = []
     for key, name, strength, n in [("pinhole", "pinhole, no distortion", None, 50),
                                    ("mild", "mild radial", "mild", 100),

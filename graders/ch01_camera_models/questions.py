@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..compare import max_abs, relative
-from ..engine import numeric_question, register, value_hint
+from graders.core.compare import max_abs, relative
+from graders.core.engine import numeric_question, register, value_hint
 from .frames import gt_frame_change
 
 register(

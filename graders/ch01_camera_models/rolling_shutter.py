@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import scene
-from ..compare import max_distance
-from ..engine import Case, Exercise, Hint, like, register
-from ..geometry import so3_exp, to_camera
+from graders.kit import scene
+from graders.core.compare import max_distance
+from graders.core.engine import Case, Exercise, Hint, like, register
+from graders.kit.geometry import so3_exp, to_camera
 
 
 def _rs_camera_points(tau, X, R, t, omega, v):
@@ -41,7 +41,7 @@ def gt_rolling_shutter(X: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarra
     return np.c_[K[0, 0] * Xc[:, 0] / Xc[:, 2] + K[0, 1] * Xc[:, 1] / Xc[:, 2] + K[0, 2], y]
 
 
-def cases_rolling_shutter(rng) -> list[Case]:
+def cases_rolling_shutter(rng: np.random.Generator) -> list[Case]:
     out = []
     w, h = 1280, 960
     for key, name, rate_deg, speed, readout in [("global", "global shutter (line_time = 0)", 60, 0.5, 0.0),

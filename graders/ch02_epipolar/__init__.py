@@ -29,8 +29,8 @@ The names below are the chapter's public API: the notebook, the tests and the be
 """
 from __future__ import annotations
 
-from ..compare import sampson_rms_px
-from ..geometry import hartley
+from graders.core.compare import sampson_rms_px
+from graders.kit.geometry import hartley
 from . import basics, debug, eight_point, frontier, homography, minimal, pose, questions, ransac  # noqa: F401 (register)
 from .basics import cv_sampson, gt_epipolar_lines
 from .debug import (broken_pose_from_E, brute_force_matches, cv_fix_cheirality, cv_fix_garbage_F, cv_fix_matcher,

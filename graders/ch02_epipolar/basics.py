@@ -5,10 +5,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .. import scene
-from ..compare import max_abs, up_to_scale
-from ..engine import Case, Exercise, Hint, OutputError, as_array, like, register
-from ..geometry import skew, to_h
+from graders.kit import scene
+from graders.core.compare import max_abs, up_to_scale
+from graders.core.engine import Case, Exercise, Hint, OutputError, as_array, like, register
+from graders.kit.geometry import skew, to_h
 from .scenes import gt_essential, gt_fundamental, gt_sampson, two_view
 
 
@@ -26,7 +26,7 @@ def cv_sampson(F: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
 
 # ------------------------------------------------------------ 2.5 skew
 
-def cases_skew(rng) -> list[Case]:
+def cases_skew(rng: np.random.Generator) -> list[Case]:
     out = []
     for key, name, v in [("unit-x", "unit x axis", np.array([1.0, 0.0, 0.0])),
                          ("random", "random vector", rng.normal(size=3)),
@@ -50,13 +50,13 @@ SKEW_HINTS = [
 
 # ------------------------------------------------------------ 2.6 essential_from_Rt
 
-def _random_pose(rng, scale=1.0):
+def _random_pose(rng: np.random.Generator, scale=1.0):
     R = scene.random_rotation(rng)
     t = rng.normal(size=3) * scale
     return R, t
 
 
-def cases_essential(rng) -> list[Case]:
+def cases_essential(rng: np.random.Generator) -> list[Case]:
     out = []
     for key, name, (R, t) in [("worked-example", "R = I, t = (1, 0, 0): the worked example",
                                (np.eye(3), np.array([1.0, 0, 0]))),
@@ -78,7 +78,7 @@ ESSENTIAL_HINTS = [
 
 # ------------------------------------------------------------ 2.7 fundamental_from_essential
 
-def cases_fundamental(rng) -> list[Case]:
+def cases_fundamental(rng: np.random.Generator) -> list[Case]:
     out = []
     for key, name, (w, h), same in [("same-camera", "same camera twice", (1280, 960), True),
                                     ("two-cameras", "two different cameras", (1280, 960), False),
@@ -117,7 +117,7 @@ def _convert_lines(out, case):
     return lines
 
 
-def cases_epipolar_lines(rng) -> list[Case]:
+def cases_epipolar_lines(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, n in [("10 points", 10), ("500 points", 500)]:
         s = two_view(rng, n, held_out=1)
@@ -136,7 +136,7 @@ LINES_HINTS = [
 
 # ------------------------------------------------------------ 2.9 sampson_distance
 
-def cases_sampson(rng) -> list[Case]:
+def cases_sampson(rng: np.random.Generator) -> list[Case]:
     out = []
     for key, name, noise, outl in [("exact", "on the epipolar lines (0 px)", 0.0, 0.0),
                                    ("noise-1px", "1 px noise", 1.0, 0.0),

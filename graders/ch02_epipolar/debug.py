@@ -7,15 +7,15 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..compare import sampson_rms_px
-from ..engine import Case, Exercise, Hint, OutputError, debug_cases, debug_practice, register
+from graders.core.compare import sampson_rms_px
+from graders.core.engine import Case, Exercise, Hint, OutputError, debug_cases, debug_practice, register
 from .eight_point import broken_eight_point, cv_eight_point
 from .pose import cheirality_hints, convert_pose_unit, cv_decompose_essential, cv_recover_pose, pose_error_deg, traps_sprung
 from .scenes import (convert_rank2, depths, design_matrix, matrix33, metric_held_out, null_vector, ok_scale,
                      to_normalised, transfer_px, two_view, unit)
 
 
-def debug_garbage_F(rng) -> tuple[dict, dict]:
+def debug_garbage_F(rng: np.random.Generator) -> tuple[dict, dict]:
     """2.17 — F is garbage: an unnormalised 8-point on a 12 MP camera whose matches sit in one corner."""
     s = two_view(rng, 200, noise=1.0, width=4000, height=3000, hfov_deg=(50, 70),
                  roi=(rng.uniform(2700, 3100), rng.uniform(1900, 2100), 800, 800), held_out=300)
@@ -23,7 +23,7 @@ def debug_garbage_F(rng) -> tuple[dict, dict]:
     return case, {"held_out": s["held_out"], "F": s["F"]}
 
 
-def debug_planar(rng, kind: str | None = None) -> tuple[dict, dict]:
+def debug_planar(rng: np.random.Generator, kind: str | None = None) -> tuple[dict, dict]:
     """2.18 — degenerate F: a planar scene or a pure rotation (H), or a general scene (F)."""
     kind = kind or rng.choice(["plane", "rotation", "general"])
     if kind == "plane":
@@ -36,7 +36,7 @@ def debug_planar(rng, kind: str | None = None) -> tuple[dict, dict]:
     return case, {"kind": "F" if kind == "general" else "H", "H": s["H"], "F": s["F"], "held_out": s["held_out"]}
 
 
-def debug_matcher(rng) -> tuple[dict, dict]:
+def debug_matcher(rng: np.random.Generator) -> tuple[dict, dict]:
     """2.19 — too few inliers: brute-force nearest-neighbour matching on repetitive texture.
 
     Synthetic SIFT-like descriptors (128-D, non-negative, unit length). 300 scene points are seen
@@ -75,7 +75,7 @@ def debug_matcher(rng) -> tuple[dict, dict]:
     return case, {"match": truth[p1], "n_true": 300}
 
 
-def debug_cheirality(rng) -> tuple[dict, dict]:
+def debug_cheirality(rng: np.random.Generator) -> tuple[dict, dict]:
     """2.20 — wrong R, t: a pose picked without a proper cheirality vote. A car-like forward motion
     (the case where the wrong rules fail) with 10 % wrong matches; E from OpenCV's USAC_MAGSAC."""
     for _ in range(100):
@@ -179,7 +179,7 @@ def _metric_matches(m, truth) -> float:
     return float(np.mean(truth["match"][m[:, 0]] != m[:, 1]))
 
 
-def cases_fix_garbage_F(rng) -> list[Case]:
+def cases_fix_garbage_F(rng: np.random.Generator) -> list[Case]:
     out = []
     for i in range(3):
         case, truth = debug_garbage_F(rng)
@@ -191,7 +191,7 @@ def cases_fix_garbage_F(rng) -> list[Case]:
     return out
 
 
-def cases_fix_planar(rng) -> list[Case]:
+def cases_fix_planar(rng: np.random.Generator) -> list[Case]:
     out = []
     for i, kind in enumerate(["plane", "rotation", "general"]):
         case, truth = debug_planar(rng, kind)

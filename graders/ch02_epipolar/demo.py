@@ -15,7 +15,7 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from ..compare import sampson_rms_px
+from graders.core.compare import sampson_rms_px
 from .ransac import _fundamental_problem
 from .scenes import two_view
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..compare import sampson_rms_px
-from ..engine import Case, Exercise, Hint, register
-from ..geometry import hartley
+from graders.core.compare import sampson_rms_px
+from graders.core.engine import Case, Exercise, Hint, register
+from graders.kit.geometry import hartley
 from .scenes import convert_rank2, design_matrix, metric_held_out, null_vector, ok_scale, two_view, unit
 
 
@@ -29,7 +29,7 @@ def broken_eight_point(x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
     return U @ np.diag([S[0], S[1], 0.0]) @ Vt
 
 
-def cases_eight_point(rng) -> list[Case]:
+def cases_eight_point(rng: np.random.Generator) -> list[Case]:
     out = []
     specs = [("exact-8", "exactly 8 points, no noise", dict(n=8)),
              ("noise-100", "100 points, 0.5 px noise", dict(n=100, noise=0.5)),

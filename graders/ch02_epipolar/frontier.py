@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..compare import sampson_rms_px
-from ..engine import Case, Exercise, Hint, register
-from ..geometry import hartley, to_h
+from graders.core.compare import sampson_rms_px
+from graders.core.engine import Case, Exercise, Hint, register
+from graders.kit.geometry import hartley, to_h
 from .eight_point import broken_eight_point, cv_eight_point
 from .scenes import convert_rank2, metric_held_out, null_vector, ok_scale, two_view, unit
 
@@ -55,7 +55,7 @@ def _metric_nearest_solution(F, expected) -> float:
     return min(sampson_rms_px(F, *pairs) for pairs in expected["on_solutions"])
 
 
-def cases_weighted_eight_point(rng) -> list[Case]:
+def cases_weighted_eight_point(rng: np.random.Generator) -> list[Case]:
     out = []
     s = two_view(rng, 300, noise=0.5, outliers=0.4, held_out=300)
     inl = ~s["is_outlier"]

@@ -7,8 +7,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..engine import Case, Exercise, Hint, register
-from ..geometry import hartley, to_h
+from graders.core.engine import Case, Exercise, Hint, register
+from graders.kit.geometry import hartley, to_h
 from .scenes import graf_grid, graf_matches, matrix33, null_vector, rms_transfer, transfer_px, two_view
 
 
@@ -47,7 +47,7 @@ def _convert_H(out, case):
     return matrix33(out, "H")
 
 
-def cases_homography(rng) -> list[Case]:
+def cases_homography(rng: np.random.Generator) -> list[Case]:
     out = []
     # Exact data: 4 points of a plane.
     s = two_view(rng, 4, planar=True, held_out=200)

@@ -10,9 +10,9 @@ from typing import Any, Callable
 import cv2
 import numpy as np
 
-from ..compare import rotation_angle_deg, unordered, up_to_scale
-from ..engine import Case, Exercise, Hint, OutputError, register
-from ..geometry import hartley, to_h
+from graders.core.compare import rotation_angle_deg, unordered, up_to_scale
+from graders.core.engine import Case, Exercise, Hint, OutputError, register
+from graders.kit.geometry import hartley, to_h
 from .pose import colmap_essential, cv_recover_pose
 from .robust import gt_ransac
 from .scenes import design_matrix, gt_sampson, to_normalised, two_view, unit
@@ -90,7 +90,7 @@ def _convert_solutions(what: str, plural: str):
 
 
 
-def _pick_problem(rng, want: Callable[[int], bool], solver: Callable, n: int, normalised: bool,
+def _pick_problem(rng: np.random.Generator, want: Callable[[int], bool], solver: Callable, n: int, normalised: bool,
                   valid: Callable | None = None, **kw):
     """Draw minimal problems until the oracle's number of solutions satisfies `want` and, if given,
     `valid(scene, a, b, solutions)` accepts them."""
@@ -151,7 +151,7 @@ def _well_posed_seven(s) -> list[np.ndarray] | None:
     return gt
 
 
-def cases_seven_point(rng) -> list[Case]:
+def cases_seven_point(rng: np.random.Generator) -> list[Case]:
     out = []
     for key, name, want, kw in [("three-roots", "7 points with 3 real solutions", 3, {}),
                                 ("one-root", "7 points with 1 real solution", 1, {}),
@@ -170,7 +170,7 @@ def cases_seven_point(rng) -> list[Case]:
     return out
 
 
-def cases_five_point(rng) -> list[Case]:
+def cases_five_point(rng: np.random.Generator) -> list[Case]:
     out = []
     for key, name, kw in [("sideways", "5 points, sideways motion", {"motion": "sideways"}),
                           ("general", "5 points, general motion", {}),

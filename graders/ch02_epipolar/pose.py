@@ -6,9 +6,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .. import scene
-from ..compare import max_angle_deg, rotation_angle_deg, unordered
-from ..engine import Case, Exercise, Hint, OutputError, register
+from graders.kit import scene
+from graders.core.compare import max_angle_deg, rotation_angle_deg, unordered
+from graders.core.engine import Case, Exercise, Hint, OutputError, register
 from ..oracles.two_view import cv_recover_pose
 from .scenes import as_pose_nonzero, convert_pose_unit, depths, gt_essential, to_normalised, two_view
 
@@ -67,7 +67,7 @@ def _svd_flips_handedness(E) -> bool:
     return np.linalg.det(U) * np.linalg.det(Vt) < 0
 
 
-def cases_decompose(rng) -> list[Case]:
+def cases_decompose(rng: np.random.Generator) -> list[Case]:
     out = []
     for key, name in [("exact", "E = [t]x R"), ("scaled", "E scaled by −3.7"),
                       ("noisy", "E from noisy matches (singular values not equal)")]:
@@ -146,7 +146,7 @@ def traps_sprung(E, x1, x2, truth, rules=("first", "camera1", "strict")) -> bool
     return all(fails[r] for r in rules)
 
 
-def cases_recover_pose(rng) -> list[Case]:
+def cases_recover_pose(rng: np.random.Generator) -> list[Case]:
     out = []
     # The forward-motion case is drawn so that the three classic wrong rules fail on it; the case
     # with 10 % wrong matches so that "every point in front" and "the first candidate" fail too (a

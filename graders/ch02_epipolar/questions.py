@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..compare import max_abs, relative, up_to_scale
-from ..engine import choice_question, numeric_question, register, value_hint
+from graders.core.compare import max_abs, relative, up_to_scale
+from graders.core.engine import choice_question, numeric_question, register, value_hint
 from .robust import k_samples as _k
 
 

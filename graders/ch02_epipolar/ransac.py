@@ -13,9 +13,9 @@ from typing import Any, Callable, Iterator
 import cv2
 import numpy as np
 
-from ..compare import max_angle_deg, rotation_angle_deg, sampson_rms_px
-from ..engine import Case, Exercise, Hint, OutputError, register
-from ..geometry import to_h
+from graders.core.compare import max_angle_deg, rotation_angle_deg, sampson_rms_px
+from graders.core.engine import Case, Exercise, Hint, OutputError, register
+from graders.kit.geometry import to_h
 from .minimal import cv_five_point
 from .pose import colmap_essential, cv_recover_pose
 from .robust import gt_ransac, k_samples, refine_essential
@@ -165,7 +165,7 @@ def _ransac_case(name, problem, metric, tol, unit_, expected=None, *, key: str, 
                 key=key, tags=tags)
 
 
-def _two_lines(rng):
+def _two_lines(rng: np.random.Generator):
     """A tight line (200 points, 0.2 px) and a looser, larger structure (240 points, 1.2 px) 25 px
     away, plus 60 uniform points, in a 600 x 400 px window. With a 2 px threshold the loose one has
     more inliers (~217 vs 200), but the tight one has the lower MSAC cost (~1,210 vs ~1,330)."""
@@ -195,7 +195,7 @@ def _pose_from_E(o, s):
 
 
 
-def _cases_F(rng) -> list[Case]:
+def _cases_F(rng: np.random.Generator) -> list[Case]:
     # F: 500 matches, 30 % wrong, 0.5 px noise, 1 px threshold on the Sampson distance.
     s = two_view(rng, 500, noise=0.5, outliers=0.3, held_out=300)
     pF = _fundamental_problem(s["x1"], s["x2"])
@@ -227,7 +227,7 @@ def _cases_F(rng) -> list[Case]:
     return out
 
 
-def _cases_E(rng) -> list[Case]:
+def _cases_E(rng: np.random.Generator) -> list[Case]:
     # E with 5-point samples; rotation and translation direction against the truth. pycolmap's
     # LO-RANSAC lands within ~0.05°; the best minimal sample alone is typically 0.2-1° off.
     s = two_view(rng, 300, noise=0.5, outliers=0.3, same_K=True, held_out=1)
@@ -251,7 +251,7 @@ def _cases_E(rng) -> list[Case]:
     return out
 
 
-def _cases_H(rng) -> list[Case]:
+def _cases_H(rng: np.random.Generator) -> list[Case]:
     # H on the real Graffiti pair: SIFT matches with a loose ratio test, ~45 % of them wrong.
     real = graf_matches()
     if real is None:
@@ -274,7 +274,7 @@ def _cases_H(rng) -> list[Case]:
                          key="H-graffiti", tags=("real",))]
 
 
-def _cases_adaptive(rng) -> list[Case]:
+def _cases_adaptive(rng: np.random.Generator) -> list[Case]:
     # Adaptive stopping, easy end: a line with 90 % inliers needs k = log(0.01) / log(1 − 0.9²) = 2.8 → 3
     # samples (p = 0.99). The reference draws one batch of 32 and stops; a learner drawing one sample
     # at a time stops after ~3. Tolerance 80 samples: one batch of up to 64 plus slack; a fixed budget
@@ -306,7 +306,7 @@ def _cases_adaptive(rng) -> list[Case]:
     return out
 
 
-def _case_msac(rng) -> Case:
+def _case_msac(rng: np.random.Generator) -> Case:
     # MSAC: RMS distance (px) of the tight line's true points from the returned line: ~0.02 px for
     # the tight structure, 25 px for the loose one that has more inliers.
     # Confidence 0.9999 here: the loose structure alone gives w ~ 0.43, and at p = 0.99 RANSAC would stop
@@ -318,7 +318,7 @@ def _case_msac(rng) -> Case:
                         key="msac-two-lines", tags=("msac",))
 
 
-def cases_ransac(rng) -> Iterator[Case]:
+def cases_ransac(rng: np.random.Generator) -> Iterator[Case]:
     """Built lazily, in this order (an untouched stub stops at the first: no pycolmap run, no SIFT)."""
     yield from _cases_F(rng)
     yield from _cases_E(rng)

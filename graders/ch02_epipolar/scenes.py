@@ -1,4 +1,4 @@
-"""Chapter 2's ground truth: synthetic two-view scenes with known geometry (`graders.scene.two_view`,
+"""Chapter 2's ground truth: synthetic two-view scenes with known geometry (`graders.kit.scene.two_view`,
 shared with chapter 4), the real Graffiti pair, and the two-view helpers every topic module uses (depths by cheirality, the 8-point design matrix,
 held-out errors, the common output checks).
 
@@ -12,11 +12,11 @@ from typing import Any
 import cv2
 import numpy as np
 
-from .. import datasets
-from ..compare import sampson_rms_px, up_to_scale
-from ..engine import OutputError, as_pose
-from ..geometry import hartley, pixels_to_normalised, skew, to_h
-from ..scene import two_view  # noqa: F401 (the chapter's scenes; re-exported)
+from graders.kit import datasets
+from graders.core.compare import sampson_rms_px, up_to_scale
+from graders.core.engine import OutputError, as_pose
+from graders.kit.geometry import hartley, pixels_to_normalised, skew, to_h
+from graders.kit.scene import two_view  # noqa: F401 (the chapter's scenes; re-exported)
 
 to_normalised = pixels_to_normalised     # the chapter's name for it (notebook, chapter 4)
 

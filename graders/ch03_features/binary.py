@@ -10,8 +10,8 @@ import numpy as np
 
 import cv2
 
-from ..compare import max_abs
-from ..engine import Case, Exercise, OutputError, like, register
+from graders.core.compare import max_abs
+from graders.core.engine import Case, Exercise, OutputError, like, register
 from .common import common, homography_pair, nn_index_accuracy, transfer
 from ..oracles.features import cv_fast
 
@@ -104,7 +104,7 @@ def _orb_acc_metric(out, exp):
     return max(0.0, exp["acc"] - nn_index_accuracy(out[0], out[1], cv_hamming))
 
 
-def cases_orb(rng) -> list[Case]:
+def cases_orb(rng: np.random.Generator) -> list[Case]:
     out = []
     tex = str(rng.choice(["astronaut", "coffee", "chelsea"]))
     img1, img2, H = homography_pair(rng, tex, max_angle_deg=30, scale_range=(0.9, 1.1))
@@ -141,7 +141,7 @@ ORB_HINTS = [
 ]
 
 
-def cases_hamming(rng) -> list[Case]:
+def cases_hamming(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, n, m, b in [("random 40 × 50, 32 bytes", 40, 50, 32), ("ORB-sized 500 × 400", 500, 400, 32),
                           ("7 bytes per descriptor", 30, 20, 7), ("2,000 × 2,000 (speed)", 2000, 2000, 32)]:

@@ -18,9 +18,9 @@ from typing import Any
 import cv2
 import numpy as np
 
-from .. import datasets, scene
-from ..engine import Case, Hint, OutputError, as_points
-from ..geometry import from_h, to_h
+from graders.kit import datasets, scene
+from graders.core.engine import Case, Hint, OutputError, as_points
+from graders.kit.geometry import from_h, to_h
 from ..oracles.features import cv_ratio_matches  # noqa: F401 (chapter API)
 
 # ============================================================ images with a known homography ====
@@ -146,7 +146,7 @@ def nn_index_accuracy(D1: np.ndarray, D2: np.ndarray, dist) -> float:
     return float(np.mean(np.argmin(d, axis=1) == np.arange(len(D1))))
 
 
-def homography_pair_from(rng, img: np.ndarray, size=(640, 480), **kw):
+def homography_pair_from(rng: np.random.Generator, img: np.ndarray, size=(640, 480), **kw):
     """Two uint8 views (size = (width, height)) of any float image in [0, 1] and H with x2 ~ H x1."""
     a, b, H = scene.random_homography_pair(rng, img, width=size[0], height=size[1], **kw)
     return to_u8(a), to_u8(b), H

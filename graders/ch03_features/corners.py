@@ -10,8 +10,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .. import datasets
-from ..engine import Case, Exercise, Hint, OutputError, like, register
+from graders.kit import datasets
+from graders.core.engine import Case, Exercise, Hint, OutputError, like, register
 from ..oracles.features import cv_corners, cv_fast
 from .common import SIZE, _both, _points, detector_pair_case, graf_half, homography_pair, swap_hint, to_u8
 
@@ -51,7 +51,7 @@ def _close_pairs(out, exp):
     return float(np.mean(d.min(1) <= 2.0))
 
 
-def corners_and_edges(rng, size=SIZE) -> tuple[np.ndarray, np.ndarray]:
+def corners_and_edges(rng: np.random.Generator, size=SIZE) -> tuple[np.ndarray, np.ndarray]:
     """Six low-contrast turned squares (their 24 vertices are the only corners) between two long
     high-contrast bars (four straight edges that run off both sides of the image): uint8 image and
     the (24, 2) true corners (x, y). Drawn 8x larger with cv2.fillPoly, area-averaged down, blurred
@@ -97,7 +97,7 @@ def _corner_oracles(n, method):
     return (lambda im: cv_corners(im, n, method), lambda im: cv_corners_gaussian(im, n, method))
 
 
-def cases_corners(rng) -> list[Case]:
+def cases_corners(rng: np.random.Generator) -> list[Case]:
     n = 300
     out = []
     for tex, method in [(rng.choice(["brick", "grass", "gravel"]), "harris"),
@@ -159,7 +159,7 @@ def set_f1_error(out, exp):
     return 1.0 - 2 * len(a & b) / (len(a) + len(b))
 
 
-def cases_fast(rng) -> list[Case]:
+def cases_fast(rng: np.random.Generator) -> list[Case]:
     out = []
     for i, (tex, nms) in enumerate([(rng.choice(["brick", "grass", "coffee"]), False),
                                     (rng.choice(["astronaut", "chelsea", "coins"]), True),

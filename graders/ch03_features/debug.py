@@ -15,7 +15,7 @@ import copy
 import cv2
 import numpy as np
 
-from ..engine import Case, Exercise, Hint, OutputError, debug_practice, register, shared_run
+from graders.core.engine import Case, Exercise, Hint, OutputError, debug_practice, register, shared_run
 from . import debug_data as dd
 from .distribution import cell_of, gt_distribute
 
@@ -92,7 +92,7 @@ def _log_matches(case: dict, truth: dict, m: np.ndarray, head: str) -> str:
             f"precision")
 
 
-def debug_too_few(rng) -> tuple[dict, dict]:
+def debug_too_few(rng: np.random.Generator) -> tuple[dict, dict]:
     """3.13 — too few matches: a 2x zoom, the 150 strongest keypoints per view, ratio 0.6."""
     case, truth = dd.split(dd.zoom_pair(rng))
     m = dd.broken_too_few(case)
@@ -102,7 +102,7 @@ def debug_too_few(rng) -> tuple[dict, dict]:
     return case, dict(truth, cause=ANSWER["3.13"], need=150, precision=0.8)
 
 
-def debug_repetitive(rng) -> tuple[dict, dict]:
+def debug_repetitive(rng: np.random.Generator) -> tuple[dict, dict]:
     """3.14 — wrong matches on repetitive texture: shelving bays, every keypoint, ratio 0.95."""
     case, truth = dd.split(dd.shelving_pair(rng))
     m = dd.broken_repetitive(case)
@@ -116,7 +116,7 @@ def debug_repetitive(rng) -> tuple[dict, dict]:
     return case, dict(truth, cause=ANSWER["3.14"], need=25, precision=0.95)
 
 
-def debug_too_slow(rng) -> tuple[dict, dict]:
+def debug_too_slow(rng: np.random.Generator) -> tuple[dict, dict]:
     """3.15 — matching too slow: 8,000 detections per view, brute force."""
     case, truth = dd.split(dd.dense_pair(rng))
     n1, n2 = len(case["kp1"]), len(case["kp2"])
@@ -128,7 +128,7 @@ def debug_too_slow(rng) -> tuple[dict, dict]:
     return case, dict(truth, cause=ANSWER["3.15"], need=800, precision=0.8, cost=n1 * n2, max_cost_ratio=0.1)
 
 
-def debug_clustered(rng) -> tuple[dict, dict]:
+def debug_clustered(rng: np.random.Generator) -> tuple[dict, dict]:
     """3.16 — features clustered: the 200 strongest keypoints per view all on one poster."""
     case, truth = dd.split(dd.poster_pair(rng))
     k1, k2 = dd.broken_clustered(case)
@@ -274,7 +274,7 @@ def debug_rows(exercise_id: str, generator, convert, n: int = 2):
     """Cases of one DEBUG exercise: the diagnosis (judged once, half the points) and the repair on `n` fresh
     hidden pairs (the other half). The learner's function runs once per pair; both rows of pair 1 judge
     that one run."""
-    def cases(rng):
+    def cases(rng: np.random.Generator):
         for i in range(n):
             case, truth = generator(rng)
             run = shared_run(lambda fn, case=case: fn(copy.deepcopy(case)))   # the learner gets a copy

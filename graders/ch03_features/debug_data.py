@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import scene
+from graders.kit import scene
 from .common import transfer
 
 DIM = 128          # SIFT's descriptor length
@@ -26,19 +26,19 @@ def _unit(D: np.ndarray) -> np.ndarray:
     return (D / np.linalg.norm(D, axis=1, keepdims=True)).astype(np.float32)
 
 
-def _descriptors(rng, n: int) -> np.ndarray:
+def _descriptors(rng: np.random.Generator, n: int) -> np.ndarray:
     """(n, 128) random SIFT-like descriptors: non-negative, unit length (nearest-neighbour distance between
     two unrelated ones ~0.8)."""
     return _unit(np.abs(rng.normal(size=(n, DIM))))
 
 
-def _perturb(rng, D: np.ndarray, sigma) -> np.ndarray:
+def _perturb(rng: np.random.Generator, D: np.ndarray, sigma) -> np.ndarray:
     """Each view's own appearance change: noise of `sigma` per dimension (a scalar or one per row)."""
     sigma = np.broadcast_to(np.asarray(sigma, float).reshape(-1, 1), (len(D), 1))
     return _unit(np.abs(D + rng.normal(size=D.shape) * sigma))
 
 
-def _homography(rng, size, zoom=1.0, max_angle_deg=12.0, shift_frac=0.06, tilt=2e-4) -> np.ndarray:
+def _homography(rng: np.random.Generator, size, zoom=1.0, max_angle_deg=12.0, shift_frac=0.06, tilt=2e-4) -> np.ndarray:
     """x2 ~ H x1: a similarity about the image centre (zoom, in-plane turn, shift) with a little perspective."""
     W, Hh = size
     c = np.array([W / 2, Hh / 2])
@@ -57,7 +57,7 @@ def _inside(x: np.ndarray, size, margin: float = 4.0) -> np.ndarray:
     return (x[:, 0] >= margin) & (x[:, 0] <= W - 1 - margin) & (x[:, 1] >= margin) & (x[:, 1] <= Hh - 1 - margin)
 
 
-def _assemble(rng, x1, d1, r1, x2, d2, r2, H, size) -> dict:
+def _assemble(rng: np.random.Generator, x1, d1, r1, x2, d2, r2, H, size) -> dict:
     """Shuffle each view's detections (their order carries no information) into a case dict."""
     p1, p2 = rng.permutation(len(x1)), rng.permutation(len(x2))
     return {"kp1": np.asarray(x1, float)[p1], "resp1": np.asarray(r1, float)[p1], "desc1": d1[p1],
@@ -80,7 +80,7 @@ def correct(truth: dict, matches: np.ndarray) -> np.ndarray:
     return np.linalg.norm(transfer(truth["H"], x1) - x2, axis=1) <= CORRECT_PX
 
 
-def zoom_pair(rng, size=(640, 480), n1=2500, n2=2500) -> dict:
+def zoom_pair(rng: np.random.Generator, size=(640, 480), n1=2500, n2=2500) -> dict:
     """3.13: view 2 is a 2x zoom onto the middle of view 1. Of view 1's detections, those in the quarter
     view 2 sees have a partner there 80 % of the time; view 2's other detections are fine detail that view
     1 resolves too coarsely to detect. Descriptor noise across the zoom is 0.02-0.055 per dimension, so a
@@ -100,7 +100,7 @@ def zoom_pair(rng, size=(640, 480), n1=2500, n2=2500) -> dict:
     return _assemble(rng, x1, _perturb(rng, base, sig.mean()), r1, x2, d2, r2, H, size)
 
 
-def shelving_pair(rng, size=(640, 480), parts=10, unique=12) -> dict:
+def shelving_pair(rng: np.random.Generator, size=(640, 480), parts=10, unique=12) -> dict:
     """3.14: warehouse shelving, a lattice of identical bays (80-90 x 62-72 px). Each bay shows the same
     `parts` features (box corners, label, barcode ends): one base descriptor per part, a small per-bay
     difference (dents, labels askew) that both views see, and each view's own noise. So the true partner is
@@ -125,7 +125,7 @@ def shelving_pair(rng, size=(640, 480), parts=10, unique=12) -> dict:
                      r * rng.lognormal(0, 0.2, len(x1)), H, size)
 
 
-def dense_pair(rng, size=(1024, 768), n=8000) -> dict:
+def dense_pair(rng: np.random.Generator, size=(1024, 768), n=8000) -> dict:
     """3.15: two 1024 x 768 views of gravel, every DoG extremum kept: 8,000 detections per view. How likely a
     detection is found again falls with its response (the strongest quarter 85 %, the weakest half ~15 %:
     weak extrema are noise), as on real images."""
@@ -147,7 +147,7 @@ def dense_pair(rng, size=(1024, 768), n=8000) -> dict:
     return _assemble(rng, x1, _perturb(rng, base, sig1), r1, x2, d2, r2, H, size)
 
 
-def poster_pair(rng, size=(640, 480), n_poster=2000, n_wall=1000) -> dict:
+def poster_pair(rng: np.random.Generator, size=(640, 480), n_poster=2000, n_wall=1000) -> dict:
     """3.16: a busy poster (a third of the image's width and height) on a plain wall. The poster's detections
     all respond more strongly (0.5-1.0) than the wall's (0.03-0.45), though the wall's are found again as
     reliably (75 %)."""

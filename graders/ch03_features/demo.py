@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from .. import scene
+from graders.kit import scene
 from .common import transfer
 from .debug_data import correct
 
@@ -166,7 +166,7 @@ def _longest_arc(pattern: str) -> tuple[list[int], str]:
     return best, letter
 
 
-def shelving(rng, size=(640, 480)) -> np.ndarray:
+def shelving(rng: np.random.Generator, size=(640, 480)) -> np.ndarray:
     """Warehouse shelving: a grid of identical bays (uprights, beams, boxes with the same label). A float32
     image in [0, 1], (height, width) = size[::-1]."""
     W, H = size

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..engine import Case, Exercise, Hint, OutputError, as_array, register
+from graders.core.engine import Case, Exercise, Hint, OutputError, as_array, register
 
 
 def gt_distribute(kps: np.ndarray, scores: np.ndarray, image_size: tuple[int, int], n: int,
@@ -31,7 +31,7 @@ def cell_of(kps: np.ndarray, image_size: tuple[int, int], cells: tuple[int, int]
 
 # ============================================================ 3.12 distribution ====
 
-def clustered_keypoints(rng, n=1500, size=(640, 480)):
+def clustered_keypoints(rng: np.random.Generator, n=1500, size=(640, 480)):
     """Most keypoints (and the strongest) on one textured poster, the rest spread thinly: (n, 2) (x, y) and
     (n,) scores."""
     W, H = size
@@ -65,7 +65,7 @@ def _distribution_metric(out, exp):
     return max(cov_gap / 0.15, score_gap / 0.3, 0.0)
 
 
-def cases_distribute(rng) -> list[Case]:
+def cases_distribute(rng: np.random.Generator) -> list[Case]:
     out = []
     for key, name, size, n, cells in [("vga-300", "VGA, poster in view, n = 300, 8 × 8", (640, 480), 300, (8, 8)),
                                       ("hd-500", "1280 × 720, n = 500, 16 × 9", (1280, 720), 500, (16, 9)),

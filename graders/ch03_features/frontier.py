@@ -8,8 +8,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .. import scene
-from ..engine import Case, Exercise, Hint, OutputError, register
+from graders.kit import scene
+from graders.core.engine import Case, Exercise, Hint, OutputError, register
 from .common import to_u8
 from ..oracles.features import sift_detector
 
@@ -144,7 +144,7 @@ FRONTIER_HINTS = [
 ]
 
 
-def cases_frontier(rng) -> list[Case]:
+def cases_frontier(rng: np.random.Generator) -> list[Case]:
     P1, P2 = patch_pairs(rng, 3000, TRAIN_TEXTURES)
     Q1, Q2 = patch_pairs(rng, 500, TEST_TEXTURES)
     raw = nn_accuracy(raw_patch_descriptor(Q1), raw_patch_descriptor(Q2))

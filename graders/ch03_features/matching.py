@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..engine import Case, Exercise, Hint, OutputError, register
+from graders.core.engine import Case, Exercise, Hint, OutputError, register
 from ..oracles.features import cv_match
 
 
 # ============================================================ 3.11 matching ====
 
-def _descriptor_sets(rng, n, m, d, noise=0.25, shared=0.6):
+def _descriptor_sets(rng: np.random.Generator, n, m, d, noise=0.25, shared=0.6):
     """D2 holds noisy copies of a fraction of D1's rows (true matches) among distractors."""
     D1 = rng.normal(size=(n, d))
     D2 = rng.normal(size=(m, d))
@@ -52,7 +52,7 @@ def _match_metric(out, exp):
     return float(sum(1 for i in np.nonzero(ok)[0] if mine.get(i) != ref.get(i)))
 
 
-def cases_match(rng) -> list[Case]:
+def cases_match(rng: np.random.Generator) -> list[Case]:
     out = []
     for key, name, n, m, d, ratio, mutual in [
             ("ratio", "300 × 400 × 64, ratio 0.8", 300, 400, 64, 0.8, False),

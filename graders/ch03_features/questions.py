@@ -6,8 +6,8 @@ from typing import Any
 
 import numpy as np
 
-from ..compare import max_abs, relative
-from ..engine import Hint, choice_question, numeric_question, register, value_hint
+from graders.core.compare import max_abs, relative
+from graders.core.engine import Hint, choice_question, numeric_question, register, value_hint
 
 # 3.2  Harris' R = det M - k tr(M)^2 for one structure tensor, k = 0.04
 _M_32 = np.array([[12.0, 3.0], [3.0, 8.0]])

@@ -9,8 +9,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .. import datasets
-from ..engine import Case, Exercise, Hint, OutputError, register
+from graders.kit import datasets
+from graders.core.engine import Case, Exercise, Hint, OutputError, register
 from ..oracles.features import cv_dog, cv_sift_descriptors
 from .common import (_both, _points, cv_ratio_matches, detector_pair_case, graf_half, homography_pair, mma,
                      nn_index_accuracy, swap_hint, to_u8)
@@ -18,7 +18,7 @@ from .common import (_both, _points, cv_ratio_matches, detector_pair_case, graf_
 
 # ============================================================ 3.9 DoG detector ====
 
-def _blobs(rng, grid=(8, 5), size=(480, 320), sigma_range=(2.0, 4.0), with_sigma=False):
+def _blobs(rng: np.random.Generator, grid=(8, 5), size=(480, 320), sigma_range=(2.0, 4.0), with_sigma=False):
     """Gaussian blobs (bright and dark, amplitude 0.35) on a grey background, one per cell of a `grid` of
     (columns, rows), centres jittered by up to 5 px to random sub-pixel positions: uint8 image, (n, 2)
     centres (x, y) [and (n,) standard deviations if with_sigma].
@@ -67,7 +67,7 @@ def _subpixel_metric(out, centres):
     return float(np.median(near[near < 2.0]))
 
 
-def cases_dog(rng) -> list[Case]:
+def cases_dog(rng: np.random.Generator) -> list[Case]:
     n = 500
     out = []
     for tex, rot in [(str(rng.choice(["astronaut", "coffee", "text"])), None),
@@ -179,7 +179,7 @@ def _desc_pair(width):
     return convert
 
 
-def cases_sift(rng) -> list[Case]:
+def cases_sift(rng: np.random.Generator) -> list[Case]:
     out = []
     pairs = [(str(rng.choice(["astronaut", "coffee", "grass"])), None),
              (str(rng.choice(["astronaut", "grass", "chelsea"])), float(rng.uniform(45, 135)))]
@@ -200,7 +200,7 @@ def cases_sift(rng) -> list[Case]:
 MIN_MATCHES = 60
 
 
-def _matched_pair(rng, tex: str, tries: int = 20, **kw):
+def _matched_pair(rng: np.random.Generator, tex: str, tries: int = 20, **kw):
     """homography_pair(rng, tex, **kw), redrawn until cv2.SIFT finds >= MIN_MATCHES ratio-test matches.
 
     MMA over n matches is a proportion with standard error sqrt(p (1 - p) / n): with 21-59 matches two

@@ -23,11 +23,11 @@ and in each topic module's `Exercise(...)` rows. The names below are the noteboo
 """
 from __future__ import annotations
 
-from ..compare import rotation_angle_deg
-from ..geometry import camera_centre, project
+from graders.core.compare import rotation_angle_deg
+from graders.kit.geometry import camera_centre, project
 from ..oracles.colmap import colmap_log, colmap_read_text, gt_write_colmap_text
 from ..oracles.sfm_standin import IncrementalSfM, cv_incremental_sfm, cv_pnp_ransac, union_find_tracks
-from ..scene import two_view
+from graders.kit.scene import two_view
 from . import questions  # noqa: F401  (registers 4.1-4.3, 4.22-4.24)
 from .alignment import cv_umeyama, pointmap_pair
 from .colmap_io import colmap_recon

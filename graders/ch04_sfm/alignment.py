@@ -1,6 +1,6 @@
 """Chapter 4, FRONTIER 4.25 — Umeyama: aligning two pointmaps (DUSt3R-style) by a similarity.
 
-Oracle: the closed form (graders.geometry.umeyama); OpenCV's estimateAffine3D(force_rotation=True) is the
+Oracle: the closed form (graders.kit.geometry.umeyama); OpenCV's estimateAffine3D(force_rotation=True) is the
 independent check.
 """
 from __future__ import annotations
@@ -8,13 +8,13 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .. import scene
-from ..compare import rotation_angle_deg
-from ..engine import as_rotation, Case, Exercise, Hint, OutputError, register
-from ..geometry import umeyama
+from graders.kit import scene
+from graders.core.compare import rotation_angle_deg
+from graders.core.engine import as_rotation, Case, Exercise, Hint, OutputError, register
+from graders.kit.geometry import umeyama
 
 
-def pointmap_pair(rng, n: int = 2000, noise: float = 0.02, outliers: float = 0.0) -> dict:
+def pointmap_pair(rng: np.random.Generator, n: int = 2000, noise: float = 0.02, outliers: float = 0.0) -> dict:
     """Two pointmaps as a DUSt3R-like network gives them: the same surface points in camera 1's frame
     (X1) and in camera 2's (X2), each up to its own unknown scale (the network predicts normalised
     depth), with relative noise and a fraction of wrong points. X2 ≈ s R X1 + t."""
@@ -57,7 +57,7 @@ def cv_umeyama(X, Y):
     return float(scale), M[:, :3], M[:, 3]                      # M = [R | t], the scale comes apart
 
 
-def cases_umeyama(rng) -> list[Case]:
+def cases_umeyama(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, kw in [("exact similarity, 20 points", dict(n=20, noise=0.0)),
                      ("pointmaps with 2 % depth noise, 2,000 points", dict(n=2000, noise=0.02)),

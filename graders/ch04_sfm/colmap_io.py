@@ -10,13 +10,13 @@ import tempfile
 
 import numpy as np
 
-from ..compare import rotation_angle_deg
-from ..engine import Case, Exercise, Hint, OutputError, register, shared_run
+from graders.core.compare import rotation_angle_deg
+from graders.core.engine import Case, Exercise, Hint, OutputError, register, shared_run
 from ..oracles.colmap import colmap_read_text, gt_write_colmap_text
 from .sfm_scenes import _convert_recon, sfm_scene
 
 
-def colmap_recon(rng, n_cams: int = 4, n_points: int = 80) -> dict:
+def colmap_recon(rng: np.random.Generator, n_cams: int = 4, n_points: int = 80) -> dict:
     """A reconstruction dict with everything a COLMAP text model holds: cameras with different K (one
     with fx ≠ fy, one with radial k1, k2 (RADIAL), one with k1 only (SIMPLE_RADIAL)), a missing
     (unregistered) image, keypoints (with unobserved ones), names and sizes."""
@@ -101,7 +101,7 @@ def _io_keypoint_error(rec, exp) -> float:
                for i in exp["cameras"])
 
 
-def _io_cases(rng, run) -> list[Case]:
+def _io_cases(rng: np.random.Generator, run) -> list[Case]:
     """The four rows of 4.16 / 4.17 over one drawn model; `run(fn, recon)` calls the learner once
     (`shared_run`) and returns the model as read back."""
     recon = colmap_recon(rng)
@@ -145,11 +145,11 @@ def _read_as_colmap_wrote(fn, recon):
         return fn(folder)
 
 
-def cases_write_colmap(rng) -> list[Case]:
+def cases_write_colmap(rng: np.random.Generator) -> list[Case]:
     return _io_cases(rng, _write_and_read_back)
 
 
-def cases_read_colmap(rng) -> list[Case]:
+def cases_read_colmap(rng: np.random.Generator) -> list[Case]:
     return _io_cases(rng, _read_as_colmap_wrote)
 
 

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import scene
-from ..engine import Exercise, Hint, OutputError, debug_cases, debug_practice, register
-from ..geometry import umeyama
+from graders.kit import scene
+from graders.core.engine import Exercise, Hint, OutputError, debug_cases, debug_practice, register
+from graders.kit.geometry import umeyama
 from .repairs import debug_initial_pair, debug_registration
 from .triangulation import _close_points
 
@@ -46,7 +46,7 @@ def gt_components(case: dict) -> list[list[int]]:
     return sorted(comps, key=lambda c: (-len(c), c[0]))
 
 
-def debug_components(rng) -> tuple[dict, dict]:
+def debug_components(rng: np.random.Generator) -> tuple[dict, dict]:
     """4.18 — two or more disconnected components: three groups of images (e.g. the front, the back
     and the courtyard of a building) matched densely inside, joined only by a few spurious pairs
     with 4-12 'verified' inliers (repetitive windows)."""
@@ -100,7 +100,7 @@ def broken_trajectory(case: dict) -> np.ndarray:
     return chain_positions(case["gps"][0], case["directions"], case["step_lengths"])
 
 
-def debug_drift(rng) -> tuple[dict, dict]:
+def debug_drift(rng: np.random.Generator) -> tuple[dict, dict]:
     """4.20 — scale drift on a long sequence: 120 camera positions along a smooth 2.5 km-ish drive,
     monocular step lengths with a scale that random-walks 4 % per step (exp), directions good to 0.3°,
     and GPS at every camera with 3 m noise."""

@@ -11,9 +11,9 @@ from typing import Iterator
 
 import numpy as np
 
-from ..compare import rotation_angle_deg
-from ..engine import Case, Exercise, Hint, register, shared_run
-from ..geometry import camera_centre, project, umeyama
+from graders.core.compare import rotation_angle_deg
+from graders.core.engine import Case, Exercise, Hint, register, shared_run
+from graders.kit.geometry import camera_centre, project, umeyama
 from ..oracles.sfm_standin import cv_incremental_sfm
 from .photos import _focal_at_prior, real_sfm_cases, REAL_SFM_HINTS
 from .sfm_scenes import _convert_recon, _convert_recon_intrinsics, sfm_scene, uncalibrated_sfm_scene
@@ -79,7 +79,7 @@ def low_angle_fraction(rec: dict, truth: dict, max_deg: float = 1.0) -> float:
     return low / max(len(rec["tracks"]), 1)
 
 
-def cases_incremental_sfm(rng) -> Iterator[Case]:
+def cases_incremental_sfm(rng: np.random.Generator) -> Iterator[Case]:
     s = sfm_scene(rng, background=60)
     truth = s["truth"]
     call = shared_run(lambda fn, p=s["problem"]: fn(copy.deepcopy(p)))
@@ -124,7 +124,7 @@ def focal_error(rec: dict, truth: dict) -> float:
     return float(np.median(errs)) if errs else 1.0
 
 
-def uncalibrated_sfm_cases(rng) -> list[Case]:
+def uncalibrated_sfm_cases(rng: np.random.Generator) -> list[Case]:
     """4.14 with K unknown on a synthetic scene (`uncalibrated_sfm_scene`): registered, rotations after the
     Sim(3) gauge, focal lengths. Measured over 8 draws: the reference and the stand-in register every camera,
     rotations ≤ 0.037°, focal lengths within 0.4 %; with the focal lengths left at the prior, 0.4-1.0° and

@@ -8,12 +8,12 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .. import scene
-from ..compare import rotation_angle_deg
-from ..engine import as_points, as_pose, Case, Exercise, Hint, OutputError, register
-from ..geometry import camera_centre, pixels_to_normalised, project, project_P
+from graders.kit import scene
+from graders.core.compare import rotation_angle_deg
+from graders.core.engine import as_points, as_pose, Case, Exercise, Hint, OutputError, register
+from graders.kit.geometry import camera_centre, pixels_to_normalised, project, project_P
 from ..oracles.two_view import refine_essential
-from ..scene import two_view
+from graders.kit.scene import two_view
 from ..oracles.sfm_standin import triangulate_normalised
 from .triangulation import cv_triangulate, gt_triangulation_angles
 
@@ -118,7 +118,8 @@ def cv_two_view_init(x1, x2, K1, K2, thresh_px: float = 2.0):
     return R, t, X[inl], inl
 
 
-def _near_epipole(rng, s: dict, k: int, radius_px: float, depth: tuple[float, float], noise: float) -> dict:
+def _near_epipole(rng: np.random.Generator,
+                  s: dict, k: int, radius_px: float, depth: tuple[float, float], noise: float) -> dict:
     """Append k true matches whose pixels in image 1 lie within radius_px of the epipole (the image of camera
     2's centre: inside the image when the camera moves forward). Their parallax is about r·B/Z px, below the
     noise, so a few triangulate behind *both* cameras with the true pose — and in front of camera 1 with the
@@ -137,7 +138,7 @@ def _near_epipole(rng, s: dict, k: int, radius_px: float, depth: tuple[float, fl
     return s
 
 
-def cases_two_view_init(rng) -> list[Case]:
+def cases_two_view_init(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, kw in [("300 matches, 20 % wrong, 0.5 px", dict(n=300, noise=0.5, outliers=0.2)),
                      ("sideways motion, 200 matches, 10 % wrong", dict(n=200, noise=0.5, outliers=0.1,
@@ -179,7 +180,7 @@ def gt_rank_initial_pairs(pair_stats: list[dict]) -> list[int]:
     return sorted(range(len(pair_stats)), key=lambda i: (not good(pair_stats[i]), -pair_stats[i]["n_inliers_E"]))
 
 
-def _pair_stats(rng, kind: str) -> dict:
+def _pair_stats(rng: np.random.Generator, kind: str) -> dict:
     if kind == "good":
         nE = int(rng.integers(150, 600))
         return dict(n_matches=int(nE * rng.uniform(1.1, 1.6)), n_inliers_E=nE,
@@ -221,7 +222,7 @@ def _metric_ranking(order, exp) -> float:
     return float(sum(1 for i in order[:last_good] if i not in good))
 
 
-def cases_rank_initial_pairs(rng) -> list[Case]:
+def cases_rank_initial_pairs(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, kinds in [("3 good pairs among a pure rotation, a facade, a short baseline and a weak pair",
                          ["good"] * 3 + ["rotation", "planar", "short", "few"]),

@@ -18,9 +18,9 @@ import functools
 import cv2
 import numpy as np
 
-from ..compare import rotation_angle_deg
-from ..engine import Case, Hint, shared_run
-from ..geometry import brown_distort
+from graders.core.compare import rotation_angle_deg
+from graders.core.engine import Case, Hint, shared_run
+from graders.kit.geometry import brown_distort
 from ..oracles.colmap import incremental_mapping
 from .sfm_scenes import _convert_recon_intrinsics
 
@@ -53,7 +53,7 @@ def photo_problem(name: str) -> dict:
     input with "K": None, names=file names, K_true=the known K per image in the resized pixels, or None);
     keypoints in our pixel convention (cv2's: centre of the top-left pixel at (0, 0)). Raises
     datasets.DatasetMissing without the photos."""
-    from .. import datasets
+    from graders.kit import datasets
 
     spec = PHOTO_SETS[name]
     folder = datasets.path(name)
@@ -184,7 +184,7 @@ def real_sfm_cases() -> list[Case]:
     `photo_problem`, `colmap_photos`); [] without the photos. One run of the learner's pipeline per set, judged
     four ways (five where K is known: the focal lengths); pycolmap runs on first use (in the metric, outside
     the learner's time limit, and never for an untouched stub)."""
-    from .. import datasets
+    from graders.kit import datasets
 
     cases = []
     for name, spec in PHOTO_SETS.items():

@@ -10,10 +10,10 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from .. import scene
-from ..compare import rotation_angle_deg, unordered
-from ..engine import as_pose, Case, Exercise, Hint, OutputError, register
-from ..geometry import camera_centre, hartley, pixels_to_normalised, project, project_to_so3, to_h
+from graders.kit import scene
+from graders.core.compare import rotation_angle_deg, unordered
+from graders.core.engine import as_pose, Case, Exercise, Hint, OutputError, register
+from graders.kit.geometry import camera_centre, hartley, pixels_to_normalised, project, project_to_so3, to_h
 from ..oracles.sfm_standin import cv_pnp_ransac, cv_pose
 
 
@@ -21,7 +21,8 @@ def _convert_pose(out, case):
     return as_pose(out)
 
 
-def pnp_scene(rng, n: int, width: int = 1280, height: int = 960, noise: float = 0.0, outliers: float = 0.0,
+def pnp_scene(rng: np.random.Generator,
+              n: int, width: int = 1280, height: int = 960, noise: float = 0.0, outliers: float = 0.0,
               depth: tuple[float, float] = (4.0, 12.0), offset: np.ndarray | None = None, held_out: int = 200,
               hfov_deg: tuple[float, float] = (50.0, 90.0)) -> dict:
     """One camera (K, R, t) and n world points it sees (pixels with noise and wrong 2D-3D matches)."""
@@ -187,7 +188,7 @@ def _metric_p3p(sols, exp) -> float:
     return max(d, px)
 
 
-def cases_p3p(rng) -> list[Case]:
+def cases_p3p(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, want in [("3 points with several solutions", lambda k: k >= 2),
                        ("3 points, any number of solutions", lambda k: k >= 1),
@@ -214,7 +215,7 @@ def _dlt_reference_px(X, x, K, exp) -> float:
     return max(held_out_px(gt_pnp_dlt(X, x, K, t_from=end), exp) for end in ("column", "lstsq"))
 
 
-def cases_pnp_dlt(rng) -> list[Case]:
+def cases_pnp_dlt(rng: np.random.Generator) -> list[Case]:
     out = []
     s = pnp_scene(rng, 6, held_out=200)
     # exact 6 points: max(rotation °, centre error / mean depth) ≤ 1e-5 (arccos resolution ~1e-6° plus
@@ -249,7 +250,7 @@ def cases_pnp_dlt(rng) -> list[Case]:
     return out
 
 
-def cases_epnp(rng) -> list[Case]:
+def cases_epnp(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, n in [("6 points, no noise", 6), ("20 points, no noise", 20),
                     ("12 MP camera, 100 points, no noise", 100)]:
@@ -329,7 +330,7 @@ def _ransac_repeat(fn, s, seeds):
     return errs
 
 
-def cases_pnp_ransac(rng) -> list[Case]:
+def cases_pnp_ransac(rng: np.random.Generator) -> list[Case]:
     out = []
     s = pnp_scene(rng, 300, noise=1.0, outliers=0.3)
     col = colmap_pnp(s["X"], s["x"], s["K"], s["width"], s["height"])

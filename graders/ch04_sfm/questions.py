@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..compare import max_abs, relative
-from ..engine import Case, Exercise, choice_question, numeric_question, register, value_hint
+from graders.core.compare import max_abs, relative
+from graders.core.engine import Case, Exercise, choice_question, numeric_question, register, value_hint
 
 
 def sigma_z(Z, f, sigma, B):
@@ -49,7 +49,7 @@ def colmap_thresholds() -> list[float]:
             float(m.filter_max_reproj_error)]
 
 
-def _colmap_threshold_cases(rng) -> list[Case]:
+def _colmap_threshold_cases(rng: np.random.Generator) -> list[Case]:
     # exact (1e-6): the four defaults are round numbers; the classic slips (8 px, swapped thresholds) are off by 4+
     return [Case("your answer (pycolmap's defaults)", (), np.asarray(colmap_thresholds(), float), max_abs, 1e-6, "",
                  shape=(4,))]

@@ -11,12 +11,12 @@ import copy
 import cv2
 import numpy as np
 
-from .. import scene
-from ..compare import rotation_angle_deg
-from ..engine import Case, Exercise, Hint, OutputError, register, shared_run
-from ..geometry import angle_between_deg, camera_centre, pixels_to_normalised, project
+from graders.kit import scene
+from graders.core.compare import rotation_angle_deg
+from graders.core.engine import Case, Exercise, Hint, OutputError, register, shared_run
+from graders.kit.geometry import angle_between_deg, camera_centre, pixels_to_normalised, project
 from ..oracles.sfm_standin import cv_pose
-from ..scene import two_view
+from graders.kit.scene import two_view
 from .initial_pair import cv_two_view_init, gt_rank_initial_pairs
 from .triangulation import gt_midpoint, gt_triangulation_angles
 
@@ -56,7 +56,7 @@ def broken_registration(case: dict, thresh_px: float = 4.0, min_inliers: int = 3
                                                     "matches": [len(im["x"]) for im in case["images"]]}}
 
 
-def _new_image(rng, X: np.ndarray, K: np.ndarray, size: tuple[int, int], foreign: bool):
+def _new_image(rng: np.random.Generator, X: np.ndarray, K: np.ndarray, size: tuple[int, int], foreign: bool):
     """One image to register: a look-at pose 10-14 m from the model, 80-150 2D-3D matches (1 px noise, 40 % wrong;
     for an image of another place all wrong, 12-20 of them consistently). Returns (image dict without camera_id,
     (R, t))."""
@@ -77,7 +77,7 @@ def _new_image(rng, X: np.ndarray, K: np.ndarray, size: tuple[int, int], foreign
     return {"x": x, "point_ids": ids}, (R, t)
 
 
-def debug_registration(rng) -> tuple[dict, dict]:
+def debug_registration(rng: np.random.Generator) -> tuple[dict, dict]:
     """4.19 — many images fail to register. A model of 2,000 points and 12 new images: 5-7 from the camera of
     the model's images, 3-5 from a second one (another body and lens: 1600 x 1200 at 45-60° or 1280 x 960 at
     65-80°, in either order), and 2 of another place (every match wrong, 12-20 of them consistent with one
@@ -173,7 +173,7 @@ def _fresh_call(case: dict):
     return shared_run(lambda fn: fn(copy.deepcopy(case)))
 
 
-def cases_fix_registration(rng):
+def cases_fix_registration(rng: np.random.Generator):
     for i in range(2):
         case, truth = debug_registration(rng)
         call = _fresh_call(case)
@@ -281,7 +281,7 @@ def broken_initial_run(case: dict) -> dict:
     return {"pair": i, "log": log, "metrics": dict(st, pair=i, median_depth_over_baseline=depth)}
 
 
-def debug_initial_pair(rng) -> tuple[dict, dict]:
+def debug_initial_pair(rng: np.random.Generator) -> tuple[dict, dict]:
     """4.21 — initialisation on a degenerate pair: five candidate pairs seen by one camera K: a pure rotation (the
     most matches), a facade 3 cm apart (planar), a 2 cm baseline, a good pair (2 m at 3-8 m) and a wide pair with
     only 25 matches; 0.5 px noise, 15 % wrong matches."""
@@ -351,7 +351,7 @@ def _metric_points(out, truth) -> float:
     return float(np.median(np.r_[err, np.full(max(0, MIN_POINTS - len(err)), 100.0)]))
 
 
-def cases_fix_initial_pair(rng):
+def cases_fix_initial_pair(rng: np.random.Generator):
     for i in range(2):
         case, truth = debug_initial_pair(rng)
         call = _fresh_call(case)

@@ -7,10 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import scene
-from ..compare import rotation_angle_deg
-from ..engine import as_rotation, Case, Exercise, Hint, OutputError, register
-from ..geometry import project_to_so3
+from graders.kit import scene
+from graders.core.compare import rotation_angle_deg
+from graders.core.engine import as_rotation, Case, Exercise, Hint, OutputError, register
+from graders.kit.geometry import project_to_so3
 
 
 def gt_rotation_averaging(R_rel: dict, n: int) -> np.ndarray:
@@ -39,7 +39,7 @@ def align_rotations(Rs: np.ndarray, Rs_true: np.ndarray) -> np.ndarray:
     return np.array([rotation_angle_deg(a @ G, b) for a, b in zip(Rs, Rs_true)])
 
 
-def rotation_graph(rng, n: int, extra: float = 0.3, noise_deg: float = 0.0, outliers: int = 0):
+def rotation_graph(rng: np.random.Generator, n: int, extra: float = 0.3, noise_deg: float = 0.0, outliers: int = 0):
     """n random world-to-camera rotations; edges: a spanning chain plus a fraction of the other pairs;
     R_ij = R_j R_iᵀ perturbed by a random rotation of noise_deg (Gaussian angle)."""
     Rs = np.stack([scene.random_rotation(rng) for _ in range(n)])
@@ -66,7 +66,7 @@ def _convert_rotations(out, case):
     return Rs
 
 
-def cases_rotation_averaging(rng) -> list[Case]:
+def cases_rotation_averaging(rng: np.random.Generator) -> list[Case]:
     out = []
     Rs, R_rel = rotation_graph(rng, 12, 0.3)
     # exact relative rotations: every camera within 1e-4° after the global gauge rotation (the angle

@@ -7,12 +7,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import scene
-from ..engine import as_points, as_pose, OutputError
-from ..geometry import brown_distort, camera_centre, project
+from graders.kit import scene
+from graders.core.engine import as_points, as_pose, OutputError
+from graders.kit.geometry import brown_distort, camera_centre, project
 
 
-def sfm_scene(rng, n_cams: int = 7, n_points: int = 400, width: int = 1280, height: int = 960,
+def sfm_scene(rng: np.random.Generator, n_cams: int = 7, n_points: int = 400, width: int = 1280, height: int = 960,
               noise: float = 0.5, wrong: float = 0.1, arc_deg: float = 120.0, radius: float = 6.0,
               known_K: bool = True, background: int = 0) -> dict:
     """A ring of cameras around a point cloud, keypoints per image (shuffled, with clutter) and
@@ -32,7 +32,8 @@ def sfm_scene(rng, n_cams: int = 7, n_points: int = 400, width: int = 1280, heig
     return _sfm_problem(rng, Ks, rig, X, width, height, noise, wrong, known_K)
 
 
-def strip_scene(rng, n_cams: int = 14, n_points: int = 1500, spacing: float = 0.8, width: int = 1280,
+def strip_scene(rng: np.random.Generator,
+                n_cams: int = 14, n_points: int = 1500, spacing: float = 0.8, width: int = 1280,
                 height: int = 960, noise: float = 0.5, wrong: float = 0.05) -> dict:
     """A camera moving sideways along a 3D facade (points 4-6 m away): each image overlaps only its
     few neighbours, so errors can accumulate along the sequence (as in a street or corridor capture)."""
@@ -47,7 +48,7 @@ def strip_scene(rng, n_cams: int = 14, n_points: int = 1500, spacing: float = 0.
     return _sfm_problem(rng, Ks, rig, X, width, height, noise, wrong, True)
 
 
-def _sfm_problem(rng, Ks, rig, X, width, height, noise, wrong, known_K) -> dict:
+def _sfm_problem(rng: np.random.Generator, Ks, rig, X, width, height, noise, wrong, known_K) -> dict:
     n_cams, n_points = len(rig), len(X)
     keypoints, kp_index = [], []
     for (R, t), K in zip(rig, Ks):
@@ -111,7 +112,8 @@ def _convert_recon_intrinsics(out, case):
     return rec
 
 
-def uncalibrated_sfm_scene(rng, n_cams: int = 7, n_points: int = 400, width: int = 1280, height: int = 960,
+def uncalibrated_sfm_scene(rng: np.random.Generator,
+                           n_cams: int = 7, n_points: int = 400, width: int = 1280, height: int = 960,
                            noise: float = 0.5, wrong: float = 0.1) -> dict:
     """`sfm_scene` with unknown, different cameras: per camera a focal length from a 40-75° horizontal field
     of view (0.54-1.14 x the 1.2 max(w, h) prior), the principal point at the centre, and radial distortion

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..engine import Case, Exercise, Hint, OutputError, register
+from graders.core.engine import Case, Exercise, Hint, OutputError, register
 
 
 def gt_build_tracks(matches: dict) -> list[dict[int, int]]:
@@ -60,7 +60,7 @@ def _metric_tracks(tracks, expected) -> float:
     return float(len(_track_set(tracks) ^ _track_set(expected)))
 
 
-def track_problem(rng, n_images: int = 6, n_points: int = 150, keep: float = 0.7, wrong: int = 6,
+def track_problem(rng: np.random.Generator, n_images: int = 6, n_points: int = 150, keep: float = 0.7, wrong: int = 6,
                   chain: bool = False) -> dict:
     """Matches between images for points seen in 2..n_images images (shuffled keypoint indices, plus
     keypoints seen once). Each pair that shares a point keeps its match with probability `keep`
@@ -99,7 +99,7 @@ def track_problem(rng, n_images: int = 6, n_points: int = 150, keep: float = 0.7
     return {k: np.array(v, int).reshape(-1, 2) for k, v in sorted(matches.items())}
 
 
-def cases_build_tracks(rng) -> list[Case]:
+def cases_build_tracks(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, kw in [("6 images, 150 points, every pair matched", dict(keep=1.0, wrong=0)),
                      ("6 images, 30 % of the pairwise matches missing (tracks join through other images)",

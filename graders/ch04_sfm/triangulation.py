@@ -12,11 +12,11 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from .. import scene
-from ..compare import max_abs
-from ..engine import as_points, Case, Exercise, Hint, like, register
-from ..geometry import camera_centre, hartley, project, project_P, to_h
-from ..scene import two_view
+from graders.kit import scene
+from graders.core.compare import max_abs
+from graders.core.engine import as_points, Case, Exercise, Hint, like, register
+from graders.kit.geometry import camera_centre, hartley, project, project_P, to_h
+from graders.kit.scene import two_view
 
 
 def cv_triangulate(P1: np.ndarray, P2: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
@@ -68,8 +68,8 @@ def colmap_triangulation_angles(C1, C2, X) -> np.ndarray:
 MIN_PARALLAX_DEG = 1.0
 
 
-def _wide_enough(rng, n: int, **kw) -> dict:
-    """A two-view scene (graders.scene.two_view) of n points all seen under ≥ MIN_PARALLAX_DEG."""
+def _wide_enough(rng: np.random.Generator, n: int, **kw) -> dict:
+    """A two-view scene (graders.kit.scene.two_view) of n points all seen under ≥ MIN_PARALLAX_DEG."""
     for _ in range(20):
         s = two_view(rng, 2 * n, **kw)
         C2 = camera_centre(s["R"], s["t"])
@@ -80,7 +80,7 @@ def _wide_enough(rng, n: int, **kw) -> dict:
     raise RuntimeError("no two-view scene with enough parallax")
 
 
-def _world_frame(rng, s: dict, offset: np.ndarray | None = None) -> dict:
+def _world_frame(rng: np.random.Generator, s: dict, offset: np.ndarray | None = None) -> dict:
     """Move a chapter-2 two-view scene (camera 1 = (I, 0)) into a random world frame X_w = Q X + o:
     P1 = K1 [Qᵀ | -Qᵀ o], P2 = K2 [R Qᵀ | t - R Qᵀ o]."""
     Q = scene.random_rotation(rng)
@@ -108,7 +108,8 @@ def _convert_X(out, case):
     return as_points(out, case.info["n"])
 
 
-def tele_wide_pair(rng, n: int = 200, noise: float = 1.0, width: int = 4000, height: int = 3000) -> dict:
+def tele_wide_pair(rng: np.random.Generator,
+                   n: int = 200, noise: float = 1.0, width: int = 4000, height: int = 3000) -> dict:
     """A telephoto camera 20 m away (hfov 15-25°) and a wide-angle one 4 m away (hfov 90-110°), both 12 MP,
     looking at points in a 2 m cube: pixels in the 1000s and very different rays per pixel."""
     K1 = scene.random_intrinsics(rng, width, height, (15.0, 25.0))
@@ -135,7 +136,7 @@ def tele_wide_pair(rng, n: int = 200, noise: float = 1.0, width: int = 4000, hei
                 C1=camera_centre(R1, t1), C2=camera_centre(R2, t2))
 
 
-def _tri_cases(rng, oracle: Callable) -> list[tuple]:
+def _tri_cases(rng: np.random.Generator, oracle: Callable) -> list[tuple]:
     """Scenes for the triangulation exercises: (name, key, args, expected, n, oracle points); keys "exact",
     "noise", "tele-wide-1", "tele-wide-2"."""
     out = []
@@ -157,7 +158,7 @@ def _tri_cases(rng, oracle: Callable) -> list[tuple]:
     return out
 
 
-def _crop_case(rng):
+def _crop_case(rng: np.random.Generator):
     """Image 1 is a 1280 x 960 crop of a gigapixel panorama that keeps the panorama's pixel coordinates: its
     pixels and P1 are offset by 80,000-150,000 px (T P1 with a translation T), image 2 is an ordinary camera."""
     s = _wide_enough(rng, 200, noise=1.0, held_out=1)
@@ -186,7 +187,7 @@ def _residual_split(X, exp) -> float:
     return float(max(e) / max(min(e), 1e-300)) if np.isfinite(e).all() else np.inf
 
 
-def cases_triangulate_dlt(rng) -> list[Case]:
+def cases_triangulate_dlt(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, key, args, exp, n, X_or in _tri_cases(rng, cv_triangulate):
         if key == "exact":
@@ -225,7 +226,7 @@ def cases_triangulate_dlt(rng) -> list[Case]:
     return out
 
 
-def cases_triangulate_midpoint(rng) -> list[Case]:
+def cases_triangulate_midpoint(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, key, args, exp, n, X_or in _tri_cases(rng, gt_midpoint)[:3]:
         exp = dict(exp, X=X_or)
@@ -236,7 +237,7 @@ def cases_triangulate_midpoint(rng) -> list[Case]:
     return out
 
 
-def cases_triangulation_angles(rng) -> list[Case]:
+def cases_triangulation_angles(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, kw in [("sideways baseline, 100 points", dict(n=100, motion="sideways")),
                      ("general motion, 100 points", dict(n=100)),

@@ -9,8 +9,8 @@ from functools import lru_cache
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from graders import datasets
-from graders.engine import Case, Exercise, Hint, OutputError, as_array, like, register
+from graders.kit import datasets
+from graders.core.engine import Case, Exercise, Hint, OutputError, as_array, like, register
 from graders.oracles.bundle_adjust import bal_project as gt_project
 
 from .common import cached, max_dist, rel_max, tuple_of_arrays, val
@@ -61,7 +61,7 @@ def _read_from_temporary_file(text: str):
     return call
 
 
-def cases_read_bal(rng) -> list[Case]:
+def cases_read_bal(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, per_line, kw in [("BAL layout, one number per line", 1, dict(n_cams=4, n_points=30)),
                                ("camera numbers 9 to a line", 9, dict(n_cams=6, n_points=50))]:
@@ -143,7 +143,7 @@ READ_HINTS = [
 ]
 
 
-def cases_bal_project(rng) -> list[Case]:
+def cases_bal_project(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, kw in [("8 cameras, 150 points", dict(n_cams=8, n_points=150)),
                      ("30 cameras, 3,000 points (vectorise!)", dict(n_cams=30, n_points=3000, visibility=0.5))]:

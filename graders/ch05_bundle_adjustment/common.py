@@ -7,22 +7,9 @@ from typing import Iterator
 
 import numpy as np
 
-from graders.engine import Case, OutputError
+from graders.core.engine import Case, OutputError
 
 
-class single_thread:
-    """torch on one thread inside the block: for the small tensors of the oracles, spinning up the
-    thread pool costs more than it saves (and much more on a busy machine)."""
-
-    def __init__(self, torch):
-        self.torch = torch
-
-    def __enter__(self):
-        self.threads = self.torch.get_num_threads()
-        self.torch.set_num_threads(1)
-
-    def __exit__(self, *exc):
-        self.torch.set_num_threads(self.threads)
 
 
 def array_key(*arrays, **kw) -> str:

@@ -10,8 +10,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg
 from scipy.spatial.transform import Rotation
 
-from graders import scene
-from graders.engine import Exercise, Hint, OutputError, debug_cases, debug_practice, raised, register
+from graders.kit import scene
+from graders.core.engine import Exercise, Hint, OutputError, debug_cases, debug_practice, raised, register
 from graders.oracles.bundle_adjust import bal_cost
 from graders.oracles.bundle_adjust import bal_project as gt_project
 
@@ -25,7 +25,7 @@ from .problems import camera_centres, held_out_rms, make_problem, problem_args, 
 # on fresh problems: fresh points triangulated from their true images in the returned cameras,
 # reprojection RMS (held_out_rms: gauge-free), and for 5.18 the kept points as well.
 
-def debug_diverges(rng) -> tuple[dict, dict]:
+def debug_diverges(rng: np.random.Generator) -> tuple[dict, dict]:
     """5.15 — BA diverges: a far-off start, lambda0 = 1e-12, and failed triangulations at (0, 0, 0)."""
     prob = make_problem(rng, n_cams=8, n_points=120, noise=0.5, rot_deg=4.0, pos_frac=0.08, pt_frac=0.10,
                         f_frac=0.05, new_gauge=False)
@@ -41,7 +41,7 @@ def debug_diverges(rng) -> tuple[dict, dict]:
     return case, prob["truth"]
 
 
-def debug_outliers(rng) -> tuple[dict, dict]:
+def debug_outliers(rng: np.random.Generator) -> tuple[dict, dict]:
     """5.16 — wrong solution: 10 % of the matches are wrong, and the pipeline uses a plain L2 cost."""
     prob = make_problem(rng, n_cams=10, n_points=200, noise=0.5, outliers=0.10)
     case = {k: prob[k] for k in ("cameras", "points", "cam_idx", "pt_idx", "obs")}
@@ -49,7 +49,7 @@ def debug_outliers(rng) -> tuple[dict, dict]:
     return case, dict(prob["truth"], is_outlier=prob["is_outlier"])
 
 
-def debug_too_slow(rng) -> tuple[dict, dict]:
+def debug_too_slow(rng: np.random.Generator) -> tuple[dict, dict]:
     """5.17 — too slow: a problem whose full normal equations (15,000+ unknowns) are solved densely."""
     prob = make_problem(rng, n_cams=20, n_points=5000, noise=0.5, visibility=0.35, rot_deg=4.0, pos_frac=0.08,
                         pt_frac=0.08, f_frac=0.05)
@@ -58,7 +58,7 @@ def debug_too_slow(rng) -> tuple[dict, dict]:
     return case, prob["truth"]
 
 
-def debug_points_at_infinity(rng) -> tuple[dict, dict]:
+def debug_points_at_infinity(rng: np.random.Generator) -> tuple[dict, dict]:
     """5.18 — points fly to infinity: under-constrained points and no gauge fixing.
 
     A video-like pair: camera 8 sits 1-2 cm beside camera 0, looking the same way, and 30 points

@@ -5,8 +5,8 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from graders import scene
-from graders.engine import Case, Exercise, Hint, register
+from graders.kit import scene
+from graders.core.engine import Case, Exercise, Hint, register
 from graders.oracles.bundle_adjust import bal_project as gt_project
 
 from .common import Lazy, array_key, cached, rel_max, tuple_of_arrays, val
@@ -72,7 +72,7 @@ def fd_differentiable_pose(X, uv, intrinsics, pose0, n_steps: int = 10):
     return fd_pose_gradient(X, uv, intrinsics, pose0)
 
 
-def cases_differentiable_pose(rng) -> list[Case]:
+def cases_differentiable_pose(rng: np.random.Generator) -> list[Case]:
     out = []
     for i in range(2):
         prob = make_problem(rng, n_cams=2, n_points=25, noise=1.0, visibility=1.0, new_gauge=False)

@@ -8,12 +8,14 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial.transform import Rotation
 
-from graders.engine import Case, Exercise, Hint, OutputError, like, register
-from graders.geometry import skew
+from graders.core.engine import Case, Exercise, Hint, OutputError, like, register
+from graders.kit.geometry import skew
 from graders.oracles.bundle_adjust import bal_cost
 from graders.oracles.bundle_adjust import bal_project as gt_project
 
-from .common import Lazy, cached, column_relative, rel_max, single_thread, tuple_of_arrays, val
+from graders.kit.threads import torch_threads
+
+from .common import Lazy, cached, column_relative, rel_max, tuple_of_arrays, val
 from .problems import distorted_args, make_problem, problem_args
 
 
@@ -27,7 +29,7 @@ def torch_jacobians(cameras, points, cam_idx, pt_idx) -> tuple[np.ndarray, np.nd
     """
     import torch
 
-    with single_thread(torch):
+    with torch_threads(1):
         return _torch_jacobians(torch, cameras, points, cam_idx, pt_idx)
 
 
@@ -103,7 +105,7 @@ def gt_torch_cost(cameras, points, cam_idx, pt_idx, obs):
     return 0.5 * ((u - torch.as_tensor(obs)) ** 2).sum()
 
 
-def cases_torch_cost(rng) -> list[Case]:
+def cases_torch_cost(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, kw in [("6 cameras, 60 points", dict(n_cams=6, n_points=60)),
                      ("8 cameras, 120 points, 2 px noise", dict(n_cams=8, n_points=120, noise=2.0))]:
@@ -181,7 +183,7 @@ TORCH_COST_HINTS = [
 ]
 
 
-def cases_jacobians(rng) -> list[Case]:
+def cases_jacobians(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, kw in [("6 cameras, 80 points", dict(n_cams=6, n_points=80)),
                      ("20 cameras, 2,000 points (vectorise!)", dict(n_cams=20, n_points=2000, visibility=0.5))]:
@@ -265,7 +267,7 @@ def gt_sparse_jacobian(J_cam, J_pt, cam_idx, pt_idx, n_cams, n_points) -> sp.csr
                          shape=(2 * m, 9 * n_cams + 3 * n_points)).tocsr()
 
 
-def jacobian_inputs(rng, n_cams, n_points, visibility=0.7, weights=False):
+def jacobian_inputs(rng: np.random.Generator, n_cams, n_points, visibility=0.7, weights=False):
     prob = make_problem(rng, n_cams=n_cams, n_points=n_points, visibility=visibility, noise=1.0)
     cams, pts, ci, pi, obs = problem_args(prob)
     J_cam, J_pt = torch_jacobians(cams, pts, ci, pi)
@@ -274,7 +276,7 @@ def jacobian_inputs(rng, n_cams, n_points, visibility=0.7, weights=False):
     return J_cam, J_pt, r, ci, pi, len(cams), len(pts), w
 
 
-def cases_sparse_jacobian(rng) -> list[Case]:
+def cases_sparse_jacobian(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, nc, n_pts in [("6 cameras, 80 points", 6, 80), ("12 cameras, 400 points", 12, 400)]:
         J_cam, J_pt, r, ci, pi, nc_, np_, _ = jacobian_inputs(rng, nc, n_pts)

@@ -5,7 +5,7 @@ from typing import Iterator
 
 import numpy as np
 
-from graders.engine import Case, Exercise, Hint, OutputError, register
+from graders.core.engine import Case, Exercise, Hint, OutputError, register
 from graders.oracles.bundle_adjust import bal_cost, gauge_mask, scipy_bundle_adjust
 from graders.oracles.bundle_adjust import bal_project as gt_project
 
@@ -17,7 +17,7 @@ from .problems import aligned_points_px, held_out_rms, make_problem, problem_arg
 from .robust import gt_robust_weights
 
 
-def cases_bundle_adjust(rng) -> Iterator[Case]:
+def cases_bundle_adjust(rng: np.random.Generator) -> Iterator[Case]:
     """The cases of 5.14, built one by one (the later ones run Ceres for their oracle or tolerance)."""
     # 1) Noise-free observations: the minimum is the truth (up to gauge); judged by fresh points
     #    triangulated in the returned cameras (held_out_rms) and by the returned points after a

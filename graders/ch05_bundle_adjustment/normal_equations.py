@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from graders.engine import Case, Exercise, Hint, register
+from graders.core.engine import Case, Exercise, Hint, register
 
 from .common import Lazy, cached, rel_max, tuple_of_arrays, val
 from .jacobians import gt_sparse_jacobian, jacobian_inputs
@@ -29,7 +29,7 @@ def gt_normal_equations(J_cam, J_pt, r, cam_idx, pt_idx, n_cams, n_points, weigh
     return U, V, W, g[:nC].reshape(n_cams, 9), g[nC:].reshape(n_points, 3)
 
 
-def cases_normal_equations(rng) -> list[Case]:
+def cases_normal_equations(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, nc, n_pts, weighted in [("6 cameras, 80 points", 6, 80, False),
                                       ("10 cameras, 200 points, IRLS weights", 10, 200, True),

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from graders import scene
-from graders.geometry import umeyama
+from graders.kit import scene
+from graders.kit.geometry import umeyama
 from graders.oracles.bundle_adjust import bal_project as gt_project
 
 
@@ -193,7 +193,7 @@ def held_out_rms(cameras: np.ndarray, truth: dict, n: int = 300, seed: int = 7) 
     return float(np.sqrt(np.mean(err**2)))
 
 
-def distorted_args(rng, prob: dict) -> tuple:
+def distorted_args(rng: np.random.Generator, prob: dict) -> tuple:
     """(cameras, points, cam_idx, pt_idx) of a problem's start with real lens distortion (the start
     itself has k1 = k2 = 0, which would hide every mistake in the distortion terms)."""
     cams, pts, ci, pi, _ = problem_args(prob)

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.compare import max_abs, relative
-from graders.engine import Hint, numeric_question, register, value_hint
+from graders.core.compare import max_abs, relative
+from graders.core.engine import Hint, numeric_question, register, value_hint
 
 
 def _lm_answer():

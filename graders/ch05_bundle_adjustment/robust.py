@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.compare import max_abs
-from graders.engine import Case, Exercise, like, register
+from graders.core.compare import max_abs
+from graders.core.engine import Case, Exercise, like, register
 
 from .common import cached
 
@@ -20,7 +20,7 @@ def gt_robust_weights(r, loss: str = "linear", scale: float = 1.0) -> np.ndarray
     return 1.0 / (1.0 + s / c2)
 
 
-def cases_robust(rng) -> list[Case]:
+def cases_robust(rng: np.random.Generator) -> list[Case]:
     out = []
     for loss, scale in [("linear", 1.0), ("huber", 1.0), ("huber", 2.5), ("cauchy", 2.0), ("cauchy", 0.7)]:
         r = rng.normal(0, 1, (300, 2)) * np.exp(rng.uniform(np.log(0.05), np.log(30), (300, 1)))

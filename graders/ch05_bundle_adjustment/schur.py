@@ -8,7 +8,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg
 
-from graders.engine import Case, Exercise, Hint, register
+from graders.core.engine import Case, Exercise, Hint, register
 
 from .common import Lazy, cached, tuple_of_arrays, val
 from .normal_equations import gt_normal_equations, jacobian_inputs
@@ -48,7 +48,7 @@ def gt_schur_solve(U, V, W, g_c, g_p, cam_idx, pt_idx):
     return x[:9 * len(U)].reshape(-1, 9), x[9 * len(U):].reshape(-1, 3)
 
 
-def _schur_inputs(rng, nc, n_pts, lam=1e-3, visibility=0.7):
+def _schur_inputs(rng: np.random.Generator, nc, n_pts, lam=1e-3, visibility=0.7):
     J_cam, J_pt, r, ci, pi, nc_, np_, _ = jacobian_inputs(rng, nc, n_pts, visibility)
     U, V, W, g_c, g_p = gt_normal_equations(J_cam, J_pt, r, ci, pi, nc_, np_)
     # Marquardt damping, as an LM iteration would pass in: U + lam diag(U), V + lam diag(V).
@@ -57,7 +57,7 @@ def _schur_inputs(rng, nc, n_pts, lam=1e-3, visibility=0.7):
     return U, V, W, g_c, g_p, ci, pi
 
 
-def cases_schur(rng) -> list[Case]:
+def cases_schur(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, nc, n_pts in [("5 cameras, 60 points (vs dense solve)", 5, 60),
                             ("10 cameras, 200 points (vs dense solve)", 10, 200)]:
@@ -154,7 +154,7 @@ def scipy_pcg(S, b, block_size: int = 9, tol: float = 1e-10, max_iter: int | Non
     return x
 
 
-def _reduced_system(rng, nc, n_pts, lam=1e-4, visibility=0.6):
+def _reduced_system(rng: np.random.Generator, nc, n_pts, lam=1e-4, visibility=0.6):
     """A damped reduced camera system S = U - W V^-1 W^T of a synthetic BAL problem (SPD, with the
     BAL parameters' wildly different scales) and a right-hand side."""
     U, V, W, g_c, g_p, ci, pi = _schur_inputs(rng, nc, n_pts, lam=lam, visibility=visibility)
@@ -172,7 +172,7 @@ def reduced_camera_system(seed: int = 0, n_cams: int = 30, n_points: int = 1000)
     return _reduced_system(np.random.default_rng(seed), n_cams, n_points)
 
 
-def cases_pcg(rng) -> list[Case]:
+def cases_pcg(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, nc, n_pts, max_iter in [("reduced camera system, 15 cameras, 500 points", 15, 500, 100),
                                       ("reduced camera system, 40 cameras, 1,500 points", 40, 1500, 100)]:

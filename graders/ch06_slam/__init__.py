@@ -4,7 +4,7 @@ Oracles: gtsam 4.3.0 (Pose2/Pose3 Expmap, Logmap, compose, AdjointMap; BetweenFa
 prior and LevenbergMarquardtOptimizer; readG2o/writeG2o), evo for trajectory metrics, and exact
 synthetic ground truth (pose graphs whose true poses are known, judged after gauge alignment and by
 the objective value, never element by element). Real data: the intel (SE(2)) and parking-garage
-(SE(3)) pose graphs via `graders.datasets`.
+(SE(3)) pose graphs via `graders.kit.datasets`.
 
 Core modules: `posegraphs` (GTSAM glue, synthetic and real graphs, gauge-free metrics), `manifold`
 (6.7, 6.9), `g2o_io` (6.8, 6.27), `optimizer` (6.10, 6.11), `debug` (6.18, 6.19, 6.21), `frontier` (6.26), `questions` (6.1-6.6, 6.22-6.25). Importing the package registers the chapter; the

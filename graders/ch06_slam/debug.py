@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.engine import Case, Exercise, Hint, OutputError, register, shared_run
+from graders.core.engine import Case, Exercise, Hint, OutputError, register, shared_run
 
 from .posegraphs import _exp, ate_rmse, gtsam_optimize, make_graph
 
@@ -43,7 +43,7 @@ def _truth(g: dict, keep: np.ndarray, cause: str, broken: np.ndarray) -> dict:
             "tol": max(0.05, 1.5 * ate_ok), "T_fixed": T_ok}
 
 
-def debug_drift(rng, dim: int | None = None) -> tuple[dict, dict]:
+def debug_drift(rng: np.random.Generator, dim: int | None = None) -> tuple[dict, dict]:
     """6.18 — the trajectory drifts: loop closures were detected but the back end never used them."""
     dim = dim or int(rng.choice([2, 3]))
     for _ in range(20):
@@ -57,7 +57,7 @@ def debug_drift(rng, dim: int | None = None) -> tuple[dict, dict]:
     raise RuntimeError("no drifting draw in 20 tries")
 
 
-def debug_jumps(rng, dim: int | None = None) -> tuple[dict, dict]:
+def debug_jumps(rng: np.random.Generator, dim: int | None = None) -> tuple[dict, dict]:
     """6.19 — sudden jumps: place recognition proposed 3 wrong loop closures (perceptual aliasing: the same
     shelf elsewhere) and the pipeline accepted every candidate without geometric verification."""
     dim = dim or int(rng.choice([2, 3]))
@@ -76,7 +76,7 @@ def debug_jumps(rng, dim: int | None = None) -> tuple[dict, dict]:
     raise RuntimeError("no draw with visible jumps in 20 tries")
 
 
-def debug_inconsistent(rng, dim: int | None = None) -> tuple[dict, dict]:
+def debug_inconsistent(rng: np.random.Generator, dim: int | None = None) -> tuple[dict, dict]:
     """6.21 — the map is inconsistent after loop closure: three (SE(3): four) loop constraints conflict with the
     rest (a repeated structure matched with a consistent but wrong relative pose, 2-4 m and ~12 deg off, many
     inliers and an overconfident covariance, 10x the information), and the back end is plain least squares."""
@@ -140,7 +140,7 @@ def _metric_fix(T, truth) -> float:
 
 
 def _cases(generator, label: str):
-    def cases(rng):
+    def cases(rng: np.random.Generator):
         for i, dim in enumerate((2, 3)):
             case, truth = generator(rng, dim)
             run = shared_run(lambda fn, c=case: fn(c))
@@ -189,7 +189,7 @@ INCONSISTENT_HINTS = [
 
 def _with_extras(generator):
     """The generator plus what the hints compare with: the odometry's ATE and the broken pipeline's output."""
-    def gen(rng, dim=None):
+    def gen(rng: np.random.Generator, dim=None):
         case, truth = generator(rng, dim)
         truth["ate_odometry"] = ate_rmse(case["T"], truth["truth"])
         if "broken" not in truth and case["settings"].get("geometric_verification") is False:

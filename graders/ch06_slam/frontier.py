@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.engine import Case, Exercise, Hint, OutputError, register, shared_run
+from graders.core.engine import Case, Exercise, Hint, OutputError, register, shared_run
 
 from .posegraphs import _exp
 
@@ -28,7 +28,7 @@ def _mat(x: np.ndarray) -> np.ndarray:
     return T
 
 
-def ring_graph(rng, n: int = 12) -> dict:
+def ring_graph(rng: np.random.Generator, n: int = 12) -> dict:
     """n poses on a circle (radius 2.5-4 m), odometry, the loop n-1 -> 0 and one chord; noise 10 cm / 2.9 deg
     (residuals large enough that the curvature terms a cut graph drops change the derivative by >= 7e-4)."""
     rad = rng.uniform(2.5, 4.0)
@@ -172,7 +172,7 @@ HINTS = [
 POSE_TOL, GRAD_TOL = 1e-6, 1e-4
 
 
-def cases_differentiable(rng):
+def cases_differentiable(rng: np.random.Generator):
     for i in range(2):
         g = ring_graph(rng)
         args = (g["x0"], g["edges"], g["z"], g["info"])

@@ -17,8 +17,8 @@ import tempfile
 
 import numpy as np
 
-from graders import datasets
-from graders.engine import Case, Exercise, Hint, OutputError, like, raised, register
+from graders.kit import datasets
+from graders.core.engine import Case, Exercise, Hint, OutputError, like, raised, register
 
 from .manifold import gt_exp, random_poses
 from .posegraphs import POSEGRAPH_FILES, gtsam_pose, make_graph
@@ -47,7 +47,7 @@ def gt_read_g2o(path) -> dict:
             "Z": np.array(Z), "info": np.array(info)}
 
 
-def _se2_text(rng) -> str:
+def _se2_text(rng: np.random.Generator) -> str:
     """A synthetic SE(2) graph as g2o text: ids 3 + 7k listed out of order, full information matrices."""
     g = make_graph(rng, dim=2, n=40, n_loops=6)
     n, m = len(g["T"]), len(g["edges"])
@@ -65,7 +65,7 @@ def _se2_text(rng) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _se3_text(rng) -> str:
+def _se3_text(rng: np.random.Generator) -> str:
     """A synthetic SE(3) graph written by gtsam.writeG2o (full information, rotation/translation coupled)."""
     import gtsam
     n = 30
@@ -166,7 +166,7 @@ HINTS = [
 
 # 1e-9: the synthetic files hold 17 significant digits (gtsam.writeG2o writes ~10-16; the real files 6);
 # parsing either way is exact to ~1e-15, and a quaternion -> matrix conversion to ~1e-15.
-def cases_read_g2o(rng):
+def cases_read_g2o(rng: np.random.Generator):
     yield Case("SE(2): ids out of order and not contiguous, full information", ("graph.g2o",),
                _expected_from_text(t := _se2_text(rng)), _metric, 1e-9, "max", convert=_convert,
                call=_from_temporary_file(t), key="synthetic-se2")
@@ -331,7 +331,7 @@ def _round_trip_error(out: dict, exp: dict) -> float:
     return float(max(err))
 
 
-def _graph_for_writing(rng, dim: int) -> dict:
+def _graph_for_writing(rng: np.random.Generator, dim: int) -> dict:
     """A graph to write: random poses (angles to 0.97 pi, a few tiny), ids increasing with gaps (not row numbers),
     measurements near the relative poses, full SPD information spanning three orders of magnitude."""
     n, m = (40, 70) if dim == 2 else (30, 50)
@@ -443,7 +443,7 @@ WRITE_HINTS = [
 WRITE_TOL = 3e-5
 
 
-def cases_write_g2o(rng):
+def cases_write_g2o(rng: np.random.Generator):
     for dim, what in ((2, "SE(2)"), (3, "SE(3)")):
         g = _graph_for_writing(rng, dim)
         yield Case(f"{what}: ids with gaps, full information, angles to 0.97 pi", ("graph.g2o", g), g,
@@ -457,7 +457,7 @@ def cases_write_g2o(rng):
                        tags=("real",))
 
 
-def _real_stretch(rng, name: str, n: int = 300) -> dict:
+def _real_stretch(rng: np.random.Generator, name: str, n: int = 300) -> dict:
     """n consecutive poses of a real graph (a random stretch: ids start where it starts) and the edges among them,
     odometry and loop closures, with the file's own information matrices."""
     g = _real(name)

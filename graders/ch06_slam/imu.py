@@ -14,15 +14,16 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from graders.engine import Case, Exercise, Hint, OutputError, like, register
-from graders.geometry import skew, so3_exp
+from graders.core.engine import Case, Exercise, Hint, OutputError, like, register
+from graders.kit.geometry import skew, so3_exp
 
 G = np.array([0.0, 0.0, -9.81])   # world gravity, z up (gtsam MakeSharedU(9.81))
 
 
 # ----------------------------------------------------------------- synthetic IMU data
 
-def imu_window(rng, n: int = 100, dt: float = 0.005, rate: float = 1.5, noise: bool = True) -> dict:
+def imu_window(rng: np.random.Generator,
+               n: int = 100, dt: float = 0.005, rate: float = 1.5, noise: bool = True) -> dict:
     """IMU samples between two keyframes, generated so that Forster's discrete model is *exact*: the body
     rate ω_k and the specific force are held over each sample interval (zero-order hold), so the true
     R_{k+1} = R_k Exp(ω_k dt) and the world acceleration R_k f_k + g is constant on [t_k, t_{k+1}].
@@ -209,7 +210,7 @@ TOL_DELTA = 1e-9
 TOL_CORRECTION = 1e-6
 
 
-def cases_preintegrate(rng):
+def cases_preintegrate(rng: np.random.Generator):
     w = imu_window(rng, n=100, noise=False)
     args = (w["omega_m"], w["acc_m"], w["dt"], w["b_g"], w["b_a"])
     yield Case("noise-free samples, true biases given: ΔR, Δv, Δp vs the ground-truth states (gravity removed)",

@@ -15,14 +15,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.engine import Case, Exercise, Hint, OutputError, register
+from graders.core.engine import Case, Exercise, Hint, OutputError, register
 
 RATIO = 0.9        # monocular thRefRatio
 MIN_TRACKED = 15   # c2: more than 15 inliers
 COVIS_MIN = 15     # covisibility edge: at least 15 shared points
 
 
-def corridor_sequence(rng, n_frames: int = 160, n_points: int = 1500, reloc: bool = False) -> dict:
+def corridor_sequence(rng: np.random.Generator, n_frames: int = 160, n_points: int = 1500, reloc: bool = False) -> dict:
     """Tracked map-point ids per frame for a camera moving along a 1-D corridor of points at a speed that
     changes (slow, fast, slow), each visible point tracked with probability ~0.92. With `reloc`, tracking is
     lost for a few frames (no points tracked) and resumes further on (relocalisation)."""
@@ -150,7 +150,7 @@ def _metric(out, expected):
     return float(np.abs(W - W_t).max())
 
 
-def cases_keyframes(rng):
+def cases_keyframes(rng: np.random.Generator):
     for i, (reloc, fps, mapping) in enumerate([(False, 30, 3), (False, 10, 6), (True, 4, 2)]):
         seq = corridor_sequence(rng, reloc=reloc)
         args = (seq["obs"], fps, mapping, seq["relocalised"])

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.engine import Case, Exercise, Hint, OutputError, register, shared_run
+from graders.core.engine import Case, Exercise, Hint, OutputError, register, shared_run
 
 MIN_RECALL = 0.5
 
@@ -28,7 +28,7 @@ def _l1_scores(H: np.ndarray) -> np.ndarray:
     return 1 - 0.5 * np.abs(v[:, None, :] - v[None, :, :]).sum(2)
 
 
-def loop_keyframes(rng, n_places: int = 30, per_place: int = 20, keep: float = 0.75) -> dict:
+def loop_keyframes(rng: np.random.Generator, n_places: int = 30, per_place: int = 20, keep: float = 0.75) -> dict:
     """Keyframes 0..2P-1 at places t mod P (two laps). Returns S (N, N), the inlier counts (N, N) behind
     `count_inliers`, place (N,), and which pairs are true loop closures (same place +-1, > 10 keyframes apart)."""
     P = n_places
@@ -139,7 +139,7 @@ def _metric_recall(pairs, truth) -> float:
     return max(MIN_RECALL - _recall(pairs, truth), 0.0)
 
 
-def cases_detect_loops(rng):
+def cases_detect_loops(rng: np.random.Generator):
     for i in range(2):
         run = loop_keyframes(rng)
         inl = run["inliers"]

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.compare import max_abs
-from graders.engine import Case, Exercise, OutputError, like, register, shared_run
-from graders.geometry import so3_exp
+from graders.core.compare import max_abs
+from graders.core.engine import Case, Exercise, OutputError, like, register, shared_run
+from graders.kit.geometry import so3_exp
 
 
 def _group(dim: int):
@@ -39,7 +39,7 @@ def gt_lie_ops(xi, T_a, T_b) -> dict:
             "inverse": np.array([a.inverse().matrix() for a in A]), "adjoint": np.array([a.AdjointMap() for a in A])}
 
 
-def random_poses(rng, n: int, dim: int, scale: float = 3.0) -> np.ndarray:
+def random_poses(rng: np.random.Generator, n: int, dim: int, scale: float = 3.0) -> np.ndarray:
     """Random poses with rotation angles up to 0.97 pi (the log is unique below pi), a few tiny ones."""
     k = 3 if dim == 2 else 6
     xi = rng.normal(0, 1, (n, k))
@@ -59,7 +59,7 @@ def _se3_direct(xi) -> np.ndarray:
     return T
 
 
-def tangents(rng, n: int, dim: int) -> np.ndarray:
+def tangents(rng: np.random.Generator, n: int, dim: int) -> np.ndarray:
     k = 3 if dim == 2 else 6
     xi = rng.normal(0, 1.5, (n, k))
     rot = slice(2, 3) if dim == 2 else slice(0, 3)
@@ -122,7 +122,7 @@ def _adjoint_v_first(case):
         Ad[:, :2, :2] = T[:, :2, :2]
         Ad[:, 0, 2], Ad[:, 1, 2] = -T[:, 1, 2], T[:, 0, 2]     # the sign of the rotation column flipped
         return Ad
-    from graders.geometry import skew
+    from graders.kit.geometry import skew
     R, t = T[:, :3, :3], T[:, :3, 3]
     Ad = np.zeros((len(T), 6, 6))
     Ad[:, :3, :3] = R
@@ -166,7 +166,7 @@ def _inverse_no_rotate(T):
 TOL = {"exp": 1e-8, "log": 1e-7, "compose": 1e-9, "inverse": 1e-9, "adjoint": 1e-9}
 
 
-def cases_lie_ops(rng):
+def cases_lie_ops(rng: np.random.Generator):
     for dim in (2, 3):
         n = 40
         xi, T_a, T_b = tangents(rng, n, dim), random_poses(rng, n, dim), random_poses(rng, n, dim)
@@ -179,7 +179,7 @@ def cases_lie_ops(rng):
 
 
 def _hint_for(op):
-    from graders.engine import Hint
+    from graders.core.engine import Hint
     return [Hint(h.text, (lambda c, out, h=h, op=op: op in c.tags and h.when(c, out))) for h in LIE_HINTS[op]]
 
 
@@ -241,7 +241,7 @@ def _part(p: int):
     return lambda out, exp: max_abs(out[p], exp[p])
 
 
-def residual_graph(rng, dim: int, m: int = 30):
+def residual_graph(rng: np.random.Generator, dim: int, m: int = 30):
     """Random poses and measurements with residuals far from zero (rotation angles 0.3-2 rad, translations
     ~2 m), so that J_r^-1(r) != I and an approximate Jacobian is caught, yet away from pi, where Log jumps
     and J_r^-1 blows up; edge ends random, not consecutive."""
@@ -267,7 +267,7 @@ def _jr_identity(case):
 
 
 def _residual_hints():
-    from graders.engine import Hint
+    from graders.core.engine import Hint
     return [
         like(lambda c: _residual_swapped(c), "the residual is Log(Z^-1 T_i^-1 T_j): the measurement is what the "
                                              "relative pose T_i^-1 T_j should be; you used T_j^-1 T_i (or Z T_ij).",
@@ -302,7 +302,7 @@ def _is_left(case, out) -> bool:
 # Tolerances: r agrees with GTSAM to ~1e-13 (1e-9 covers any sound implementation); the Jacobians are
 # judged against central differences with h = 1e-6, whose truncation + rounding error is ~1e-9 on these
 # O(1)-O(10) entries (measured <= 3e-9): 1e-6 is well above it and far below any wrong block (>= 1e-2).
-def cases_between_residuals(rng):
+def cases_between_residuals(rng: np.random.Generator):
     for dim in (2, 3):
         T, edges, Z = residual_graph(rng, dim)
         expected = gt_between_residuals(T, edges, Z)

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders import datasets
-from graders.engine import Case, Exercise, Hint, OutputError, register
+from graders.kit import datasets
+from graders.core.engine import Case, Exercise, Hint, OutputError, register
 
 from .posegraphs import (gt_chi2, gtsam_optimize, graph_args, load_posegraph, make_graph, pose_errors, real_optimum,
                          subgraph)
@@ -80,7 +80,7 @@ OPT_HINTS = [
 ]
 
 
-def _synthetic(rng, dim: int) -> tuple[tuple, dict]:
+def _synthetic(rng: np.random.Generator, dim: int) -> tuple[tuple, dict]:
     g = make_graph(rng, dim=dim, n=120 if dim == 2 else 100, n_loops=12)
     args = graph_args(g)
     return args, _expected(args, gtsam_optimize(*args))
@@ -90,7 +90,7 @@ def _synthetic(rng, dim: int) -> tuple[tuple, dict]:
 # agree to 1e-12, a run stopped at a relative decrease of 1e-6 is within 1e-8), 1e-3 on the real ones (the
 # issue's 0.1 % of GTSAM's). Poses: 1e-3 m after aligning the first poses (reference vs GTSAM: <= 5e-5 m on
 # every graph measured; ignoring the information matrices moves poses by 0.05-0.5 m).
-def cases_optimize(rng):
+def cases_optimize(rng: np.random.Generator):
     for dim in (2, 3):
         args, exp = _synthetic(rng, dim)
         run = _shared(args)
@@ -118,11 +118,11 @@ def _real_cases(name: str, n: int | None):
 
 
 def _shared(args):
-    from graders.engine import shared_run
+    from graders.core.engine import shared_run
     return shared_run(lambda fn: fn(*args))
 
 
-def hidden_optimize(rng):
+def hidden_optimize(rng: np.random.Generator):
     if datasets.available("posegraph"):
         yield from _real_cases("garage", None)
 
@@ -152,7 +152,7 @@ register(Exercise(
 C_CAUCHY = 3.0   # the kernel's scale in whitened units: ~ the 95 % quantile of sqrt(chi2) for 3-6 DOF
 
 
-def plant_false_loops(rng, g: dict, n_false: int, min_dist: float = 5.0) -> dict:
+def plant_false_loops(rng: np.random.Generator, g: dict, n_false: int, min_dist: float = 5.0) -> dict:
     """`g` plus `n_false` wrong loop closures ("same place", identity with the odometry's information)
     between poses more than `min_dist` apart in the optimum and at least 50 poses apart in time."""
     T_ref = g.get("optimum", g["T"])
@@ -184,7 +184,7 @@ def _robust_tol(exp: dict) -> float:
     return max(0.02, 3.0 * exp["dev_robust"])
 
 
-def _robust_draw(rng, dim: int):
+def _robust_draw(rng: np.random.Generator, dim: int):
     """A synthetic graph with 3 false loop closures, redrawn until they matter (L2 is >= 10x the tolerance off)."""
     for _ in range(20):
         g = make_graph(rng, dim=dim, n=120 if dim == 2 else 100, n_loops=12, n_false=3)
@@ -216,7 +216,7 @@ ROBUST_HINTS = [
 ]
 
 
-def cases_robust(rng):
+def cases_robust(rng: np.random.Generator):
     for dim in (2, 3):
         args, exp = _robust_draw(rng, dim)
         yield Case(f"synthetic SE({dim}) with 3 false loop closures: poses vs the optimum without them", args, exp,

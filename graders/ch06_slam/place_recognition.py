@@ -14,14 +14,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.engine import Case, Exercise, Hint, OutputError, register
+from graders.core.engine import Case, Exercise, Hint, OutputError, register
 
 D = 32   # descriptor length
 
 
 # ----------------------------------------------------------------- the loop sequence
 
-def loop_sequence(rng, n_places: int = 40, per_place: int = 8, window: int = 2, noise: float = 0.35,
+def loop_sequence(rng: np.random.Generator,
+                  n_places: int = 40, per_place: int = 8, window: int = 2, noise: float = 0.35,
                   keep: float = 0.7, n_ubiquitous: int = 8, aliased: int = 0) -> dict:
     """Two laps round a loop of `n_places` places. Place p owns `per_place` landmarks; frame at place p sees
     the landmarks of places p-window..p+window (each kept with probability `keep`) and the ubiquitous ones
@@ -165,7 +166,7 @@ TOL_SCORES = 1e-9   # float64 sums of <= 200 terms: ~1e-15; every slip below mov
 TOL_RETRIEVAL = 0.15
 
 
-def cases_bow_scores(rng):
+def cases_bow_scores(rng: np.random.Generator):
     for i, (n_places, n_words) in enumerate([(16, 24), (30, 48)]):
         seq = loop_sequence(rng, n_places=n_places)
         V = seq["prototypes"][rng.choice(len(seq["prototypes"]), n_words, replace=False)] \

@@ -14,8 +14,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from graders import datasets
-from graders.geometry import so3_exp, umeyama
+from graders.kit import datasets
+from graders.kit.geometry import so3_exp, umeyama
 
 POSEGRAPH_FILES = {"intel": "intel.g2o", "garage": "parking-garage.g2o"}
 
@@ -157,7 +157,7 @@ def _exp(xi: np.ndarray) -> np.ndarray:
     return np.array([G.Expmap(x).matrix() for x in xi])
 
 
-def _true_path(rng, n: int, dim: int) -> np.ndarray:
+def _true_path(rng: np.random.Generator, n: int, dim: int) -> np.ndarray:
     """n poses on laps of a rounded rectangle (SE(3): on two floors, rising on a ramp), 1 m apart."""
     W, H = rng.uniform(6, 12), rng.uniform(4, 8)
     per = 2 * (W + H)
@@ -180,7 +180,7 @@ def _true_path(rng, n: int, dim: int) -> np.ndarray:
     return T
 
 
-def make_graph(rng, dim: int = 2, n: int = 120, n_loops: int = 12, sigma_t: float = 0.05,
+def make_graph(rng: np.random.Generator, dim: int = 2, n: int = 120, n_loops: int = 12, sigma_t: float = 0.05,
                sigma_r: float = 0.01, n_false: int = 0, loop_scale: float = 1.0) -> dict:
     """A graph with known truth: odometry between consecutive poses and `n_loops` loop closures between
     poses within 1.5 m of each other on different laps, all with Gaussian noise of the stated sigmas

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.compare import max_abs, relative
-from graders.engine import Hint, choice_question, numeric_question, register, value_hint
+from graders.core.compare import max_abs, relative
+from graders.core.engine import Hint, choice_question, numeric_question, register, value_hint
 
 # ----------------------------------------------------------------- 6.1
 

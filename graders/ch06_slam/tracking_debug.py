@@ -21,9 +21,9 @@ from functools import lru_cache
 import numpy as np
 from scipy.spatial import cKDTree
 
-from graders.convert import as_pose_stack
-from graders.engine import Case, Exercise, Hint, OutputError, register, shared_run
-from graders.geometry import so3_exp
+from graders.core.convert import as_pose_stack
+from graders.core.engine import Case, Exercise, Hint, OutputError, register, shared_run
+from graders.kit.geometry import so3_exp
 
 CAUSES = ("a", "b", "c", "d")
 CAUSE_TEXT = {
@@ -40,7 +40,7 @@ K = np.array([[F, 0, W / 2], [0, F, H / 2], [0, 0, 1.0]])
 D = 16
 
 
-def yaw_profile(rng, n_frames: int = 56, fast_deg: float | None = None) -> np.ndarray:
+def yaw_profile(rng: np.random.Generator, n_frames: int = 56, fast_deg: float | None = None) -> np.ndarray:
     """Yaw per frame (rad): slow, a smooth ramp up to a fast turn, hold, ramp down, slow."""
     fast = np.radians(fast_deg if fast_deg is not None else rng.uniform(5.0, 7.0))
     slow = np.radians(rng.uniform(0.2, 0.5))
@@ -54,7 +54,7 @@ def yaw_profile(rng, n_frames: int = 56, fast_deg: float | None = None) -> np.nd
     return np.cumsum(np.r_[0.0, rate[:-1]]) * rng.choice([-1, 1])
 
 
-def tracking_sequence(rng, n_frames: int = 56, fast_deg: float | None = None) -> dict:
+def tracking_sequence(rng: np.random.Generator, n_frames: int = 56, fast_deg: float | None = None) -> dict:
     """A camera at the centre of a ring of points turns (mostly yaw) while creeping forward. Returns the map
     (points, descriptors), per-frame keypoints (pixels, descriptors; shuffled; 0.5 px noise), true poses
     T_cw (n_frames, 4, 4)."""
@@ -158,7 +158,7 @@ def run_tracker(case: dict, motion_model: bool = False, radius: float = WINDOW) 
     return {"T": T, "matches": np.array(log)}
 
 
-def debug_tracking(rng) -> tuple[dict, dict]:
+def debug_tracking(rng: np.random.Generator) -> tuple[dict, dict]:
     """6.20's case: the sequence's callbacks, frame 0's pose, and the broken tracker's log; truth: the poses."""
     seq = tracking_sequence(rng)
 
@@ -215,7 +215,7 @@ TOL_UNTRACKED = 0.05
 TOL_ATE = 0.02   # m RMS: the reference reaches 1-4 mm; a tracker lost at the turn is off by metres.
 
 
-def cases_tracking(rng):
+def cases_tracking(rng: np.random.Generator):
     for i in range(2):
         case, truth = debug_tracking(rng)
         call = shared_run(lambda fn, case=case: fn(case))

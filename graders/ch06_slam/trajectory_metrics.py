@@ -13,9 +13,9 @@ from functools import lru_cache
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from graders import datasets
-from graders.engine import Case, Exercise, OutputError, like, register
-from graders.geometry import umeyama
+from graders.kit import datasets
+from graders.core.engine import Case, Exercise, OutputError, like, register
+from graders.kit.geometry import umeyama
 
 MAX_DIFF = 0.01  # s: evo's default association window (`evo_ape ... --t_max_diff 0.01`)
 
@@ -39,7 +39,8 @@ def load_tum_pair() -> dict:
     return {"stamps_est": t_est, "T_est": T_est, "stamps_gt": t_gt, "T_gt": T_gt}
 
 
-def synthetic_pair(rng, n_gt: int = 600, rate_gt: float = 100.0, rate_est: float = 30.0, noise: float = 0.01,
+def synthetic_pair(rng: np.random.Generator,
+                   n_gt: int = 600, rate_gt: float = 100.0, rate_est: float = 30.0, noise: float = 0.01,
                    drift_deg: float = 3.0) -> dict:
     """A smooth 6-DOF ground truth at `rate_gt` Hz and an estimate at ~`rate_est` Hz in another frame and
     scale (a random similarity), with noise, a slow rotation drift, jittered stamps and a few estimate
@@ -185,7 +186,7 @@ def _metric(out, expected):
 TOL = 1e-6
 
 
-def cases_trajectory_errors(rng):
+def cases_trajectory_errors(rng: np.random.Generator):
     if datasets.available("trajectories"):
         pair = load_tum_pair()
         args = (pair["stamps_est"], pair["T_est"], pair["stamps_gt"], pair["T_gt"])

@@ -1,6 +1,6 @@
 """Chapter 6, visual odometry: 6.13 `monocular_vo` (E → pose → triangulate → PnP on the local map, frame by frame).
 
-Input: a feature tracker's output, frame by frame (keypoints with track ids). One run is rendered: graders.scene's
+Input: a feature tracker's output, frame by frame (keypoints with track ids). One run is rendered: graders.kit.scene's
 textured corridor at 320 x 240, tracked by OpenCV's KLT (graders.oracles.flow.klt_tracks), so the loop meets real
 tracker output (drifting tracks, tracks that die and are re-detected). Two runs are projected points whose ids are
 the scene point's (0.3 px noise, 5 % of them given a wrong id: the mismatches RANSAC must reject): there the truth
@@ -16,19 +16,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.convert import as_pose_stack
-from graders.engine import Case, Exercise, Hint, register, shared_run
-from graders.geometry import so3_exp, umeyama
+from graders.core.convert import as_pose_stack
+from graders.core.engine import Case, Exercise, Hint, register, shared_run
+from graders.kit.geometry import so3_exp, umeyama
 from graders.oracles.flow import klt_tracks
 from graders.oracles.two_view import SOLVERS
 from graders.oracles.vo import centres, standin_vo
-from graders.corridor import render_corridor
+from graders.kit.corridor import render_corridor
 
 F, W, H = 500.0, 640, 480
 K = np.array([[F, 0, W / 2], [0, F, H / 2], [0, 0, 1.0]])
 
 
-def _trajectory(rng, n_frames: int, sway: float, speed: float, yaw_deg: tuple[float, float], z0: float = 0.0):
+def _trajectory(rng: np.random.Generator,
+                n_frames: int, sway: float, speed: float, yaw_deg: tuple[float, float], z0: float = 0.0):
     """Poses T_cw (n, 4, 4) and camera-to-world rotations (n, 3, 3) of a camera moving forward (+Z) at a speed
     varying 2-4x along the run (0.4-1.6 x `speed` per frame), swaying sideways by ±`sway` and yawing."""
     k = np.arange(n_frames)
@@ -44,7 +45,7 @@ def _trajectory(rng, n_frames: int, sway: float, speed: float, yaw_deg: tuple[fl
     return T, R_wc
 
 
-def vo_sequence(rng, n_frames: int = 40, n_points: int = 1600, wrong: float = 0.05) -> dict:
+def vo_sequence(rng: np.random.Generator, n_frames: int = 40, n_points: int = 1600, wrong: float = 0.05) -> dict:
     """A camera moving forward (0.08-0.32 m/frame) and sideways with a gentle yaw through a corridor of points.
     Returns frames (list of dict(ids (m,), uv (m, 2))) and the true poses T_cw (n, 4, 4)."""
     X = np.c_[rng.uniform(-5, 5, n_points), rng.uniform(-2.5, 2.5, n_points), rng.uniform(-1, 16, n_points)]
@@ -71,8 +72,8 @@ W_R, H_R = 320, 240   # the rendered sequence: 40 renders and KLT in ~0.5 s; 640
 K_R = np.array([[0.9 * W_R, 0, (W_R - 1) / 2], [0, 0.9 * W_R, (H_R - 1) / 2], [0, 0, 1.0]])
 
 
-def rendered_vo_sequence(rng, n_frames: int = 40, noise: float = 1.0) -> dict:
-    """The same kind of run, 4 m down graders.scene's textured corridor (4 m wide), *rendered* (320 x 240, K_R,
+def rendered_vo_sequence(rng: np.random.Generator, n_frames: int = 40, noise: float = 1.0) -> dict:
+    """The same kind of run, 4 m down graders.kit.scene's textured corridor (4 m wide), *rendered* (320 x 240, K_R,
     `noise` grey levels) and turned into tracks by a real tracker (graders.oracles.flow.klt_tracks: corners,
     pyramidal LK, forward-backward check, re-detection). Returns frames (ids = track ids, uv), images, T."""
     T, _ = _trajectory(rng, n_frames, sway=0.6, speed=0.1, yaw_deg=(8, 15), z0=0.5)
@@ -130,7 +131,7 @@ TOL_DRIFT = 0.3
 TOL_ATE_RENDERED = 0.06
 
 
-def cases_vo(rng):
+def cases_vo(rng: np.random.Generator):
     seq = rendered_vo_sequence(rng)
     args = (seq["frames"], K_R.copy(), dict(SOLVERS))
     yield Case("rendered corridor (40 frames of 320 × 240, tracks from KLT on the images): camera centres after "

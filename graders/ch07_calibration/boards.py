@@ -12,8 +12,8 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from graders import datasets, scene
-from graders.geometry import brown_distort, from_h, so3_exp, so3_log, to_camera
+from graders.kit import datasets, scene
+from graders.kit.geometry import brown_distort, from_h, so3_exp, so3_log, to_camera
 
 PATTERN = (9, 6)            # inner corners (cols, rows), as the real views
 SQUARE = 0.025              # metres, as the real board

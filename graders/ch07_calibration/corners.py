@@ -5,8 +5,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from graders.compare import max_distance
-from graders.engine import Case, Exercise, Hint, register
+from graders.core.compare import max_distance
+from graders.core.engine import Case, Exercise, Hint, register
 
 from . import boards
 
@@ -36,7 +36,7 @@ def rendered_board(rng: np.random.Generator, square_px: int = 24) -> np.ndarray:
     return np.clip(img, 0, 255).astype(np.uint8)
 
 
-def _synthetic_cases(rng):
+def _synthetic_cases(rng: np.random.Generator):
     cases = []
     for j in range(3):
         for _ in range(20):
@@ -52,7 +52,7 @@ def _synthetic_cases(rng):
     return cases
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     if not boards.real_available():   # without the real views: rendered boards, same judge
         return _synthetic_cases(rng)
     imgs, coarse = boards.real_images(), boards.real_corners(refined=False)

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.convert import OutputError
-from graders.engine import Exercise, Hint, debug_cases, debug_practice, register
-from graders.geometry import so3_exp
+from graders.core.convert import OutputError
+from graders.core.engine import Exercise, Hint, debug_cases, debug_practice, register
+from graders.kit.geometry import so3_exp
 
 from . import boards
 from .stereo import _convert_rig, boards_seen_by_both, cv_stereo_calibrate, cv_stereo_rectify, synthetic_stereo, vertical_disparity
@@ -19,7 +19,7 @@ from .timesync import gt_time_offset, imu_camera_rates
 from .field_debug import debug_mount_shift, debug_rolling_shutter  # 7.21-7.22 (registered there)
 
 
-def debug_stereo_drift(rng) -> tuple[dict, dict]:
+def debug_stereo_drift(rng: np.random.Generator) -> tuple[dict, dict]:
     """7.18 — stereo stopped matching after a knock: camera 2 turned by 0.3-1° about a random axis; the
     intrinsics are still right. The case: the old (drifted) rig and 6 fresh board views of both cameras."""
     d = synthetic_stereo(rng, n_views=6)
@@ -60,7 +60,7 @@ def cv_fix_stereo_drift(case: dict):
     return R, t
 
 
-def debug_time_offset(rng) -> tuple[dict, dict]:
+def debug_time_offset(rng: np.random.Generator) -> tuple[dict, dict]:
     """7.19 — the IMU and the camera disagree while turning: the camera's clock lags by 3-40 ms."""
     d = imu_camera_rates(rng)
     case = {k: d[k] for k in ("t_imu", "w_imu", "t_cam", "w_cam")}

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.geometry import brown_distort
+from graders.kit.geometry import brown_distort
 
 from .boards import SIZE, per_view_rms
 

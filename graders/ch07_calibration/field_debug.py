@@ -13,17 +13,17 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from graders import scene
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, Hint, register, shared_run
-from graders.geometry import so3_exp, so3_log
+from graders.kit import scene
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, register, shared_run
+from graders.kit.geometry import so3_exp, so3_log
 
 from .boards import SIZE, project_board
 
 NOISE_PX = 0.3
 
 
-def _points_in_view(rng, K, n: int, depth=(1.5, 6.0), margin: float = 40.0) -> np.ndarray:
+def _points_in_view(rng: np.random.Generator, K, n: int, depth=(1.5, 6.0), margin: float = 40.0) -> np.ndarray:
     """n camera-frame points whose (undistorted) pixels fall inside the image with a margin: (n, 3)."""
     w, h = SIZE
     uv = np.c_[rng.uniform(margin, w - margin, n), rng.uniform(margin, h - margin, n)]
@@ -45,7 +45,7 @@ def _angle_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
 _R_CAM_FROM_BODY = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
 
 
-def _body_path(rng, n: int) -> tuple[np.ndarray, np.ndarray]:
+def _body_path(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
     """A robot driving and turning on the floor: body-to-world R_wb (n, 3, 3), t_wb (n, 3)."""
     s = np.arange(n) * 0.05
     yaw = 0.4 * np.sin(s / rng.uniform(1.5, 3.0) + rng.uniform(0, 2 * np.pi))
@@ -54,7 +54,7 @@ def _body_path(rng, n: int) -> tuple[np.ndarray, np.ndarray]:
     return R_wb, t_wb
 
 
-def _frames(rng, K, dist, R_cb, t_cb, R_wb, t_wb, n_points: int):
+def _frames(rng: np.random.Generator, K, dist, R_cb, t_cb, R_wb, t_wb, n_points: int):
     """Landmarks seen from each body pose through the mount (R_cb, t_cb): world points (F, P, 3), pixels (F, P, 2)."""
     F = len(R_wb)
     X_c = np.array([_points_in_view(rng, K, n_points) for _ in range(F)])
@@ -64,7 +64,8 @@ def _frames(rng, K, dist, R_cb, t_cb, R_wb, t_wb, n_points: int):
     return X_w, scene.add_noise(rng, uv, NOISE_PX), X_b
 
 
-def debug_mount_shift(rng, n_frames: int = 200, n_points: int = 30, n_held: int = 20) -> tuple[dict, dict]:
+def debug_mount_shift(rng: np.random.Generator,
+                      n_frames: int = 200, n_points: int = 30, n_held: int = 20) -> tuple[dict, dict]:
     """7.21 — calibrated in the lab at ~0.4 px; on the robot the monitor's residual jumps and stays up: at a
     hidden frame the mount settled 0.5-1.5° and 5-15 mm away from where the lab measured it. The case: K, dist
     (still right), the lab's camera-from-body extrinsics (R_cb, t_cb: X_c = R_cb X_b + t_cb), the robot's
@@ -172,7 +173,7 @@ MOUNT_HINTS = [
 ]
 
 
-def _cases_mount(rng):
+def _cases_mount(rng: np.random.Generator):
     case, truth = debug_mount_shift(rng)
     run = shared_run(lambda fn: fn(case))
     # 0 frames: the step is >= 4 px over a 0.35 px median (10x the frame-to-frame scatter of the log), so the
@@ -216,7 +217,7 @@ def _brown(x, dist):
     return np.c_[u * radial + 2 * p1 * u * w + p2 * (r2 + 2 * u * u), w * radial + p1 * (r2 + 2 * w * w) + 2 * p2 * u * w]
 
 
-def _rs_frames(rng, K, dist, line_delay, rates, n_points: int) -> dict:
+def _rs_frames(rng: np.random.Generator, K, dist, line_delay, rates, n_points: int) -> dict:
     F = len(rates)
     axes = np.c_[rng.normal(0, 0.3, F), np.sign(rng.normal(size=F)), rng.normal(0, 0.3, F)]  # mostly pans (about y)
     omega = axes / np.linalg.norm(axes, axis=1, keepdims=True) * np.asarray(rates)[:, None]
@@ -228,7 +229,7 @@ def _rs_frames(rng, K, dist, line_delay, rates, n_points: int) -> dict:
     return {"R0": R0, "t0": t0, "omega": omega, "v": v, "X": X, "uv": scene.add_noise(rng, uv, NOISE_PX)}
 
 
-def debug_rolling_shutter(rng, n_points: int = 40) -> tuple[dict, dict]:
+def debug_rolling_shutter(rng: np.random.Generator, n_points: int = 40) -> tuple[dict, dict]:
     """7.22 — reprojection errors of 5-20 px while the camera pans fast, ~0.4 px when it is still; a colleague
     re-calibrated K and it did not help. The camera reads its rows out top to bottom, 20-60 µs apart. The case:
     K, dist (right), six frames (two still, four panning at 1-3 rad/s) with each frame's pose at row 0, its gyro
@@ -288,7 +289,7 @@ RS_HINTS = [
 ]
 
 
-def _cases_rs(rng):
+def _cases_rs(rng: np.random.Generator):
     case, truth = debug_rolling_shutter(rng)
     # 0.05 px beyond the truth's RMS (~0.42 px of noise): one parameter from 240 pixels of fast frames lands
     # within 0.3 % of the line delay (< 0.01 px); K re-fitted with no shutter model leaves 3-10 px on other pans.

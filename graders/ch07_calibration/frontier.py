@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.engine import Case, Exercise, Hint, register
-from graders.geometry import so3_exp
-from graders import scene
+from graders.core.engine import Case, Exercise, Hint, register
+from graders.kit.geometry import so3_exp
+from graders.kit import scene
 
 from .boards import SIZE
 
@@ -52,7 +52,7 @@ def gt_recalibration_trigger(residuals, baseline, window: int = 50, factor: floa
     return -1
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     cases = []
     for i, (window, factor) in enumerate(((50, 2.0), (30, 1.5), (50, 2.0))):
         d = drifting_rig(rng)

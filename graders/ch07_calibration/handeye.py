@@ -11,10 +11,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
-from graders.compare import rotation_angle_deg
-from graders.convert import OutputError, as_rotation
-from graders.engine import Case, Exercise, Hint, register
-from graders.geometry import project_to_so3, so3_exp, so3_log
+from graders.core.compare import rotation_angle_deg
+from graders.core.convert import OutputError, as_rotation
+from graders.core.engine import Case, Exercise, Hint, register
+from graders.kit.geometry import project_to_so3, so3_exp, so3_log
 
 
 def _T(R, t):
@@ -23,7 +23,7 @@ def _T(R, t):
     return T
 
 
-def _random_rotation(rng, lo_deg, hi_deg):
+def _random_rotation(rng: np.random.Generator, lo_deg, hi_deg):
     w = rng.normal(size=3)
     return so3_exp(w / np.linalg.norm(w) * np.radians(rng.uniform(lo_deg, hi_deg)))
 
@@ -96,7 +96,7 @@ def _convert_X(out, case):
     return X
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     cases = []
     for i in range(2):
         d = hand_eye_motions(rng, n=2, rot_noise_deg=0.0, trans_noise=0.0, axes="two")

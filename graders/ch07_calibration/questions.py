@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.compare import max_abs, relative
-from graders.engine import Hint, choice_question, numeric_question, register, value_hint
+from graders.core.compare import max_abs, relative
+from graders.core.engine import Hint, choice_question, numeric_question, register, value_hint
 
 # Synchronisation, worst case of each method (s): hardware trigger < 1 µs, PTP < 100 µs, NTP ~1 ms,
 # software timestamps 1-10 ms.

@@ -12,10 +12,10 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from graders.compare import rotation_angle_deg
-from graders.convert import OutputError, as_rotation, as_pose
-from graders.engine import Case, Exercise, Hint, raised, register, shared_run
-from graders.geometry import so3_exp
+from graders.core.compare import rotation_angle_deg
+from graders.core.convert import OutputError, as_rotation, as_pose
+from graders.core.engine import Case, Exercise, Hint, raised, register, shared_run
+from graders.kit.geometry import so3_exp
 
 from . import boards
 
@@ -103,7 +103,7 @@ def synthetic_stereo(rng: np.random.Generator, n_views: int = 8, noise: float = 
             "Rs2": Rs2, "ts2": ts2, "R": R, "t": t, "poses_true": true_poses}
 
 
-def boards_seen_by_both(rng, K1, d1, K2, d2, R, t, n_views, X=None):
+def boards_seen_by_both(rng: np.random.Generator, K1, d1, K2, d2, R, t, n_views, X=None):
     """n_views true board poses (camera 1's frame) whose corners all land inside both images."""
     X = boards.board() if X is None else X
     poses = []
@@ -124,7 +124,7 @@ def _convert_rig(out, case):
     return as_pose(out)   # (R, t): R in SO(3), t finite (3,)
 
 
-def _extrinsics_cases(rng):
+def _extrinsics_cases(rng: np.random.Generator):
     draws = []
     if boards.real_available():
         draws.append(("real", "the 13 real pairs", real_stereo()))
@@ -210,7 +210,7 @@ def _structure(out, t) -> float:
                      abs(P2[1, 2] - P1[1, 2]), 1e6 * (f <= 0)))
 
 
-def _rectify_cases(rng):
+def _rectify_cases(rng: np.random.Generator):
     draws = [("synthetic", "a synthetic rig", synthetic_stereo(rng, n_views=4))]
     if boards.real_available():
         draws.insert(0, ("real", "the real rig", real_stereo()))

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.engine import Case, Exercise, Hint, register
-from graders.geometry import so3_exp
+from graders.core.engine import Case, Exercise, Hint, register
+from graders.kit.geometry import so3_exp
 
 IMU_HZ, CAM_HZ, DURATION = 200.0, 30.0, 20.0
 
 
-def _rates(rng, n_terms=6):
+def _rates(rng: np.random.Generator, n_terms=6):
     f = rng.uniform(0.2, 3.0, (3, n_terms))
     a = rng.uniform(0.3, 1.5, (3, n_terms))
     ph = rng.uniform(0, 2 * np.pi, (3, n_terms))
@@ -62,7 +62,7 @@ def _ms(out, delta):
     return 1e3 * abs(float(out) - delta)
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     cases = []
     draws = [("general", None, True), ("half-sample", None, True), ("aligned-frames", None, False)]
     for key, delta, rotate in draws:

@@ -10,10 +10,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from graders.compare import max_abs, up_to_scale
-from graders.convert import OutputError, as_array, as_rotation, as_pose
-from graders.engine import Case, Exercise, Hint, like, raised, register, shared_run
-from graders.geometry import from_h, project, to_h
+from graders.core.compare import max_abs, up_to_scale
+from graders.core.convert import OutputError, as_array, as_rotation, as_pose
+from graders.core.engine import Case, Exercise, Hint, like, raised, register, shared_run
+from graders.kit.geometry import from_h, project, to_h
 
 from . import boards
 
@@ -74,7 +74,7 @@ def _transfer_rms(H, X_xy, uv_true):
     return float(np.sqrt(np.mean(np.sum((from_h(to_h(X_xy) @ np.asarray(H, float).T) - uv_true) ** 2, 1))))
 
 
-def _homography_cases(rng):
+def _homography_cases(rng: np.random.Generator):
     cases = []
     for key, noise, unit_scale in (("exact", 0.0, 1.0), ("noisy", 0.3, 1.0), ("noisy-mm", 0.3, 1000.0)):
         rig = boards.synthetic_rig(rng, n_views=1, noise=noise, strength="none")
@@ -142,7 +142,7 @@ def _k_metric(K, K_ref):
     return max_abs(np.asarray(K, float)[:2] / K[2, 2], np.asarray(K_ref, float)[:2])
 
 
-def _exact_homographies(rng, n_views):
+def _exact_homographies(rng: np.random.Generator, n_views):
     rig = boards.synthetic_rig(rng, n_views=n_views, strength="none")
     K = rig["K"].copy()
     K[0, 1] = rng.uniform(-1.0, 1.0) * bool(n_views > 3)   # a little skew where the data can tell
@@ -153,7 +153,7 @@ def _exact_homographies(rng, n_views):
     return np.array(Hs), K
 
 
-def _intrinsics_cases(rng):
+def _intrinsics_cases(rng: np.random.Generator):
     cases = []
     for n in (3, 8):
         Hs, K = _exact_homographies(rng, n)
@@ -210,7 +210,7 @@ def _pose_error_px(pose, info):
     return float(np.sqrt(np.mean(np.sum((uv - info["uv_true"]) ** 2, 1))))
 
 
-def _extrinsics_cases(rng):
+def _extrinsics_cases(rng: np.random.Generator):
     cases = []
     for key, noise in (("exact", 0.0), ("noisy-1", 0.3), ("noisy-2", 0.3)):
         rig = boards.synthetic_rig(rng, n_views=1, noise=noise, strength="none")
@@ -272,7 +272,7 @@ def _distortion_px(a, b, uv):
     return float(np.max(np.linalg.norm(pa - g, axis=1)))
 
 
-def _calibration_cases(rng):
+def _calibration_cases(rng: np.random.Generator):
     draws = []
     if boards.real_available():
         X, uv = boards.board(), boards.real_corners()

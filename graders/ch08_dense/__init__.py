@@ -3,7 +3,7 @@
 Oracles: the real Middlebury motorcycle pair with its ground-truth disparity (scikit-image's
 `skimage.data.stereo_motorcycle()`), OpenCV's StereoBM / StereoSGBM on the same pairs, synthetic
 rectified pairs with exact disparity, and multi-view scenes of textured planes rendered by
-`graders.scene` with exact depth (plane-sweep MVS and depth-map fusion are judged on it).
+`graders.kit.scene` with exact depth (plane-sweep MVS and depth-map fusion are judged on it).
 
 Geometry modules: `stereo` (8.8-8.9), `mvs` (8.10), `fusion` (8.11), `debug` (8.17), `questions` (8.1-8.3, 8.24). Importing the package registers the
 chapter; the names below are the API of the notebook, the tests and the benchmark.
@@ -33,8 +33,7 @@ from .raster import brute_force_weights, gt_rasterize, splat_batch  # noqa: E402
 __all__ += ["brute_force_weights", "gt_rasterize", "splat_batch"]
 from . import fit2d  # noqa: F401,E402 (register 8.16)
 from .fit2d import gt_fit_splats, initial_gaussians, psnr, render_splats, target_image  # noqa: E402
-__all__ += ["gt_fit_splats", "initial_gaussians", "psnr", "render_splats", "target_image", "single_thread"]
-from .nerf import single_thread  # noqa: E402
+__all__ += ["gt_fit_splats", "initial_gaussians", "psnr", "render_splats", "target_image"]
 from . import tiny_nerf  # noqa: F401,E402 (register 8.13)
 from .tiny_nerf import gt_train_tiny_nerf, nerf_scene, render_field  # noqa: E402
 __all__ += ["gt_train_tiny_nerf", "nerf_scene", "render_field"]

@@ -14,7 +14,7 @@ import copy
 import cv2
 import numpy as np
 
-from graders.engine import Case, Exercise, Hint, OutputError, debug_practice, register, shared_run
+from graders.core.engine import Case, Exercise, Hint, OutputError, debug_practice, register, shared_run
 
 from . import mvs
 
@@ -137,7 +137,7 @@ def _convert(out, case):
     return {"cause": cause, "depth": Z}
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     for i in range(2):
         case, truth = debug_holes(rng)
         call = shared_run(lambda fn, c=case: fn(copy.deepcopy(c)))

@@ -17,10 +17,10 @@ import copy
 
 import numpy as np
 
-from graders.engine import Case, Exercise, Hint, OutputError, register, shared_run
+from graders.core.engine import Case, Exercise, Hint, OutputError, register, shared_run
 
 from . import fit2d
-from .nerf import single_thread
+from graders.kit.threads import torch_threads
 
 CAUSES = {
     "position_lr": "the position learning rate is too high: each step moves a mean further than a Gaussian is wide",
@@ -48,7 +48,7 @@ def debug_diverging(rng: np.random.Generator, kind: str | None = None) -> tuple[
                                                           "color_logit": 0.1, "opacity_logit": 0.1},
                 "densify_every": 30, "densify_until": 120, "prune_opacity": fit2d.O_PRUNE}
     rounds: list[dict] = []
-    with single_thread():
+    with torch_threads(1):
         broken = fit2d.gt_fit_splats(target, init, settings["steps"], settings["max_gaussians"], lr_means=lr, log=rounds)
     p = fit2d.psnr(fit2d.render_splats(**broken, H=H, W=W), target)
     m = init["means"]
@@ -67,7 +67,7 @@ def debug_diverging(rng: np.random.Generator, kind: str | None = None) -> tuple[
 def _bar(target) -> float:
     """The stand-in's PSNR from a sound start (8.16's grid, 0.3 px per step), minus PSNR_TOL."""
     H, W = target.shape[:2]
-    with single_thread():
+    with torch_threads(1):
         ref = fit2d.gt_fit_splats(target, fit2d.initial_gaussians(H, W), 150, 64)
     return fit2d.psnr(fit2d.render_splats(**ref, H=H, W=W), target) - PSNR_TOL
 
@@ -86,12 +86,12 @@ def _psnr(out, case):
     return fit2d.psnr(fit2d.render_splats(**out["gaussians"], H=t.shape[0], W=t.shape[1]), t)
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     for i, kind in enumerate(rng.permutation(KINDS)):
         case, truth = debug_diverging(rng, str(kind))
 
         def learner(fn, c=case):
-            with single_thread():
+            with torch_threads(1):
                 return fn(copy.deepcopy(c))
         call = shared_run(learner)
         yield Case(f"run {i + 1}: the cause you named", (case,), truth, lambda o, t: float(o["cause"] != t["cause"]),

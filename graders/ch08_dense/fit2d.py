@@ -11,10 +11,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, Hint, register, shared_run
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, register, shared_run
 
-from .nerf import single_thread, to_numpy
+from graders.kit.threads import torch_threads
+
+from .nerf import to_numpy
 
 O_PRUNE = 0.005
 
@@ -75,7 +77,7 @@ def gt_fit_splats(target, init, steps=150, max_gaussians=64, seed=0, densify=Tru
     1.5 px, cloned otherwise), those below o = 0.005 pruned, the budget kept by opacity. `lr_means` is the
     position learning rate (px per step); a list `log` gets one dict per 30-step round (8.20's run log)."""
     import torch
-    with single_thread():
+    with torch_threads(1):
         torch.manual_seed(seed)
         T = torch.as_tensor(np.asarray(target, float))
         H, W = T.shape[:2]
@@ -161,7 +163,7 @@ def _convert(out, case):
     return arr
 
 
-def _fit_cases(rng):
+def _fit_cases(rng: np.random.Generator):
     target = target_image(rng)
     H, W = target.shape[:2]
     init = initial_gaussians(H, W)
@@ -171,7 +173,7 @@ def _fit_cases(rng):
     args = (target, init, steps, budget)
     info = {"target": target, "H": H, "W": W, "psnr_ref": p_ref, "n_init": int(np.sum(init["opacity"] >= O_PRUNE)), "budget": budget}
     def learner(fn):
-        with single_thread():
+        with torch_threads(1):
             return fn(*args)
     run = shared_run(learner)
     # 1.5 dB below the stand-in: the reference's fits of the same target, seeded differently, spread by

@@ -23,9 +23,9 @@ import copy
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, Hint, register, shared_run
-from graders.scene import look_at
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, register, shared_run
+from graders.kit.scene import look_at
 
 from .nerf import to_numpy
 from .raster import gt_rasterize
@@ -52,7 +52,7 @@ def _camera(az_deg: float, el_deg: float, dist: float = 4.0):
     return look_at(C, np.zeros(3))
 
 
-def _wall(rng) -> dict:
+def _wall(rng: np.random.Generator) -> dict:
     g = np.linspace(-0.9, 0.9, N_SIDE)
     x, y = np.meshgrid(g, g)
     n = N_SIDE * N_SIDE
@@ -89,7 +89,7 @@ def views_seeing(mu, cams, margin: float = 0.0) -> np.ndarray:
     return count
 
 
-def _floaters(rng, cams, held, wall_imgs, n: int) -> list[dict]:
+def _floaters(rng: np.random.Generator, cams, held, wall_imgs, n: int) -> list[dict]:
     """Up to n floaters in the held-out views' frusta (0.8-3 m in front of them) that at most one training
     camera sees: a point no view constrains keeps its initial colour; one seen by a single view is coloured
     like the wall it covers there (it explains that view)."""
@@ -125,7 +125,7 @@ def _psnr(imgs, refs) -> float:
     return float(10 * np.log10(1.0 / max(mse, 1e-12)))
 
 
-def _draw(rng):
+def _draw(rng: np.random.Generator):
     K = np.array([[FOCAL, 0, W / 2], [0, FOCAL, H / 2], [0, 0, 1]])
     az = np.sort(rng.uniform(-45, 45, 6))
     cams = [(K, *_camera(a, rng.uniform(-12, 12))) for a in az]
@@ -216,7 +216,7 @@ def _train_drop(o, t) -> float:
     return max(0.0, t["train_psnr_broken"] - _psnr([render_gaussians(o["gaussians"], *c) for c in t["cams"]], t["train_images"]))
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     case, truth = debug_floaters(rng)
 
     def learner(fn, c=case):

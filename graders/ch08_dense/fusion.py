@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, Hint, register
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, register
 
 from . import mvs
 
@@ -99,14 +99,14 @@ def _precision(X, planes) -> float:
     return float(on_surface(X, planes).mean()) if len(X) else 0.0
 
 
-def _fusion_cases(rng):
+def _fusion_cases(rng: np.random.Generator):
     prob = fusion_problem(rng)
     rel_tol, k = float(rng.choice([0.005, 0.01])), int(rng.integers(1, 3))
     args = (prob["depths"], prob["Ks"], prob["Rs"], prob["ts"], rel_tol, k)
     X_o = gt_fuse(*args)
     info = {"planes": prob["planes"], "n_o": len(X_o), "prec_o": _precision(X_o, prob["planes"]),
             "n_all": sum(int(np.isfinite(Z).sum()) for Z in prob["depths"]), "args": args}
-    from graders.engine import shared_run
+    from graders.core.engine import shared_run
     run = shared_run(lambda fn, a=args: fn(*a))
     # 1 %: the filter is deterministic; only points that project within rounding of a pixel boundary, or
     # sit exactly at the tolerance, may go either way (measured < 0.05 %).

@@ -2,8 +2,8 @@
 
 Scenes: a reference camera (the world frame) and 2-4 neighbours 15-30 cm away looking at a slanted
 textured background 5.5-7.5 m away and one or two tilted textured planes in front (3.5-5 m), each
-rendered with its exact homography by `graders.scene.render_plane` and its exact depth by
-`graders.scene.plane_depth`, composited by depth (occlusions included). The neighbours' focal lengths
+rendered with its exact homography by `graders.kit.scene.render_plane` and its exact depth by
+`graders.kit.scene.plane_depth`, composited by depth (occlusions included). The neighbours' focal lengths
 differ from the reference's by a few per cent, so every camera's own K matters.
 
 Oracle: the grader's own sweep (cv2.warpPerspective + cv2.boxFilter, written from the specification),
@@ -15,9 +15,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from graders import scene
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, Hint, register
+from graders.kit import scene
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, register
 
 TEXTURED = ("brick", "gravel", "grass")     # detail everywhere (the others have sky or flat regions: 8.17)
 Z_NEAR, Z_FAR, N_PLANES = 3.0, 8.0, 64
@@ -25,7 +25,7 @@ BLANK_MARGIN = 0.2   # 8.17's poster: a textured frame 20 % of its size wide aro
 REL_OK = 0.03        # "accurate": within 3 % of the true depth (~1.5-2.5 hypothesis steps of 64 in inverse depth)
 
 
-def _plane(rng, centre, size, max_tilt_deg, name, f):
+def _plane(rng: np.random.Generator, centre, size, max_tilt_deg, name, f):
     # ~1.5 texels per pixel where the plane is seen: finer textures alias in the bilinear renders and the
     # views would disagree for reasons no matcher can fix.
     tex_px = (int(size[0] * f / centre[2] * 1.5), int(size[1] * f / centre[2] * 1.5))
@@ -160,7 +160,7 @@ def _as_depth(out, case):
     return Z
 
 
-def _sweep_cases(rng):
+def _sweep_cases(rng: np.random.Generator):
     for i, n_views in enumerate((2, 4)):
         s = mvs_scene(rng, n_views=n_views)
         r = int(rng.integers(1, 3))

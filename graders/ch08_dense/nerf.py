@@ -12,21 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, Hint, register, shared_run
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, register, shared_run
 
 
-class single_thread:
-    """torch on one thread inside the block (docs/ENGINE.md, "Threads and timing"): for small tensors the
-    thread pool costs more than it saves, much more on a busy machine. Restores the previous setting."""
-
-    def __enter__(self):
-        import torch
-        self.torch, self.threads = torch, torch.get_num_threads()
-        torch.set_num_threads(1)
-
-    def __exit__(self, *exc):
-        self.torch.set_num_threads(self.threads)
 
 
 def to_numpy(x) -> np.ndarray:
@@ -104,7 +93,7 @@ def _quantile_error(out, info) -> np.ndarray:
     return np.abs(np.stack([np.interp(out[4][r], edges[r], cdf[r]) for r in range(len(u))]) - u)
 
 
-def _render_cases(rng):
+def _render_cases(rng: np.random.Generator):
     b = ray_batch(rng, R=int(rng.integers(32, 97)), S=int(rng.choice([16, 32, 64])))
     args = (b["sigma"], b["rgb"], b["t"], b["t_far"], b["u"])
     o = analytic_render(*args)

@@ -12,12 +12,12 @@ import copy
 
 import numpy as np
 
-from graders.engine import Case, Exercise, Hint, debug_practice, register, shared_run
+from graders.core.engine import Case, Exercise, Hint, debug_practice, register, shared_run
 
 from . import fit2d
 from .diverge import debug_diverging
 from .floaters import debug_floaters
-from .nerf import single_thread
+from graders.kit.threads import torch_threads
 
 CAUSES = {
     "no_densification": "the number of Gaussians never grows: too few, too large Gaussians cannot draw the edges",
@@ -56,10 +56,10 @@ def _psnr(out, case):
     return fit2d.psnr(fit2d.render_splats(**out["gaussians"], H=t.shape[0], W=t.shape[1]), t)
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     case, truth = debug_blurry(rng)
     def learner(fn, c=case):
-        with single_thread():    # small tensors: one torch thread is faster, much faster on a busy machine
+        with torch_threads(1):    # small tensors: one torch thread is faster, much faster on a busy machine
             return fn(copy.deepcopy(c))
     call = shared_run(learner)
     yield Case("the cause you named", (case,), truth, lambda o, t: float(o["cause"] != t["cause"]), 0, "wrong",

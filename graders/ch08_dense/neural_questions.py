@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.compare import relative
-from graders.engine import choice_question, numeric_question, register, value_hint
+from graders.core.compare import relative
+from graders.core.engine import choice_question, numeric_question, register, value_hint
 
 # ----------------------------------------------------------------- 8.4 NeRF quadrature
 SIGMAS, DELTA = np.array([0.0, 1.0, 4.0, 2.0]), 0.5       # four samples 0.5 m apart, σ in 1/m

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.compare import relative
-from graders.engine import choice_question, numeric_question, register, value_hint
+from graders.core.compare import relative
+from graders.core.engine import choice_question, numeric_question, register, value_hint
 
 # ----------------------------------------------------------------- 8.1 depth from disparity
 

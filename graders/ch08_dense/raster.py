@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, Hint, register, shared_run
-from graders.sandbox import backward_weights
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, register, shared_run
+from graders.core.sandbox import backward_weights
 
-from .nerf import single_thread, to_numpy
+from graders.kit.threads import torch_threads
+
+from .nerf import to_numpy
 
 TILE, ALPHA_MIN, ALPHA_MAX, T_STOP = 16, 1 / 255, 0.99, 1e-4
 
@@ -85,7 +87,7 @@ def _torch_args(b):
 def _run(fn, b, L):
     import torch
     args = _torch_args(b)
-    with single_thread(), backward_weights(L):   # graded mode: the learner's side takes d(img · L)/d colours
+    with torch_threads(1), backward_weights(L):   # graded mode: the learner's side takes d(img · L)/d colours
         img, T = fn(*args, b["W"], b["H"])
         grad = None
         if isinstance(img, torch.Tensor) and img.requires_grad:
@@ -112,7 +114,7 @@ def _share_off(a, b, tol):
     return float(np.mean(np.abs(a - b).reshape(len(a), -1).max(1) > tol)) if a.ndim > 1 else float(np.mean(np.abs(a - b) > tol))
 
 
-def _raster_cases(rng):
+def _raster_cases(rng: np.random.Generator):
     b = splat_batch(rng)
     w, T = brute_force_weights(b["means2d"], b["conic"], b["opacity"], b["depth"], b["radius"], b["W"], b["H"])
     L = rng.normal(0, 1, (b["H"], b["W"], 3))

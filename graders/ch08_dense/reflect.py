@@ -26,9 +26,9 @@ import copy
 
 import numpy as np
 
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, Hint, debug_practice, register, shared_run
-from graders.scene import look_at
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, debug_practice, register, shared_run
+from graders.kit.scene import look_at
 
 CAUSES = {
     "no_view_direction": "the field has no view-direction input: a reflection that moves with the viewpoint can "
@@ -129,7 +129,7 @@ def _rms(a, b) -> float:
     return float(np.sqrt(np.mean((a - b) ** 2)))
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     case, truth = reflect_scene(rng)
 
     def learner(fn, c=case):

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, Hint, register, shared_run
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, register, shared_run
 
 from .nerf import to_numpy
 
@@ -105,7 +105,7 @@ def _rel(a, b):
                         initial=0.0))
 
 
-def _proj_cases(rng):
+def _proj_cases(rng: np.random.Generator):
     sc = gaussian_scene(rng, N=int(rng.integers(100, 300)))
     args = (sc["mu"], sc["q"], sc["s"], sc["R"], sc["t"], sc["K"], sc["W"], sc["H"])
     o = gt_project(*args)

@@ -20,8 +20,8 @@ from functools import lru_cache
 import numpy as np
 from scipy import ndimage
 
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, Hint, like, register, shared_run
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, like, register, shared_run
 from graders.oracles.stereo import cv_block_matching, cv_sgbm  # noqa: F401 (chapter API)
 
 PATHS_4 = ((0, 1), (0, -1), (1, 0), (-1, 0))                       # (dy, dx): the direction of travel
@@ -199,7 +199,7 @@ def _scores(case, D) -> dict:
     return stereo_scores(D, case.info["D_gt"], case.info["region"])
 
 
-def _bm_cases(rng):
+def _bm_cases(rng: np.random.Generator):
     for key, label in (("synthetic", "synthetic pair (exact disparity, occlusions)"),
                        ("motorcycle", "real motorcycle crop (Middlebury ground truth)")):
         pair = synthetic_pair(rng) if key == "synthetic" else motorcycle_crop(rng)
@@ -328,7 +328,7 @@ def _as_volume(out, case):
     return S
 
 
-def _sgm_cases(rng):
+def _sgm_cases(rng: np.random.Generator):
     draws = []
     for paths in (4, 8):
         H, W, n = int(rng.integers(9, 15)), int(rng.integers(11, 19)), int(rng.integers(6, 11))

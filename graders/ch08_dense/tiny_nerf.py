@@ -15,19 +15,22 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, Hint, register, shared_run
-from graders.scene import look_at
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, register, shared_run
+from graders.kit.scene import look_at
 
 from .fit2d import psnr
-from .nerf import analytic_render, single_thread
+from graders.kit.threads import torch_threads
+
+from .nerf import analytic_render
 
 W_NERF, STEPS, N_EVAL = 20, 400, 64
 PROBE_R, PROBE_DB, PROBE_SLACK = 1.6, 20.0, 2.5
 SIGMA_BIAS = -2.0     # the stand-in's σ starts near softplus(−2) = 0.13 /m: the rays start almost empty
 
 
-def nerf_scene(rng: np.random.Generator, W: int = W_NERF, n_train: int = 12, n_test: int = 2, dist: float = 4.0) -> dict:
+def nerf_scene(rng: np.random.Generator,
+               W: int = W_NERF, n_train: int = 12, n_test: int = 2, dist: float = 4.0) -> dict:
     """A painted sphere seen by n_train + n_test cameras. Returns train rays (o, d, rgb): (n_train·W², 3) each,
     test rays (n_test, W², 3) each, the test images (n_test, W, W, 3), K, poses, near, far, and the
     colour model (omega (3, 3), phi (3,))."""
@@ -122,7 +125,7 @@ def gt_train_tiny_nerf(rays_o, rays_d, rgb, near, far, steps=STEPS, seed=0, L=4,
     linearly to 1e-3 over the last quarter of the steps, `batch` random rays × S stratified samples per step.
     Returns the field F(X) -> (σ (N,), rgb (N, 3))."""
     import torch
-    with single_thread():
+    with torch_threads(1):
         torch.manual_seed(seed)
         o, d, c = (torch.as_tensor(np.asarray(a), dtype=torch.float32) for a in (rays_o, rays_d, rgb))
         net = torch.nn.Sequential(torch.nn.Linear(3 + 6 * L, width), torch.nn.ReLU(), torch.nn.Linear(width, width),
@@ -148,7 +151,7 @@ def gt_train_tiny_nerf(rays_o, rays_d, rgb, near, far, steps=STEPS, seed=0, L=4,
             opt.step()
 
     def field(X):
-        with torch.no_grad(), single_thread():
+        with torch.no_grad(), torch_threads(1):
             s, col = F(torch.as_tensor(np.asarray(X), dtype=torch.float32))
         return s.numpy(), col.numpy()
     return field
@@ -173,7 +176,7 @@ def _convert(out, case):
     return {"images": img, "sigma_box": sigma, "probe": render_field(out, PROBE_R * n, -n, 0.0, PROBE_R)}
 
 
-def _tiny_nerf_cases(rng):
+def _tiny_nerf_cases(rng: np.random.Generator):
     sc = nerf_scene(rng)
     args = (*sc["train"], sc["near"], sc["far"], STEPS, int(rng.integers(2 ** 31)))
     O, D, _ = sc["test"]
@@ -184,7 +187,7 @@ def _tiny_nerf_cases(rng):
                 probe_gt=0.5 + 0.45 * np.sin(n @ sc["omega"].T + sc["phi"]))
 
     def learner(fn):
-        with single_thread():
+        with torch_threads(1):
             return fn(*args)
     run = shared_run(learner)
     # The cheap case first: an untouched stub stops here, before the stand-in is trained for the PSNR bar.

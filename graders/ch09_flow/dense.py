@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import gaussian_filter, median_filter
 
-from graders.convert import OutputError, as_array
-from graders.engine import Case, Exercise, Hint, like, register
+from graders.core.convert import OutputError, as_array
+from graders.core.engine import Case, Exercise, Hint, like, register
 from graders.oracles.flow import cv_dis, cv_farneback
 
 from .pairs import load_chairs, plane_pair, real_available
@@ -42,7 +42,7 @@ def gt_horn_schunck(I1, I2, alpha=10.0, iters=100, average=_hs_average, sign=1.0
     return np.stack([u, v], -1)
 
 
-def _hs_cases(rng):
+def _hs_cases(rng: np.random.Generator):
     out = []
     for i, (W, H) in enumerate([(int(rng.integers(48, 72)), int(rng.integers(36, 47))),
                                  (int(rng.integers(80, 100)), int(rng.integers(50, 64)))]):
@@ -108,7 +108,7 @@ def _vs_farneback(out, truth):
     return float(gt_epe_map(out, truth["flow"])[truth["valid"]].mean() - truth["bar"])
 
 
-def _dense_cases(rng):
+def _dense_cases(rng: np.random.Generator):
     # Synthetic planes: 2-8 px of motion with 2 % of rotation, scale, shear and perspective; the pixels that
     # leave the frame are not judged. Farneback reaches 0.2-1.6 px there, a good coarse-to-fine flow < 0.5.
     for i, shift in enumerate([rng.uniform(2.0, 4.0), rng.uniform(5.0, 8.0)]):

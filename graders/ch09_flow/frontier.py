@@ -11,22 +11,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, Hint, register, shared_run
-from graders.sandbox import backward_weights
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, register, shared_run
+from graders.core.sandbox import backward_weights
+from graders.kit.threads import torch_threads
 
 
-class single_thread:
-    """torch on one thread inside the block (small tensors: the thread pool costs more than it saves)."""
-
-    def __enter__(self):
-        import torch
-        self.threads = torch.get_num_threads()
-        torch.set_num_threads(1)
-
-    def __exit__(self, *exc):
-        import torch
-        torch.set_num_threads(self.threads)
 
 
 def offsets(radius: int):
@@ -53,7 +43,7 @@ def _to_numpy(x):
     return x.detach().cpu().numpy() if hasattr(x, "detach") else np.asarray(x, float)
 
 
-def _lookup_draw(rng, kind):
+def _lookup_draw(rng: np.random.Generator, kind):
     N, H2, W2 = 40, 12, 16
     corr = rng.normal(0, 1, (N, H2, W2))
     if kind == "integer":
@@ -68,7 +58,7 @@ def _lookup_draw(rng, kind):
 def _run(fn, corr, coords, radius, L):
     import torch
     c = torch.tensor(corr, requires_grad=True)
-    with single_thread(), backward_weights(L):
+    with torch_threads(1), backward_weights(L):
         out = fn(c, torch.tensor(coords), radius)
         grad = None
         if isinstance(out, torch.Tensor) and out.requires_grad and out.shape == L.shape:
@@ -90,14 +80,14 @@ def _convert(out, case):
     return out
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     import torch
     for kind in ("integer", "subpixel", "border"):
         corr, coords, radius = _lookup_draw(rng, kind)
         S = (2 * radius + 1) ** 2
         L = rng.normal(0, 1, (len(corr), S))
         c = torch.tensor(corr, requires_grad=True)
-        with single_thread():
+        with torch_threads(1):
             ref = gt_corr_lookup(c, torch.tensor(coords), radius)
             (ref * torch.as_tensor(L)).sum().backward()
         info = {"radius": radius, "N": len(corr), "corr": corr, "coords": coords}

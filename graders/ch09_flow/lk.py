@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, Hint, like, register, shared_run
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, like, register, shared_run
 from graders.oracles.flow import cv_lucas_kanade, cv_pyramidal_lk
 
 from .pairs import MULTISCALE_TEXTURES, TEXTURES, lk_scene
@@ -35,7 +35,7 @@ def gt_min_eig(I: np.ndarray, pts: np.ndarray, win: int) -> np.ndarray:
 MIN_JUDGED = 30      # a draw judges positions at >= 30 clearly trackable points, else it is drawn again
 
 
-def _draw(rng, width, height, shift, warp, win, min_eig, max_level=0):
+def _draw(rng: np.random.Generator, width, height, shift, warp, win, min_eig, max_level=0):
     """A scene whose 90th-percentile error means something: redrawn until it has MIN_JUDGED clearly
     trackable points inside the judged region (a dark crop of a texture at λ_min ≥ 40 had none, and the
     percentile of nothing failed the reference: 9.11, seeds 624751615 and 807694133)."""
@@ -46,7 +46,7 @@ def _draw(rng, width, height, shift, warp, win, min_eig, max_level=0):
     return args, truth
 
 
-def _draw_once(rng, width, height, shift, warp, win, min_eig, max_level=0):
+def _draw_once(rng: np.random.Generator, width, height, shift, warp, win, min_eig, max_level=0):
     """A scene and the points to track: a jittered grid (trackable where λ_min is high, the rest not
     judged), the flat and the edge centres (untrackable). Returns (args, truth). A pyramid needs texture
     at its coarsest level too, so its scenes are drawn from the textures that have some at every scale."""
@@ -106,7 +106,7 @@ def _status_wrong(out, truth):
 
 
 def _cases(label, draws, arg_names):
-    def cases(rng):
+    def cases(rng: np.random.Generator):
         for i, kw in enumerate(draws(rng)):
             call_kw = {k: kw[k] for k in arg_names if k in kw}
             args, truth = _draw(rng, kw["width"], kw["height"], kw["shift"], kw["warp"], kw["win"], kw["min_eig"],
@@ -126,13 +126,13 @@ def _cases(label, draws, arg_names):
     return cases
 
 
-def _single_draws(rng):
+def _single_draws(rng: np.random.Generator):
     return [dict(width=200, height=150, shift=rng.uniform(0.5, 1.5), warp=0.005, win=9, min_eig=1.0),
             dict(width=180, height=140, shift=rng.uniform(0.5, 1.5), warp=0.005, win=int(rng.choice([7, 11])),
                  min_eig=float(rng.choice([0.5, 2.0])))]
 
 
-def _pyr_draws(rng):
+def _pyr_draws(rng: np.random.Generator):
     # Motions beyond one level's reach (a win-px window captures ~win/2 px), and beyond what the finest
     # level can make up when the guess is not doubled (half the motion left for level 0): 20-30 px with
     # 13 px windows, 30-42 px with 21 px windows, three levels (a 30-42 px motion is 4-5 px at level 3).

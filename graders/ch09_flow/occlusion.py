@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, Hint, register
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, register
 
 from .tools import gt_bilinear
 
@@ -30,7 +30,7 @@ def sample(field: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.stack([gt_bilinear(field[..., c], x, y) for c in range(field.shape[-1])], -1)
 
 
-def _region(rng, H, W):
+def _region(rng: np.random.Generator, H, W):
     """A foreground shape (disk, square or ellipse) as a function of pixel coordinates -> bool."""
     cx, cy = rng.uniform(0.3 * W, 0.7 * W), rng.uniform(0.3 * H, 0.7 * H)
     a, b = rng.uniform(12, 24), rng.uniform(12, 24)
@@ -135,7 +135,7 @@ DRAWS = [("static", "static background, moving patch", dict(background="static")
          ("noisy", "estimated flows (noise 0.3 px)", dict(background="affine", noise=0.3))]
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     cases = []
     for key, name, kw in DRAWS:
         d = occlusion_pair(rng, **kw)

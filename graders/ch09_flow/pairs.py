@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 from scipy.ndimage import map_coordinates
 
-from graders import datasets, scene
+from graders.kit import datasets, scene
 
 FLO_MAGIC = 202021.25       # Middlebury .flo: float32 magic, int32 width, int32 height, then (H, W, 2) float32
 TEXTURES = ("astronaut", "coffee", "chelsea", "rocket", "hubble_deep_field", "immunohistochemistry")
@@ -66,7 +66,8 @@ def chairs_flo_bytes() -> bytes:
     return _chairs()[3]
 
 
-def _texture(rng, width: int, height: int, blur: float, names: tuple[str, ...] = TEXTURES) -> np.ndarray:
+def _texture(rng: np.random.Generator,
+             width: int, height: int, blur: float, names: tuple[str, ...] = TEXTURES) -> np.ndarray:
     """A grey texture (skimage.data, one of `names`) resampled to a random scale, cropped to (height, width),
     blurred by `blur` px so bilinear/cubic resampling is accurate (the exact flow then really is exact), in
     [0, 255]."""
@@ -81,7 +82,7 @@ def _texture(rng, width: int, height: int, blur: float, names: tuple[str, ...] =
     return 255.0 * cv2.GaussianBlur(img, (0, 0), blur)
 
 
-def small_homography(rng, width: int, height: int, shift: float, warp: float = 0.02) -> np.ndarray:
+def small_homography(rng: np.random.Generator, width: int, height: int, shift: float, warp: float = 0.02) -> np.ndarray:
     """A homography near a translation of length `shift` px (random direction), with a small rotation,
     scale, shear and perspective (`warp` sets their size), about the image centre. x2 ~ H x1."""
     c = np.array([(width - 1) / 2, (height - 1) / 2])
@@ -104,7 +105,7 @@ def homography_flow(H: np.ndarray, width: int, height: int) -> np.ndarray:
     return p[..., :2] / p[..., 2:] - np.stack([xs, ys], -1)
 
 
-def plane_pair(rng, width: int = 160, height: int = 120, shift: float = 2.0, warp: float = 0.02,
+def plane_pair(rng: np.random.Generator, width: int = 160, height: int = 120, shift: float = 2.0, warp: float = 0.02,
                blur: float = 1.5, I1: np.ndarray | None = None) -> dict:
     """A textured plane seen before and after a small homography: {"I1", "I2", "flow", "H"}.
 
@@ -127,7 +128,7 @@ def plane_pair(rng, width: int = 160, height: int = 120, shift: float = 2.0, war
     return {"I1": I1, "I2": I2, "flow": flow, "H": H, "valid": valid}
 
 
-def _paste_patches(rng, I: np.ndarray, n_flat: int, n_edge: int, size: int) -> tuple[list, list]:
+def _paste_patches(rng: np.random.Generator, I: np.ndarray, n_flat: int, n_edge: int, size: int) -> tuple[list, list]:
     """Paint `n_flat` constant squares and `n_edge` squares holding one straight, blurred step edge at a
     random angle into I (in place), on a grid so they never overlap. Returns their centres (x, y)."""
     H, W = I.shape
@@ -150,7 +151,7 @@ def _paste_patches(rng, I: np.ndarray, n_flat: int, n_edge: int, size: int) -> t
     return flat, edge
 
 
-def lk_scene(rng, width: int, height: int, shift: float, warp: float, win: int, noise: float = 0.5,
+def lk_scene(rng: np.random.Generator, width: int, height: int, shift: float, warp: float, win: int, noise: float = 0.5,
              textures: tuple[str, ...] = TEXTURES) -> dict:
     """A textured plane with flat squares and straight-edge squares pasted in, seen before and after a small
     homography (exact flow), plus 0.5 grey levels of sensor noise in each frame.

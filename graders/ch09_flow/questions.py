@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 
-from graders.compare import max_abs, relative
-from graders.engine import choice_question, numeric_question, register, value_hint
+from graders.core.compare import max_abs, relative
+from graders.core.engine import choice_question, numeric_question, register, value_hint
 
 # 9.1: one pixel's derivatives (grey levels / px, grey levels / frame).
 IX, IY, IT = 4.0, 3.0, -10.0

@@ -13,16 +13,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, Hint, like, register
-from graders.geometry import so3_exp
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, like, register
+from graders.kit.geometry import so3_exp
 
 from .occlusion import sample
 
 SIZE = (120, 160)   # (H, W)
 
 
-def _plane(rng, depth, tilt_deg):
+def _plane(rng: np.random.Generator, depth, tilt_deg):
     """A plane n·X = d facing the camera (n (3,), d), tilted by up to tilt_deg."""
     w = rng.normal(size=3)
     w[2] = 0
@@ -139,7 +139,7 @@ def _convert(out, case):
     return S
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     cases = []
     for i in range(3):
         d = scene_flow_scene(rng)

@@ -13,7 +13,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import gaussian_filter, map_coordinates
 
-from .frontier import gt_corr_lookup, single_thread
+from graders.kit.threads import torch_threads
+
+from .frontier import gt_corr_lookup
 
 SIZE, RADIUS, PATCH = 40, 2, 5
 
@@ -80,7 +82,7 @@ def lookup_experiment(lookup=gt_corr_lookup, n: int = 4, seed: int = 0, iters: i
     Farneback's EPE on the same pairs."""
     I1, I2, W = synthetic_warps(np.random.default_rng(seed), n)
     inner = (slice(None), slice(6, -6), slice(6, -6))          # the borders' patches see replicated pixels
-    with single_thread():
+    with torch_threads(1):
         runs = [iterate_flow(lookup, a, b, iters) for a, b in zip(I1, I2)]
     epe = {k + 1: float(np.mean([_epe(r[k][inner[1:]], w[inner[1:]]) for r, w in zip(runs, W)])) for k in range(iters)}
     return {"epe": epe, "zero": _epe(np.zeros_like(W[inner]), W[inner]),

@@ -14,8 +14,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from graders.convert import OutputError, as_array
-from graders.engine import Case, Exercise, Hint, like, raised, register, shared_run
+from graders.core.convert import OutputError, as_array
+from graders.core.engine import Case, Exercise, Hint, like, raised, register, shared_run
 
 from .pairs import chairs_flo_bytes, gt_read_flo, gt_write_flo, real_available
 
@@ -81,20 +81,20 @@ def cv_flow_tools(flo: bytes, flow: np.ndarray, I: np.ndarray, flow_gt: np.ndarr
 
 # ----------------------------------------------------------------- cases
 
-def _random_field(rng, H: int, W: int, scale: float) -> np.ndarray:
+def _random_field(rng: np.random.Generator, H: int, W: int, scale: float) -> np.ndarray:
     """A smooth random flow field (H, W, 2): low-frequency noise blown up, |flow| up to ~`scale`."""
     small = rng.normal(0, 1, (max(2, H // 8), max(2, W // 8), 2)).astype(np.float32)
     big = cv2.resize(small, (W, H), interpolation=cv2.INTER_CUBIC).astype(float)
     return scale * big / np.abs(big).max()
 
 
-def _smooth_image(rng, H: int, W: int) -> np.ndarray:
+def _smooth_image(rng: np.random.Generator, H: int, W: int) -> np.ndarray:
     noise = rng.uniform(0, 255, (H, W))
     img = cv2.GaussianBlur(noise, (0, 0), 1.2)
     return 255 * (img - img.min()) / np.ptp(img)
 
 
-def _draw(rng, real: bool) -> tuple:
+def _draw(rng: np.random.Generator, real: bool) -> tuple:
     """(flo bytes, flow, I, flow_gt, flo's flow). Non-square sizes so (H, W) and (W, H) differ. The
     estimated flow = gt + errors spread over both Fl thresholds: on large motions (|gt| ~ 60-150 px)
     errors of 3-7 px (> 3 px but < 5 %: AND says inlier, OR outlier), on small ones (|gt| < 2 px)
@@ -159,7 +159,7 @@ def _max_rel(out, exp):
     return float(np.abs(out - exp).max() / max(1.0, np.abs(exp).max()))
 
 
-def cases_flow_tools(rng):
+def cases_flow_tools(rng: np.random.Generator):
     draws = [("synthetic", False)] + ([("real", True)] if real_available() else [])
     for label, real in draws:
         flo, flo_flow, warp_flow, flow_est, I, flow_gt = _draw(rng, real)

@@ -17,14 +17,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, Hint, register, shared_run
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, register, shared_run
 
 SIZE, T, TAU = 256, 40, 0.5
 THRESHOLDS = (1, 2, 4, 8, 16)
 
 
-def _objects(rng, n_obj=3):
+def _objects(rng: np.random.Generator, n_obj=3):
     """Each object: points at frame 0 (n, 2), and its motion (centre path, rotation, scale) over T frames."""
     t = np.arange(T)[:, None]
     out = []
@@ -47,7 +47,7 @@ def _objects(rng, n_obj=3):
     return out
 
 
-def _bars(rng):
+def _bars(rng: np.random.Generator):
     """Two bars (centre x(t) (T,), half-width): one sweeping right from the left edge, one left from the right."""
     t = np.arange(T)
     bars = []
@@ -208,7 +208,7 @@ def judged_cases(seq: dict, call, label: str, key: str) -> list[Case]:
     return cases
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     seq = tracking_sequence(rng)
     args = (seq["query"], seq["obs"], seq["score"], seq["group"])
     call = shared_run(lambda fn: fn(*(a.copy() for a in args)))

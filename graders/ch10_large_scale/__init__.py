@@ -2,19 +2,19 @@
 per section.
 
 Oracles: brute-force descriptor matching (retrieval), pycolmap (estimate_sim3d_robust,
-align_reconstructions_via_points), the grader's own Umeyama (graders.geometry) and exact synthetic
+align_reconstructions_via_points), the grader's own Umeyama (graders.kit.geometry) and exact synthetic
 ground truth (textured-plane renders of known places, sub-reconstructions with known poses).
 
 Modules (part A): `questions` (10.1-10.3, 10.14-10.16), `retrieval` (10.6), `sim3` (10.7),
 `merge` (10.8), `debug` (10.11).
-Modules (part B): `questions_b` (10.4-10.5), `pointmaps` (10.9), `distributed` (10.10), `debug_b` (10.12-10.13),
+Modules (part B): `questions_learned` (10.4-10.5), `pointmaps` (10.9), `distributed` (10.10), `debug_learned` (10.12-10.13),
 `frontier` (10.17 and the classical-vs-pointmaps race of the widget).
 Importing the package registers the chapter; the names below are the API of the notebook, the tests
 and the benchmark.
 """
 from __future__ import annotations
 
-from graders.engine import debug_practice
+from graders.core.engine import debug_practice
 
 from . import questions  # noqa: F401 (registers 10.1-10.3, 10.14-10.16)
 
@@ -32,16 +32,16 @@ __all__ = ["components", "components_after", "cv_fix_components", "top_k_pairs",
            "held_rms", "mean_ap", "place_images", "place_problem", "recall_at_k", "sift_descriptors", "sim3_problem",
            "structured_problem", "tfidf_scores"]
 
-# ---- part B (pointmaps, distributed, debug_b, frontier, demo): add imports, DEBUG_GENERATORS entries
+# ---- part B (pointmaps, distributed, debug_learned, frontier, demo): add imports, DEBUG_GENERATORS entries
 # and __all__ names below this line.
-from . import questions_b  # noqa: F401,E402 (registers 10.4-10.5)
+from . import questions_learned  # noqa: F401,E402 (registers 10.4-10.5)
 from .distributed import (PipelineStages, TransientTaskError, gt_run_pipeline, gt_serial_pipeline,  # noqa: E402
                           pipeline_images, task_key)
 from .pointmaps import (alignment_errors, alignment_loss, gt_global_alignment, pair_graph,  # noqa: E402
                         pointmap_scene)
 
-from .debug_b import DEBUG_GENERATORS as _DEBUG_B  # noqa: E402
-from .debug_b import cv_choose_pipelines, cv_chunked_poses, pose_errors  # noqa: E402
+from .debug_learned import DEBUG_GENERATORS as _DEBUG_B  # noqa: E402
+from .debug_learned import cv_choose_pipelines, cv_chunked_poses, pose_errors  # noqa: E402
 
 from .frontier import gt_focal_from_pointmap, pointmap_view, race, race_scene  # noqa: E402
 

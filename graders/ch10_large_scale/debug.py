@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.convert import OutputError
-from graders.engine import Exercise, Hint, debug_cases, raised, register
+from graders.core.convert import OutputError
+from graders.core.engine import Exercise, Hint, debug_cases, raised, register
 
 N_PER, DISTRICTS, K_BROKEN, BUDGET_PER_IMAGE = 80, 3, 3, 25
 

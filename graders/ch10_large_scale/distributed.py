@@ -27,9 +27,9 @@ import zlib
 
 import numpy as np
 
-from graders import scene
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, Hint, raised, register, shared_run
+from graders.kit import scene
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, raised, register, shared_run
 
 STALE = {"pairs": [[0, 1, -1]], "note": "the previous run's result"}
 

@@ -20,12 +20,12 @@ import time
 
 import numpy as np
 
-from graders import scene
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, Hint, register
+from graders.kit import scene
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, register
 from graders.oracles.sfm_standin import cv_incremental_sfm
 
-from .debug_b import pose_errors
+from .debug_learned import pose_errors
 from .pointmaps import pointmap_scene
 
 # ================================================================= 10.17 focal length from a pointmap

@@ -21,17 +21,17 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from graders.compare import rotation_angle_deg
-from graders.convert import OutputError, as_pose, as_sim3
-from graders.engine import Case, Exercise, Hint, register, shared_run
-from graders.geometry import camera_centre, project, umeyama
+from graders.core.compare import rotation_angle_deg
+from graders.core.convert import OutputError, as_pose, as_sim3
+from graders.core.engine import Case, Exercise, Hint, register, shared_run
+from graders.kit.geometry import camera_centre, project, umeyama
 from graders.oracles.bundle_adjust import scipy_bundle_adjust
-from graders.scene import look_at, random_rotation
+from graders.kit.scene import look_at, random_rotation
 
 W, H, F = 640, 480, 500.0
 
 
-def _random_sim3(rng):
+def _random_sim3(rng: np.random.Generator):
     return float(np.exp(rng.uniform(np.log(0.3), np.log(3.0)))), random_rotation(rng), rng.uniform(-10, 10, 3)
 
 
@@ -116,7 +116,7 @@ def _from_bal(cams, pts, ids, pids, K) -> dict:
 
 
 def gt_merge_reconstructions(rec_a: dict, rec_b: dict, refine: bool = True) -> tuple[tuple, dict]:
-    """Stand-in: Umeyama (graders.geometry) on the shared points, B mapped into A (shared points keep
+    """Stand-in: Umeyama (graders.kit.geometry) on the shared points, B mapped into A (shared points keep
     A's position), then the one scipy bundle adjuster of the course with K held, gauge fixed."""
     shared = sorted(set(rec_a["points"]) & set(rec_b["points"]))
     sim = umeyama(np.array([rec_b["points"][p] for p in shared]), np.array([rec_a["points"][p] for p in shared]))
@@ -198,7 +198,7 @@ def gauge_errors(cams: dict, pts: dict, truth: dict) -> tuple[float, float]:
     return float(eC), float(eX)
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     for key, label, kw in [("wide", "40 shared points", dict(n_shared=40)),
                            ("thin", "a thin overlap: 8 shared points", dict(n_shared=8))]:
         P = merge_problem(rng, **kw)

@@ -16,7 +16,7 @@ much more (a symmetric scene flipped), a pair is an outlier that the unsquared n
 wrong by this much, only its confidence keeps it out.
 
 Judged after the Sim(3) gauge that best maps the returned camera centres onto the true ones (Umeyama,
-`graders.geometry.umeyama`): rotation error of every camera, camera-centre error relative to the ring's
+`graders.kit.geometry.umeyama`): rotation error of every camera, camera-centre error relative to the ring's
 radius, and every pair's scale against the truth.
 """
 from __future__ import annotations
@@ -25,10 +25,10 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse.csgraph import minimum_spanning_tree
 
-from graders import scene
-from graders.convert import OutputError, as_rotation
-from graders.engine import Case, Exercise, Hint, register, shared_run
-from graders.geometry import so3_exp, umeyama
+from graders.kit import scene
+from graders.core.convert import OutputError, as_rotation
+from graders.core.engine import Case, Exercise, Hint, register, shared_run
+from graders.kit.geometry import so3_exp, umeyama
 
 RADIUS = 5.0
 

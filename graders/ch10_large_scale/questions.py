@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.compare import relative
-from graders.engine import choice_question, numeric_question, register, value_hint
+from graders.core.compare import relative
+from graders.core.engine import choice_question, numeric_question, register, value_hint
 
 MATCH_S = 0.030          # one matched pair (LightGlue-class matcher on a GPU), the lesson's figure
 EXTRACT_PER_S = 100.0    # images a GPU extracts per second (SuperPoint), the lesson's figure

@@ -1,7 +1,7 @@
 """10.6 — a vocabulary tree: hierarchical k-means, tree descent, tf-idf, L1 scores, an inverted file.
 
 Two kinds of case. (1) Places: a set of images of known places — textured planes (crops of the
-skimage textures) rendered by graders.scene under new viewpoints (homographies) and lighting (gain,
+skimage textures) rendered by graders.kit.scene under new viewpoints (homographies) and lighting (gain,
 gamma, noise); SIFT descriptors from OpenCV. The learner's ranking is judged by mAP and recall@k
 against the labels, beside brute-force matching (ratio-test matches of every query with every database
 image), the quadratic baseline retrieval replaces. (2) Structured words: descriptors drawn around
@@ -19,9 +19,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from graders.convert import OutputError
-from graders.engine import Case, Exercise, like, register, shared_run
-from graders.scene import TEXTURES, look_at, render_plane, rotation_about, texture
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, like, register, shared_run
+from graders.kit.scene import TEXTURES, look_at, render_plane, rotation_about, texture
 
 W, H = 160, 120                                  # rendered views: small, so SIFT costs ~25 ms an image
 RICH = ("astronaut", "brick", "camera", "chelsea", "coffee", "coins", "gravel", "immunohistochemistry",
@@ -31,7 +31,7 @@ assert set(RICH) <= set(TEXTURES)
 
 # ------------------------------------------------------------------ places: renders of known places
 
-def _view(rng, crop: np.ndarray) -> np.ndarray:
+def _view(rng: np.random.Generator, crop: np.ndarray) -> np.ndarray:
     """One photo of a place: the crop on a 1 m plane, seen from 0.9-1.3 m, tilted 0-30°, rolled ±20°,
     with a gain of 0.6-1.4, a gamma of 0.7-1.4 and sensor noise."""
     f = W / 2 / np.tan(np.radians(30))
@@ -241,7 +241,7 @@ def _top_consistent(out, S_ref) -> float:
     return float(np.abs(best - np.take_along_axis(S, top, 1)).max())
 
 
-def _place_cases(rng, n_places=10, views=4, k=5, branching=6, depth=3):
+def _place_cases(rng: np.random.Generator, n_places=10, views=4, k=5, branching=6, depth=3):
     P = place_problem(rng, n_places, views)
     args = (P["db_descriptors"], P["query_descriptors"], k, branching, depth)
     run = shared_run(lambda fn, a=args: fn(*a))
@@ -259,7 +259,7 @@ def _place_cases(rng, n_places=10, views=4, k=5, branching=6, depth=3):
                1e-9, "recall short", convert=_convert, call=run, key="places-recall", info=info, tags=("places",))
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     for i, (b, L) in enumerate([(3, 2), (2, 3)]):
         P = structured_problem(rng, branching=b, depth=L)
         S = tfidf_scores(P["db_words"], P["query_words"], P["n_words"])

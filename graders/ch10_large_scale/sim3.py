@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from graders.compare import rotation_angle_deg, rotation_angle_exact_deg
-from graders.convert import as_sim3
-from graders.engine import Case, Exercise, Hint, raised, register, shared_run
-from graders.geometry import umeyama
-from graders.scene import random_rotation
+from graders.core.compare import rotation_angle_deg, rotation_angle_exact_deg
+from graders.core.convert import as_sim3
+from graders.core.engine import Case, Exercise, Hint, raised, register, shared_run
+from graders.kit.geometry import umeyama
+from graders.kit.scene import random_rotation
 
 
 def _unfixed_det(X: np.ndarray, Y: np.ndarray) -> float:
@@ -69,7 +69,7 @@ def exact_planar_problem(rng: np.random.Generator, n: int = 6) -> dict:
 
 def gt_sim3_ransac(X: np.ndarray, Y: np.ndarray, threshold: float, iters: int = 300,
                    seed: int = 0) -> tuple[float, np.ndarray, np.ndarray]:
-    """The grader's own stand-in (demos): RANSAC over 3-pair samples with graders.geometry.umeyama,
+    """The grader's own stand-in (demos): RANSAC over 3-pair samples with graders.kit.geometry.umeyama,
     refit on the best sample's inliers. Unlike pycolmap it accepts exactly coplanar landmarks."""
     X, Y = np.asarray(X, float), np.asarray(Y, float)
     rng = np.random.default_rng(seed)
@@ -110,7 +110,7 @@ def _rel_scale(sim, P) -> float:
     return abs(sim[0] / P["s"] - 1.0)
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     E = exact_planar_problem(rng)
     args = (E["X"], E["Y"], E["threshold"])
     run = shared_run(lambda fn, a=args: fn(*a))

@@ -118,7 +118,7 @@ def drive_run(schedule: list[dict] | str, monitor: Callable = gt_health_monitor,
     hold)`. Returns {"frames" (T,), "metrics" {pipeline metric but dense stereo's: (T,)}, "stream" (T, M), "names" (M,),
     "table" (M rows), "events" [(t, metric, action)] with t an index into "frames", "alerts" (T, M) bool, "modes" (T,) str, "faults" per frame the active kinds,
     "images" (T, h, w) u8 left images, "schedule"}, T = n_frames - 1."""
-    from graders import corridor
+    from graders.kit import corridor
     from .pipeline import run_pipeline
 
     sched = SCHEDULES[schedule] if isinstance(schedule, str) else list(schedule)

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from graders.engine import Case, Exercise, OutputError, like, register
+from graders.core.engine import Case, Exercise, OutputError, like, register
 
 MODES: list[tuple[str, frozenset]] = [
     ("stereo VIO", frozenset({"features", "stereo", "imu"})), ("direct VO", frozenset({"stereo"})),
@@ -73,7 +73,7 @@ def gt_degradation_modes(alerts, names, hold: int = 10) -> list[str]:
 
 # ---------------------------------------------------------------- fault scenarios
 
-def _interval(rng, T: int, start: tuple[float, float], length: tuple[int, int]) -> tuple[int, int]:
+def _interval(rng: np.random.Generator, T: int, start: tuple[float, float], length: tuple[int, int]) -> tuple[int, int]:
     a = int(rng.uniform(*start) * T)
     return a, min(T, a + int(rng.integers(*length)))
 

@@ -182,7 +182,7 @@ def stage_faults(levels: dict, seq: dict, seed: int = 0) -> dict:
         return E, inl & (rng.random(len(inl)) >= 0.4 * lv["RANSAC"])
 
     def pnp(X, uv, K):
-        from graders.geometry import so3_exp
+        from graders.kit.geometry import so3_exp
         T, inl = STANDINS["pnp"](X, uv, K)
         T = np.array(T, float)
         axis = rng.normal(size=3)

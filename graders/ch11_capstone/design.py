@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.stats import norm
 
-from graders.compare import relative
-from graders.engine import choice_question, numeric_question, register, value_hint
+from graders.core.compare import relative
+from graders.core.engine import choice_question, numeric_question, register, value_hint
 
 PAIRS, FPS, CORES, HEADROOM = 3, 30, 4, 0.5            # at most half of the 4 cores for perception
 # ms on one core, per stereo pair per frame (BA: per keyframe, one keyframe every KEYFRAME_EVERY frames)

@@ -16,8 +16,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from graders import corridor
-from graders.engine import Case, Exercise, Hint, register
+from graders.kit import corridor
+from graders.core.engine import Case, Exercise, Hint, register
 
 
 def exposure_problem(rng: np.random.Generator, n: int = 3) -> dict:
@@ -52,7 +52,7 @@ def exposure_error(out, truth) -> float:
     return float(max(abs(o[1] - t[1]), abs(o[0] / t[0] - 1) / 0.1))
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     cases = []
     for i in range(3):
         p = exposure_problem(rng)

@@ -18,7 +18,7 @@ import numpy as np
 from scipy.spatial.distance import cdist
 from scipy.stats import chi2, norm
 
-from graders.engine import Case, Exercise, Hint, like, register
+from graders.core.engine import Case, Exercise, Hint, like, register
 
 METRIC_NAMES = ("features", "stereo_matches", "net_confidence", "net_agreement")
 CLEAN_LEVEL = np.array([2400.0, 300.0, 0.80, 0.85])       # the capstone pipeline's clean features and matches
@@ -74,7 +74,7 @@ def disagreement(out, expected) -> float:
     return float(np.mean(np.asarray(out, bool) != np.asarray(expected, bool)))
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     cases = []
     for i, alpha in enumerate((0.01, 0.001, 0.01)):
         d = confidence_run(rng)

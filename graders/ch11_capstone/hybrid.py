@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from graders.convert import as_pose_stack
-from graders.engine import Case, Exercise, like, register
+from graders.core.convert import as_pose_stack
+from graders.core.engine import Case, Exercise, like, register
 from graders.oracles.vo import centres
 
 N_FRAMES = 60
@@ -33,7 +33,7 @@ def _rigids(R, t) -> np.ndarray:
     return T
 
 
-def _perturb(rng, T, rot_deg, trans_m) -> np.ndarray:
+def _perturb(rng: np.random.Generator, T, rot_deg, trans_m) -> np.ndarray:
     """Each of T (n, 4, 4) with a random rotation of rot_deg[i] (rms over the axes) and a translation error of
     trans_m[i] (rms) applied: an estimate of the motion."""
     n = len(T)
@@ -42,7 +42,7 @@ def _perturb(rng, T, rot_deg, trans_m) -> np.ndarray:
     return _rigids(dR @ T[:, :3, :3], T[:, :3, 3] + np.asarray(trans_m)[:, None] * rng.standard_normal((n, 3)) / np.sqrt(3))
 
 
-def _window(rng, lo, hi, length=(9, 14), n_flicker=(1, 2)):
+def _window(rng: np.random.Generator, lo, hi, length=(9, 14), n_flicker=(1, 2)):
     """A fault window [a, b) inside [lo, hi) and 1-2 isolated frames in it that pass the test anyway."""
     a = int(rng.integers(lo, hi - length[1]))
     b = a + int(rng.integers(*length))

@@ -15,8 +15,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from graders import corridor
-from graders.engine import Case, Exercise, Hint, like, register
+from graders.kit import corridor
+from graders.core.engine import Case, Exercise, Hint, like, register
 from graders.oracles.features import cv_fast
 
 W, H, CELL = 320, 240, 16
@@ -80,7 +80,7 @@ def smudge_error(out, truth) -> float:
     return float(max(np.hypot(o[0] - t[0], o[1] - t[1]), abs(o[2] - t[2])) / t[2])
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     cases = []
     for i in range(3):
         p = smudge_problem(rng)

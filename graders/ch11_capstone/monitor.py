@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from graders.engine import Case, Exercise, Hint, OutputError, like, register
+from graders.core.engine import Case, Exercise, Hint, OutputError, like, register
 
 # The lesson's table; the last two rows split its Gaussian-count row (too many, too few: two causes, two
 # actions) and the IMU row is the course's addition (the degradation ladder of 11.6 needs the IMU's health).
@@ -76,7 +76,7 @@ def gt_health_monitor(stream, table, k: int = 3) -> list[tuple[int, str, str]]:
 
 # ---------------------------------------------------------------- generated streams
 
-def _value(rng, row: dict, band: str, n: int) -> np.ndarray:
+def _value(rng: np.random.Generator, row: dict, band: str, n: int) -> np.ndarray:
     """n values of one metric in a band ("past", "warn", "normal"), at least 5 % away from every threshold."""
     lo_bad = row["bad"] == "low"
     a, m = row["alert"], row["normal"]

@@ -28,8 +28,8 @@ from typing import Callable
 
 import numpy as np
 
-from graders import corridor
-from graders.geometry import so3_log
+from graders.kit import corridor
+from graders.kit.geometry import so3_log
 from graders.oracles.camera import cv_project
 from graders.oracles.features import cv_fast
 from graders.oracles.flow import cv_pyramidal_lk

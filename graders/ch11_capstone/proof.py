@@ -31,7 +31,7 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from graders import corridor
+from graders.kit import corridor
 from graders.oracles.features import cv_fast
 
 from .pipeline import FAULTS, METRICS, STANDINS, _grid_cap, out_of_range, run_pipeline

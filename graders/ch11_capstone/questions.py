@@ -18,8 +18,8 @@ from math import comb
 import numpy as np
 from scipy.stats import norm
 
-from graders.compare import relative
-from graders.engine import Hint, choice_question, numeric_question, register, value_hint
+from graders.core.compare import relative
+from graders.core.engine import Hint, choice_question, numeric_question, register, value_hint
 
 # ---------------------------------------------------------------- 11.1 the cascade, in numbers
 # A rectified stereo pair: a correct match's row difference (its epipolar distance) is N(b, SIGMA^2) px;

@@ -20,8 +20,8 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from graders.convert import as_rotation
-from graders.engine import Case, Exercise, Hint, OutputError, register
+from graders.core.convert import as_rotation
+from graders.core.engine import Case, Exercise, Hint, OutputError, register
 
 W, H, F, B = 320, 240, 288.0, 0.12
 K = np.array([[F, 0, (W - 1) / 2], [0, F, (H - 1) / 2], [0, 0, 1.0]])
@@ -30,7 +30,7 @@ K = np.array([[F, 0, (W - 1) / 2], [0, F, (H - 1) / 2], [0, 0, 1.0]])
 NORMAL_ROW_PX = 0.25
 
 
-def _matches(rng, R_m, n, noise=0.1):
+def _matches(rng: np.random.Generator, R_m, n, noise=0.1):
     """n left-right matches (pixels) of points in view of both cameras, the right one turned by R_m."""
     out_l, out_r = np.zeros((0, 2)), np.zeros((0, 2))
     while len(out_l) < n:

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from graders.engine import Case, Exercise, OutputError, like, register
+from graders.core.engine import Case, Exercise, OutputError, like, register
 
 # stage -> [(metric, baseline mean, relative spread, direction a fault pushes it: +1 up, -1 down)]
 STAGE_METRICS: dict[str, list[tuple[str, float, float, int]]] = {

@@ -15,8 +15,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from graders import corridor
-from graders.engine import Case, Exercise, Hint, register
+from graders.kit import corridor
+from graders.core.engine import Case, Exercise, Hint, register
 from graders.oracles.features import cv_fast
 
 H = 240
@@ -48,7 +48,7 @@ def _rows_off(out, truth) -> float:
     return float(abs(float(np.asarray(out, float).ravel()[0]) - truth))
 
 
-def _cases(rng):
+def _cases(rng: np.random.Generator):
     cases = []
     for i in range(3):
         p = sky_problem(rng)

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from graders.engine import Case, Exercise, Hint, OutputError, register
+from graders.core.engine import Case, Exercise, Hint, OutputError, register
 
 W, H, F, B, FPS = 320, 240, 288.0, 0.12, 30.0
 K = np.array([[F, 0, (W - 1) / 2], [0, F, (H - 1) / 2], [0, 0, 1.0]])
@@ -32,7 +32,7 @@ def _project(X, R, t):
     return Xc[:, :2] / Xc[:, 2:] * F + K[:2, 2], Xc[:, 2]
 
 
-def _frame(rng, motion, dt_frames, n, noise=0.1):
+def _frame(rng: np.random.Generator, motion, dt_frames, n, noise=0.1):
     """n matches seen by the left camera at t = 0 and by the right one at t = dt, the left points' velocity
     (px/frame, from t = -1 to 1), and their true depths."""
     v, w = motion

@@ -5,7 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..geometry import so3_log
+from graders.kit.geometry import so3_log
 
 
 def cv_project(X: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray,

@@ -7,7 +7,7 @@ normalised coordinates, and tracks by union-find (an algorithm independent of 4.
 tracks, the initial pair with most E inliers among pairs with a 75th-percentile triangulation angle ≥ 4° and
 H/E inlier ratio < 0.8, then repeatedly the image seeing most reconstructed points → PnP RANSAC (+ focal
 search when K is unknown) → triangulation of new tracks (rays ≥ 1.5° apart, reprojection < threshold), a
-scipy bundle adjustment every second image and two at the end. Imports only graders.geometry.
+scipy bundle adjustment every second image and two at the end. Imports only graders.kit.geometry.
 
 The bundle adjustment stays here rather than on graders.oracles.bundle_adjust: that adjuster optimises BAL
 cameras (one focal length, principal point in the observations), while this one keeps each camera's full K
@@ -20,7 +20,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 
-from ..geometry import (angle_between_deg, brown_distort, brown_undistort, camera_centre, pixels_to_normalised,
+from graders.kit.geometry import (angle_between_deg, brown_distort, brown_undistort, camera_centre, pixels_to_normalised,
                         project)
 
 MIN_ANGLE_DEG = 1.5          # COLMAP's triangulation angle (tri_min_angle = filter_min_tri_angle = 1.5)

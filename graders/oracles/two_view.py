@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..geometry import skew, so3_exp, to_h
+from graders.kit.geometry import skew, so3_exp, to_h
 from .sfm_standin import cv_pnp_ransac, triangulate_normalised
 
 _W = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])

@@ -14,14 +14,14 @@ from .dense import HS_AVERAGE, dense_flow, horn_schunck
 from .questions import (application_trackers, budget_30hz, corr_memory, hs_update, normal_flow, pyramid_levels,
                         window_kinds)
 from .lk import gradients, lucas_kanade, pyr_down, pyramid, pyramidal_lk
-from .debug_a import fix_drift, fix_large_motion
+from .debug_lk import fix_drift, fix_large_motion
 
 # ---- part B (9.5-9.8, 9.14-9.16, 9.19-9.20, 9.24) ----
 from .occlusion import occlusion_mask  # noqa: E402
-from .questions_b import fb_verdicts, raft_sizes, scene_flow_errors_mm, tracker_choice  # noqa: E402
+from .questions_tracking import fb_verdicts, raft_sizes, scene_flow_errors_mm, tracker_choice  # noqa: E402
 from .scene_flow import scene_flow, unproject  # noqa: E402
 from .tracking import joint_tracker, similarity_fit  # noqa: E402
-from .debug_b import fix_lost_tracks, fix_noisy_scene_flow  # noqa: E402
+from .debug_occlusion import fix_lost_tracks, fix_noisy_scene_flow  # noqa: E402
 from .frontier import corr_lookup  # noqa: E402
 
 __all__ = ["application_trackers", "budget_30hz", "corr_memory", "hs_update", "normal_flow", "pyramid_levels",

@@ -294,7 +294,7 @@ MUTANTS += [
 
 # ----------------------------------------------------------------- 9.17-9.18 DEBUG (drift, large motion)
 
-from solutions.ch09_flow import debug_a as ref_debug  # noqa: E402
+from solutions.ch09_flow import debug_lk as ref_debug  # noqa: E402
 
 
 def drift_wrong_cause(case):

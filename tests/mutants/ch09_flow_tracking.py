@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from solutions.ch09_flow import debug_b as ref_debug
+from solutions.ch09_flow import debug_occlusion as ref_debug
 from solutions.ch09_flow.frontier import corr_lookup
 from solutions.ch09_flow.scene_flow import scene_flow
 from solutions.ch09_flow.tools import bilinear

@@ -1,0 +1,443 @@
+"""The exercise engine: exercise specifications are data, one loop judges them all.
+
+An `Exercise` says what the learner writes (`name`), how many points it is worth, how to draw
+hidden `Case`s from a seeded generator, and which `Hint`s name known mistakes. `grade` calls the
+learner's function on every case through `sandbox.safe_call`, validates what comes back, measures
+the error with the case's metric and compares it with the case's tolerance. A case never raises:
+everything the learner does wrong becomes a failed row with a message.
+
+Read docs/ENGINE.md for how a chapter adds exercises.
+"""
+from __future__ import annotations
+
+import importlib
+import re
+import secrets
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Sequence
+
+import numpy as np
+
+from graders.core.chapters import by_number
+from graders.core.convert import OutputError, as_array, as_mask, as_points, as_pose, as_poses, as_rotation, as_sim3  # noqa: F401 (re-exported)
+from graders.core.report import CaseResult, ExerciseResult
+from graders.core.sandbox import safe_call
+
+KINDS = ("concept", "code", "debug", "design", "frontier")
+LIBRARIES = ("cv2", "pycolmap", "kornia")    # what graded mode watches (see graders.grading.learner)
+
+
+@dataclass
+class Case:
+    """One hidden test: call the learner with `args`, compare with `expected` by `metric`.
+
+    metric(output, expected) -> error (float, in `unit`); the case passes if error <= tol.
+    shape: the required output shape (None: do not check). `check` may replace `convert`:
+    it turns the raw output into the form the metric expects and raises OutputError otherwise.
+    call: optional; how to call the learner's function when `fn(*args, **kwargs)` is not enough:
+    `call(fn)` runs it inside grader machinery (e.g. the learner's solver inside the grader's
+    RANSAC, or the learner's RANSAC with a callback that counts samples) and returns the output.
+    It runs under the same sandbox (time limit, captured output, exceptions reported).
+    key: a stable identifier (hints and tests select cases by `key` or `tags`, never by the display
+    `name`, so renaming a row cannot switch a hint off).
+    """
+    name: str
+    args: tuple
+    expected: Any
+    metric: Callable[[Any, Any], float]
+    tol: float
+    unit: str = ""
+    shape: tuple[int, ...] | None = None
+    kwargs: dict = field(default_factory=dict)
+    weight: float = 1.0
+    convert: Callable[[Any, "Case"], Any] | None = None
+    info: dict = field(default_factory=dict)  # anything hints need (e.g. the scene)
+    call: Callable[[Callable], Any] | None = None
+    key: str = ""                  # stable identifier for hints and tests; defaults to a slug of `name`
+    tags: tuple[str, ...] = ()     # properties hints select on ("noise", "planar", ...), never display text
+
+    def __post_init__(self):
+        if not self.key:
+            self.key = re.sub(r"[^a-z0-9]+", "-", self.name.lower()).strip("-")
+        self.tags = tuple(self.tags)
+
+
+@dataclass
+class Hint:
+    """A known mistake: `when(case, output)` is True if the output looks like that mistake; or, with
+    `raised` (a regex), the mistake is recognised by the error it causes — an exception from the
+    learner's code or an output the checks reject (see `raised()`)."""
+    text: str | Callable[[Case, Any], str]     # or text(case, output): a hint that quotes what it measured
+    when: Callable[[Case, Any], bool] | None = None
+    raised: str | None = None
+
+    def say(self, case: Case, out: Any) -> str:
+        """The hint's text for this case and output (out is None for a `raised` hint)."""
+        if not callable(self.text):
+            return self.text
+        try:
+            return str(self.text(case, out))
+        except Exception:  # a text that cannot be composed for this output must not cost the learner a hint
+            return ""
+
+
+def _magnitude(x: Any) -> float:
+    """Largest absolute entry of an array-like; 0 for what has none (a hidden-truth dict, a pose pair)."""
+    try:
+        return float(np.max(np.abs(np.asarray(x, float))))
+    except (TypeError, ValueError):
+        return 0.0
+
+
+def like(bug: Callable[[Case], Any], text: str, factor: float = 1.0, rel: float = 1e-9) -> Hint:
+    """A hint that fires when the output matches what the mistake `bug(case)` would return:
+    within the case's tolerance (times `factor`), plus `rel` of the bug's own magnitude, since
+    some mistakes produce values so large (1e14 px) that float rounding alone exceeds 1e-6 px."""
+
+    def when(case: Case, out: Any) -> bool:
+        try:
+            wrong = bug(case)
+            return case.metric(out, wrong) <= factor * case.tol + rel * _magnitude(wrong)
+        except Exception:  # a hint model that does not apply to this output is simply silent
+            return False
+
+    return Hint(text, when)
+
+
+def raised(pattern: str, text: str) -> Hint:
+    """A hint for a mistake known by its error: fires when the learner's code raises, or its output is
+    rejected, with a message or traceback matching the regex `pattern`."""
+    return Hint(text, raised=pattern)
+
+
+@dataclass(kw_only=True)
+class Exercise:
+    """A graded exercise.
+
+    id: "chapter.number", e.g. "1.5"; name: the learner's function or variable; kind: one of KINDS.
+    cases(rng) -> list[Case]: fresh hidden cases for a seed.
+    fallback: an implementation independent of `solutions` (an OpenCV call or the grader's own
+      ground-truth model) that demo cells use until the learner's version passes.
+    value: True if the learner gives a value (a numeric or choice answer), not a function.
+    explanation: a model answer shown once the learner has attempted the exercise.
+    difficulty, target_minutes, stub, topics: what a timed drill of a CODE exercise needs (graders.study.drill).
+    """
+    id: str
+    title: str
+    name: str
+    kind: str
+    points: float
+    cases: Callable[[np.random.Generator], Iterable[Case]]   # a list, or a generator (lazy cases)
+    hints: list[Hint] = field(default_factory=list)
+    fallback: Callable | None = None
+    value: bool = False
+    timeout: float = 10.0
+    explanation: str = ""
+    arg_names: tuple[str, ...] = ()
+    libraries: tuple[str, ...] | None = None   # libraries graded work may call; None: by kind (below)
+    hidden_cases: Callable[[np.random.Generator], Iterable[Case]] | None = None  # added in instructor grading
+    # Timed drills (graders.study.drill), as data: 1 warm-up, 2 core, 3 hard (0: from the points); a target time in
+    # minutes (0: from the difficulty); the drill's stub (signature + docstring; "": the notebook's stub cell);
+    # extra words `drill --topic` matches besides the title, the name and the chapter's title.
+    difficulty: int = 0
+    target_minutes: float = 0.0
+    stub: str = ""
+    topics: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        assert self.kind in KINDS, f"{self.id}: kind {self.kind!r} is not one of {KINDS}"
+        if self.libraries is None:   # CODE is from scratch; the other kinds may use any library
+            self.libraries = () if self.kind == "code" else LIBRARIES
+
+
+# ---------------------------------------------------------------- registry ----------
+
+def numeric_question(id: str, title: str, name: str, kind: str, expected: Any, tol: float, unit: str,
+                     shape: tuple, metric: Callable[[Any, Any], float], explanation: str,
+                     hints: Sequence[Hint] = (), points: int = 1) -> Exercise:
+    """A CONCEPT/DESIGN question answered by a number or an array (the learner assigns `name`).
+
+    expected: the answer, computed in the grader from the seed lesson's numbers (never pasted);
+    metric(answer, expected) -> error in `unit`, passed if <= tol; shape: the answer's shape."""
+    def cases(rng: np.random.Generator) -> list[Case]:
+        return [Case("your answer", (), np.asarray(expected, float), metric, tol, unit, shape=shape)]
+
+    return Exercise(id=id, title=title, name=name, kind=kind, points=points, value=True, cases=cases, hints=list(hints),
+                    explanation=explanation)
+
+
+def value_hint(wrong: Any, text: str) -> Hint:
+    """A hint for a numeric question: fires when the answer is `wrong`, the classic slip, within the
+    question's own tolerance (no magnitude allowance: the metric may already be relative)."""
+    return like(lambda case: np.asarray(wrong, float), text, factor=1.0, rel=0.0)
+
+
+def choice_question(id: str, title: str, name: str, kind: str, answers: Sequence[str], options: Sequence[str],
+                    explanation: str, hints: dict[int, str] | None = None, points: int = 1) -> Exercise:
+    """A CONCEPT/DESIGN question answered by a list of choices, one per scenario (the learner assigns
+    `name`, e.g. ["E", "F", ...]); matching ignores case and surrounding spaces.
+
+    answers: the right choice for each scenario; options: the allowed choices; hints: scenario index ->
+    the hint shown when that scenario is answered wrongly. Scored by the number of wrong answers (0 to pass)."""
+    answers = [a.strip().lower() for a in answers]
+    allowed = {o.strip().lower() for o in options}
+    listed = ", ".join(f'"{o}"' for o in options)
+
+    def convert(out: Any, case: Case) -> list[str]:
+        if isinstance(out, str):
+            raise OutputError(f"expected a list of {len(answers)} answers, each one of {listed}; got a single string")
+        try:
+            choices = [str(c).strip().lower() for c in out]
+        except TypeError:
+            raise OutputError(f"expected a list of {len(answers)} answers, each one of {listed}") from None
+        if len(choices) != len(answers) or not set(choices) <= allowed:
+            raise OutputError(f"expected {len(answers)} answers, each one of {listed}; got {out!r}")
+        return choices
+
+    def n_wrong(choices: list[str], expected: list[str]) -> float:
+        return float(sum(a != b for a, b in zip(choices, expected)))
+
+    def hint(index: int, text: str) -> Hint:
+        return Hint(text, lambda case, out: out[index] != case.expected[index])
+
+    return Exercise(id=id, title=title, name=name, kind=kind, points=points, value=True,
+                    cases=lambda rng: [Case(f"{len(answers)} scenarios", (), answers, n_wrong, 0, "wrong",
+                                            convert=convert)],
+                    hints=[hint(i, text) for i, text in (hints or {}).items()], explanation=explanation)
+
+
+# ---------------------------------------------------------------- shared case builders
+
+def debug_cases(generator: Callable[[np.random.Generator], tuple[dict, Any]], metric: Callable[[Any, Any], float],
+                tol: float, *, unit: str = "px RMS", convert: Callable | None = None,
+                shape: tuple[int, ...] | None = None, n: int = 3, label: str = "hidden problem",
+                info: Callable[[dict, Any], dict] | None = None) -> Callable[[np.random.Generator], Iterable[Case]]:
+    """Cases of a DEBUG exercise: `n` broken artefacts drawn by `generator(rng) -> (case, truth)`; the
+    learner's fix of `case` is judged by `metric(fixed, truth)` in `unit` against `tol`.
+    info(case, truth) -> what the hints need. Built lazily: an untouched stub builds only the first."""
+    def cases(rng: np.random.Generator) -> Iterable[Case]:
+        for i in range(n):
+            case, truth = generator(rng)
+            yield Case(f"{label} {i + 1}", (case,), truth, metric, tol, unit, shape=shape, convert=convert,
+                       info=info(case, truth) if info else {}, key=f"{label.replace(' ', '-')}-{i + 1}")
+    return cases
+
+
+def debug_practice(generators: dict[str, Callable[..., tuple[dict, Any]]]) -> Callable[..., dict]:
+    """`debug_case(exercise_id, seed=0, **kw)` for a notebook: a broken artefact to practise on (its
+    hidden truth stays in the grader; the check draws fresh ones)."""
+    def debug_case(exercise_id: str, seed: int = 0, **kw) -> dict:
+        if exercise_id not in generators:
+            raise KeyError(f"no DEBUG exercise {exercise_id!r}; this chapter has {', '.join(generators)}")
+        case, _ = generators[exercise_id](np.random.default_rng(seed), **kw)
+        return case
+    debug_case.__doc__ = f"A broken artefact of DEBUG exercise {', '.join(generators)} to practise on."
+    return debug_case
+
+
+def shared_run(run: Callable[[Callable], Any]) -> Callable[[Callable], Any]:
+    """Run the learner's code once and judge the output several ways: `run(fn)` is called on the first
+    case that uses it and its output (or its exception) is memoised for the others of the same draw.
+    Pass the result as `Case(call=...)` to every case that judges that one run."""
+    memo: dict[int, tuple[bool, Any]] = {}
+
+    def call(fn: Callable) -> Any:
+        if id(fn) not in memo:
+            try:
+                memo[id(fn)] = (True, run(fn))
+            except Exception as exc:   # the same error is reported on every case that judges this run
+                memo[id(fn)] = (False, exc)
+        ok, value = memo[id(fn)]
+        if not ok:
+            raise value
+        return value
+    return call
+
+
+_REGISTRY: dict[str, Exercise] = {}
+def register(*exercises: Exercise) -> None:
+    for ex in exercises:
+        _REGISTRY[ex.id] = ex
+
+
+def chapter(number: str | int) -> list[Exercise]:
+    """All exercises of a chapter, in order."""
+    number = by_number(number).key
+    importlib.import_module(by_number(number).grader)
+    ids = [i for i in _REGISTRY if i.split(".")[0] == number]
+    return [_REGISTRY[i] for i in sorted(ids, key=lambda i: [int(p) for p in i.split(".")])]
+
+
+def get(exercise_id: str) -> Exercise:
+    number = by_number(exercise_id.split(".")[0]).key   # KeyError naming the chapters
+    importlib.import_module(by_number(number).grader)
+    if exercise_id not in _REGISTRY:
+        known = ", ".join(e.id for e in chapter(number))
+        raise KeyError(f"no exercise {exercise_id!r}; chapter {number} has {known}")
+    return _REGISTRY[exercise_id]
+
+
+# ---------------------------------------------------------------- judging -----------
+
+def _not_attempted(value: Any) -> bool:
+    return value is None or value is Ellipsis
+
+
+def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None, hidden: bool = False) -> ExerciseResult:
+    """Judge `fn_or_value` on fresh hidden cases drawn with `seed` (random if None). Never raises.
+    hidden: the instructor's grade, which adds the exercise's `hidden_cases` to the usual ones."""
+    seed = secrets.randbits(32) if seed is None else int(seed)
+    result = ExerciseResult(id=ex.id, title=ex.title, name=ex.name, kind=ex.kind,
+                            max_score=ex.points, seed=seed, replayable=not ex.value)
+    if ex.value:
+        if _not_attempted(fn_or_value):
+            result.status, result.message = "not_attempted", f"`{ex.name}` is still None: not attempted"
+            return result
+        value = fn_or_value
+        fn = lambda *a, **k: value  # noqa: E731 — a value answer is a function of nothing
+    else:
+        if not callable(fn_or_value):
+            result.status = "error"
+            result.message = f"`{ex.name}` should be a function, got {type(fn_or_value).__name__}"
+            return result
+        fn = fn_or_value
+    # `cases` may return a list or yield its cases one by one: a generator builds an expensive case
+    # (real photos, a library run) only once the learner's code has got that far.
+    weights = []
+    try:
+        rng = np.random.default_rng(seed)
+        drawn = ex.cases(rng)
+        if hidden and ex.hidden_cases is not None:
+            drawn = _chain(drawn, ex.hidden_cases, rng)
+    except Exception as exc:  # a broken case generator is our bug, not the learner's; say so
+        drawn = _raise(exc)
+    cases = iter(drawn)
+    while True:
+        try:
+            case = next(cases, None)
+        except Exception as exc:
+            result.status, result.cases = "error", []
+            result.message = f"grader error while drawing cases ({exc!r}); please report it"
+            return result
+        if case is None:
+            break
+        judged = _judge_case(ex, fn, case)
+        if judged is None:  # NotImplementedError on a case: the whole exercise is not attempted
+            result.status, result.cases = "not_attempted", []
+            result.message = "raises NotImplementedError: not attempted"
+            return result
+        row, kind = judged
+        result.cases.append(row)
+        weights.append(case.weight)
+        if kind == "timeout":
+            result.timed_out = True
+            # One endless loop costs one time limit, not one per case: the rest are reported, not run.
+            _stop_after_timeout(result, weights, drawn, cases, len(result.cases), ex.timeout)
+            break
+    for row, weight in zip(result.cases, weights):
+        row.max_points = ex.points * weight / sum(weights)
+        row.points = row.max_points if row.passed else 0.0
+    result.score = round(sum(r.points for r in result.cases), 6)
+    result.status = ("passed" if all(r.passed for r in result.cases)
+                     else "failed" if result.score == 0 else "partial")
+    if ex.explanation:
+        result.explanation = ex.explanation
+    return result
+
+
+def _stop_after_timeout(result: ExerciseResult, weights: list[float], drawn: Any, rest: Iterable[Case],
+                        k: int, timeout: float) -> None:
+    """Rows for the cases after a time-out in case k: listed by name when the cases were a list (cheap),
+    one row for the rest when they are built lazily (building them may cost a reconstruction)."""
+    why = f"not run: stopped after a time-out in case {k}"
+    if isinstance(drawn, (list, tuple)):
+        for case in rest:
+            result.cases.append(CaseResult(name=case.name, tol=case.tol, unit=case.unit, message=why, key=case.key))
+            weights.append(case.weight)
+    else:
+        result.cases.append(CaseResult(name="remaining cases", message=why))
+        weights.append(float(np.mean(weights)))
+    result.message = (f"case {k} exceeded the time limit of {timeout:g} s "
+                      "(an endless loop, or far too slow?); the remaining cases were not run")
+
+
+def _error_hint(ex: Exercise, case: Case, error_text: str) -> str:
+    """The first `raised` hint whose pattern matches the error, or ''."""
+    return next((h.say(case, None) for h in ex.hints if h.raised and re.search(h.raised, error_text)), "")
+
+
+def _chain(first: Iterable[Case], more: Callable, rng: np.random.Generator):
+    """The usual cases, then the hidden ones (drawn from the same generator once the first are done)."""
+    yield from first
+    yield from more(rng)
+
+
+def _raise(exc: Exception):
+    raise exc
+    yield  # a generator that raises on the first next()
+
+
+def _judge_case(ex: Exercise, fn: Callable, case: Case) -> tuple[CaseResult, str] | None:
+    """The row for one case and the kind of outcome (ok | exception | timeout | exit); None if the
+    learner's code raised NotImplementedError."""
+    row = CaseResult(name=case.name, tol=case.tol, unit=case.unit, key=case.key)
+    target = fn if case.call is None else (lambda *args, **kwargs: case.call(fn))
+    remote = hasattr(fn, "drain")     # graded mode: the learner's code runs in its own process
+    if remote:
+        fn.deadline = time.monotonic() + ex.timeout        # shared by every call this case makes
+    # In graded mode the learner's process enforces the time limit; the judge's own is a backstop.
+    outcome = safe_call(target, case.args, case.kwargs, timeout=ex.timeout + (10.0 if remote else 0.0),
+                        names=ex.arg_names)
+    if remote:
+        stdout, mutated, used = fn.drain()
+        outcome.stdout, outcome.mutated = outcome.stdout + stdout, outcome.mutated + mutated
+        course = [u for u in used if u.startswith("graders")]
+        banned = [u for u in used if not u.startswith("graders") and u.split(".")[0] not in ex.libraries]
+        if course and outcome.kind in ("ok", "exception"):
+            row.message = (f"calls {', '.join(course[:3])}: the course's own stand-ins and oracles are not an "
+                           "answer in graded work (self-study checks allow them)")
+            return row, outcome.kind
+        if banned and outcome.kind in ("ok", "exception"):
+            row.message = (f"calls {', '.join(banned[:3])}: exercise {ex.id} is from scratch, so graded work "
+                           f"may not use {', '.join(sorted({b.split('.')[0] for b in banned}))} "
+                           "(self-study checks allow it)")
+            return row, outcome.kind
+    if outcome.kind == "not_implemented":
+        return None
+    row.stdout = outcome.stdout + (f"\n… {outcome.stdout_truncated} more characters of output dropped"
+                                   if outcome.stdout_truncated else "")
+    if outcome.kind != "ok":
+        row.message = outcome.error
+        row.traceback = outcome.traceback
+        row.hint = _error_hint(ex, case, row.message + "\n" + row.traceback)
+        return row, outcome.kind
+    try:
+        out = (case.convert or as_array)(outcome.value, case)
+        row.error = float(case.metric(out, case.expected))
+    except OutputError as exc:
+        row.message = str(exc)
+        row.hint = _error_hint(ex, case, row.message)
+        return row, outcome.kind
+    except Exception as exc:  # an output the metric cannot digest is a wrong output
+        row.message = f"output could not be compared ({type(exc).__name__}: {exc})"
+        return row, outcome.kind
+    if not np.isfinite(row.error):
+        row.error, row.message = None, "error is not finite"
+        return row, outcome.kind
+    row.passed = bool(row.error <= float(case.tol))   # a numpy tol would make a numpy bool, which JSON refuses
+    if outcome.mutated:
+        row.passed = False
+        row.message = f"modified its input {', '.join(outcome.mutated)} in place; work on a copy"
+    if not row.passed:
+        for hint in ex.hints:
+            if hint.when is None:
+                continue
+            try:
+                fired = hint.when(case, out)
+            except Exception:
+                fired = False
+            if fired:
+                row.hint = hint.say(case, out)
+                break
+    return row, outcome.kind

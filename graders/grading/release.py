@@ -1,0 +1,206 @@
+"""Course releases: the student edition and the Gradescope autograder.
+
+    python -m graders release OUT/ [--chapters 1,2]
+    python -m graders gradescope --chapter 4 --out autograder.zip [--secret-file S]
+
+The student edition holds the chosen chapters' notebooks (untouched stubs, no outputs), the `graders`
+package with only those chapters, the data manifest, docs, README, environment and Makefile: the two
+README commands work in it, and it has no `solutions/` (a test installs it in a fresh venv, runs every
+notebook and greps it for reference code).
+
+The autograder follows Gradescope's contract: `setup.sh` installs the pinned environment; 
+`run_autograder` grades `/autograder/submission` in instructor mode (graded mode, secret seed, hidden
+cases) and writes `/autograder/results/results.json`, valid in every failure mode: written before
+grading starts, rewritten atomically after every exercise, and inside a time budget shorter than
+the autograder's limit. Nothing is printed into it.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import stat
+import sys
+import zipfile
+from pathlib import Path
+
+from graders.core.chapters import READY, by_number
+
+ROOT = Path(__file__).resolve().parents[2]
+SHARED = ("__init__.py", "__main__.py", "cli.py", "datasets.py", "layers.py")   # graders/*.py
+PACKAGES = ("core", "kit", "grading", "study", "oracles")   # every row of graders.layers but the chapters
+HOME_NOTEBOOK = "notebooks/00_start_here.ipynb"
+RELEASED = "released.json"     # beside chapters.py in a release: the chapters it holds
+
+
+def _ignore(_dir, names):
+    return [n for n in names if n in ("__pycache__", ".ipynb_checkpoints") or n.endswith(".pyc")]
+
+
+def _copy_graders(dest: Path, numbers: list[int]) -> None:
+    pkg = dest / "graders"
+    pkg.mkdir(parents=True)
+    for name in SHARED:
+        shutil.copy2(ROOT / "graders" / name, pkg / name)
+    for sub in PACKAGES:
+        shutil.copytree(ROOT / "graders" / sub, pkg / sub, ignore=_ignore)
+    for n in numbers:
+        ch = by_number(n)
+        shutil.copytree(ROOT / "graders" / ch.prefix, pkg / ch.prefix, ignore=_ignore)
+    (pkg / RELEASED).write_text(json.dumps(sorted(numbers)))
+
+
+def _pyproject() -> str:
+    text = (ROOT / "pyproject.toml").read_text()
+    text = text.replace('include = ["solutions*", "graders*", "benchmarks*"]', 'include = ["graders*"]')
+    return text.replace('testpaths = ["tests", "notebooks"]', 'testpaths = ["notebooks"]')
+
+
+def student_release(out: str | Path, numbers: list[int] | None = None) -> Path:
+    """Write the student edition of `numbers` (default: every ready chapter) into `out` (must not exist)."""
+    out = Path(out)
+    numbers = sorted(numbers or [c.number for c in READY])
+    if out.exists():
+        raise FileExistsError(f"{out} exists; give a new folder")
+    out.mkdir(parents=True)
+    _copy_graders(out, numbers)
+    (out / "notebooks").mkdir()
+    for n in numbers:
+        nb = ROOT / by_number(n).notebook
+        shutil.copy2(nb, out / "notebooks" / nb.name)
+    if (ROOT / HOME_NOTEBOOK).exists():     # the course home: map, progress, reference tables
+        shutil.copy2(ROOT / HOME_NOTEBOOK, out / HOME_NOTEBOOK)
+    for name in ("README.md", "environment.txt", "Makefile", "conftest.py", ".gitignore"):
+        shutil.copy2(ROOT / name, out / name)
+    shutil.copytree(ROOT / "data", out / "data", ignore=_ignore)
+    shutil.copytree(ROOT / "docs", out / "docs", ignore=_ignore)
+    (out / "pyproject.toml").write_text(_pyproject())
+    return out
+
+
+# ------------------------------------------------------------------ Gradescope
+
+SETUP_SH = """#!/usr/bin/env bash
+# Gradescope runs this once, as root, when the autograder image is built.
+set -euo pipefail
+cd /autograder/source
+apt-get update -qq && apt-get install -y -qq python3.11 python3.11-venv > /dev/null || true
+PY=$(command -v python3.11 || command -v python3)
+$PY -m venv /autograder/venv
+/autograder/venv/bin/python -m pip install -q torch==2.13.0 --index-url https://download.pytorch.org/whl/cpu
+/autograder/venv/bin/python -m pip install -q -r environment.txt
+/autograder/venv/bin/python -m pip install -q --no-deps -e .   # editable, as make install: data/ stays beside graders/
+"""
+
+RUN_AUTOGRADER = """#!/usr/bin/env bash
+# Gradescope runs this for every submission. All output goes to a log, never into results.json.
+ROOT="${AUTOGRADER_ROOT:-/autograder}"
+PY="${AUTOGRADER_PYTHON:-$ROOT/venv/bin/python}"
+cd "$ROOT/source"
+exec "$PY" -m graders gradescope-run --root "$ROOT" >> "$ROOT/results/autograder.log" 2>&1
+"""
+
+
+def gradescope_bundle(out_zip: str | Path, number: int, secret: bytes | None = None,
+                      time_budget: float | None = None) -> Path:
+    """The autograder zip for one chapter: setup.sh, run_autograder, the graders, the pins, the secret."""
+    import tempfile
+    out_zip = Path(out_zip)
+    with tempfile.TemporaryDirectory(prefix="cv3d-bundle-") as tmp:
+        src = Path(tmp)
+        _copy_graders(src, [number])
+        for name in ("environment.txt",):
+            shutil.copy2(ROOT / name, src / name)
+        shutil.copytree(ROOT / "data", src / "data", ignore=_ignore)
+        (src / "pyproject.toml").write_text(_pyproject())
+        config = {"chapter": number}
+        if time_budget:
+            config["time_budget"] = time_budget
+        (src / "autograder.json").write_text(json.dumps(config))
+        if secret:
+            (src / "secret").write_bytes(secret)
+        (src / "setup.sh").write_text(SETUP_SH)
+        (src / "run_autograder").write_text(RUN_AUTOGRADER)
+        with zipfile.ZipFile(out_zip, "w", zipfile.ZIP_DEFLATED) as z:
+            for path in sorted(src.rglob("*")):
+                if path.is_file():
+                    info = zipfile.ZipInfo(str(path.relative_to(src)))
+                    mode = 0o755 if path.name in ("setup.sh", "run_autograder") else 0o644
+                    info.external_attr = (stat.S_IFREG | mode) << 16
+                    info.compress_type = zipfile.ZIP_DEFLATED
+                    z.writestr(info, path.read_bytes())
+    return out_zip
+
+
+def _submission_file(folder: Path, number: int) -> Path | None:
+    files = sorted(p for p in folder.rglob("*") if p.is_file() and p.suffix in (".ipynb", ".py"))
+    stem = by_number(number).notebook.split("/")[1]
+    named = [p for p in files if p.name == stem]
+    notebooks = [p for p in files if p.suffix == ".ipynb"]
+    return (named or notebooks or files or [None])[0]
+
+
+def gradescope_run(root: str | Path) -> int:
+    """Grade /autograder/submission into /autograder/results/results.json (see the module docstring)."""
+    from graders.grading.runner import TIME_BUDGET, check_file
+    from graders.core.report import write_gradescope
+    root = Path(root)
+    source = root / "source"
+    results = root / "results" / "results.json"
+    results.parent.mkdir(parents=True, exist_ok=True)
+    write_gradescope(results, [], "The autograder started but did not finish: please resubmit or tell staff.")
+    config = json.loads((source / "autograder.json").read_text())
+    number = int(config["chapter"])
+    secret_file = source / "secret"
+    secret = secret_file.read_bytes().strip() if secret_file.exists() else None
+    sub = _submission_file(root / "submission", number)
+    if sub is None:
+        write_gradescope(results, [], "No notebook (.ipynb) or module (.py) found in your submission.")
+        return 0
+    meta = root / "submission_metadata.json"
+    sid = sub.stem
+    if meta.exists():
+        try:
+            sid = str(json.loads(meta.read_text()).get("id", sid))
+        except ValueError:
+            pass
+    from graders.core.engine import chapter
+    ids = [ex.id for ex in chapter(by_number(number).key)]
+
+    def save(partial):
+        write_gradescope(results, partial, "grading in progress")
+    try:
+        graded, message = check_file(sub, only=ids, time_budget=float(config.get("time_budget", TIME_BUDGET)),
+                                     graded=True, on_result=save, secret=secret, submission=sid)
+        write_gradescope(results, graded, message)
+    except Exception as exc:       # a grader bug must still leave a valid file that says so
+        write_gradescope(results, [], f"The autograder failed ({type(exc).__name__}: {exc}); please tell staff.")
+    return 0
+
+
+def main(argv: list[str]) -> int:
+    command, rest = argv[0], argv[1:]
+    ap = argparse.ArgumentParser(prog=f"python -m graders {command}")
+    if command == "release":
+        ap.add_argument("out")
+        ap.add_argument("--chapters", help="comma-separated chapter numbers (default: all ready)")
+        args = ap.parse_args(rest)
+        out = student_release(args.out, [int(c) for c in args.chapters.split(",")] if args.chapters else None)
+        print(f"student edition in {out}")
+    elif command == "gradescope":
+        ap.add_argument("--chapter", required=True, type=int)
+        ap.add_argument("--out", required=True)
+        ap.add_argument("--secret-file")
+        ap.add_argument("--time-budget", type=float, help="seconds (default: the shell grader's 540)")
+        args = ap.parse_args(rest)
+        secret = Path(args.secret_file).read_bytes().strip() if args.secret_file else None
+        print(f"autograder in {gradescope_bundle(args.out, args.chapter, secret, args.time_budget)}")
+    else:
+        ap.add_argument("--root", default=os.environ.get("AUTOGRADER_ROOT", "/autograder"))
+        return gradescope_run(ap.parse_args(rest).root)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
