@@ -27,8 +27,10 @@ $(STAMP): environment.txt pyproject.toml
 lab: install
 	$(BIN)/python -m graders.lab $(LAB_ARGS)
 
+# Both cores (pytest-xdist); each notebook runs whole on one worker (conftest.py); the 25 slowest tests listed at the end.
+TEST_WORKERS ?= 2
 test: install
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) --durations=25
 
 bench: install
 	$(BIN)/python -m benchmarks

@@ -31,6 +31,32 @@ def pytest_ignore_collect(collection_path, config):
     return True if collection_path.name in planned else None
 
 
+# Long items start first, so that under pytest-xdist (make test: 2 workers) no worker is left with a long
+# test at the end while the other idles. Matched on the node id; the rest keep their collection order.
+LONG_FIRST = ("test_notebooks.py", "test_graded.py", "test_hostile.py")
+
+
+def pytest_collection_modifyitems(config, items):
+    rank = {id(item): next((i for i, key in enumerate(LONG_FIRST) if key in item.nodeid), len(LONG_FIRST))
+            for item in items}
+    items.sort(key=lambda item: rank[id(item)])
+
+
+def pytest_xdist_make_scheduler(config, log):
+    """Under pytest-xdist each notebook's cells run in order in one kernel, so a notebook goes whole to one
+    worker; every other test is scheduled on its own. (xdist's `--dist loadgroup` would do this from marks,
+    but pytest 9 derives node ids from `Node._id`, so xdist 3.8's renaming of `_nodeid` has no effect.)
+    Larger groups are sent first (xdist's default reordering), so the notebooks start early."""
+    from xdist.scheduler import LoadScopeScheduling
+
+    class NotebookScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            path = nodeid.split("::")[0]
+            return path if path.endswith(".ipynb") else nodeid
+
+    return NotebookScheduling(config, log)
+
+
 def pytest_runtest_logreport(report):
     path = report.nodeid.split("::")[0]
     if path.endswith(".ipynb"):
