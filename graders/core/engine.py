@@ -19,13 +19,14 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
+from graders.core.attempt import RemoteAttempt
 from graders.core.chapters import by_number
 from graders.core.convert import OutputError, as_array, as_mask, as_points, as_pose, as_poses, as_rotation, as_sim3  # noqa: F401 (re-exported)
 from graders.core.report import CaseResult, ExerciseResult
 from graders.core.sandbox import safe_call
 
 KINDS = ("concept", "code", "debug", "design", "frontier")
-LIBRARIES = ("cv2", "pycolmap", "kornia")    # what graded mode watches (see graders.grading.learner)
+LIBRARIES = ("cv2", "pycolmap", "kornia")    # what graded mode watches (graders.grading.policy, .learner)
 
 
 @dataclass
@@ -383,25 +384,17 @@ def _judge_case(ex: Exercise, fn: Callable, case: Case) -> tuple[CaseResult, str
     learner's code raised NotImplementedError."""
     row = CaseResult(name=case.name, tol=case.tol, unit=case.unit, key=case.key)
     target = fn if case.call is None else (lambda *args, **kwargs: case.call(fn))
-    remote = hasattr(fn, "drain")     # graded mode: the learner's code runs in its own process
+    remote = isinstance(fn, RemoteAttempt)     # graded mode: the learner's code runs in its own process
     if remote:
-        fn.deadline = time.monotonic() + ex.timeout        # shared by every call this case makes
+        fn.begin_case(ex.timeout)
     # In graded mode the learner's process enforces the time limit; the judge's own is a backstop.
     outcome = safe_call(target, case.args, case.kwargs, timeout=ex.timeout + (10.0 if remote else 0.0),
                         names=ex.arg_names)
     if remote:
-        stdout, mutated, used = fn.drain()
-        outcome.stdout, outcome.mutated = outcome.stdout + stdout, outcome.mutated + mutated
-        course = [u for u in used if u.startswith("graders")]
-        banned = [u for u in used if not u.startswith("graders") and u.split(".")[0] not in ex.libraries]
-        if course and outcome.kind in ("ok", "exception"):
-            row.message = (f"calls {', '.join(course[:3])}: the course's own stand-ins and oracles are not an "
-                           "answer in graded work (self-study checks allow them)")
-            return row, outcome.kind
-        if banned and outcome.kind in ("ok", "exception"):
-            row.message = (f"calls {', '.join(banned[:3])}: exercise {ex.id} is from scratch, so graded work "
-                           f"may not use {', '.join(sorted({b.split('.')[0] for b in banned}))} "
-                           "(self-study checks allow it)")
+        report = fn.end_case(ex)
+        outcome.stdout, outcome.mutated = outcome.stdout + report.stdout, outcome.mutated + report.mutated
+        if report.refusal and outcome.kind in ("ok", "exception"):
+            row.message = report.refusal
             return row, outcome.kind
     if outcome.kind == "not_implemented":
         return None

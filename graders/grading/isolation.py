@@ -31,7 +31,9 @@ import tempfile
 import time
 from typing import Any, Callable
 
+from graders.core.attempt import CaseReport
 from graders.grading.learner import receive_bytes, send
+from graders.grading.policy import refusal
 from graders.core.sandbox import TimeLimitExceeded, current_cotangent
 
 MARGIN_S = 5.0          # the judge waits this much longer than the learner's own time limit
@@ -387,8 +389,9 @@ class LearnerProcess:
 
 
 class RemoteFunction:
-    """The learner's function as the judge sees it. After each call, `drain()` hands the engine what the
-    learner printed, which inputs it changed and which library functions it called."""
+    """The learner's function as the judge sees it (a `graders.core.attempt.RemoteAttempt`). After each case,
+    `end_case` hands the engine what the learner printed, which inputs it changed, and graded mode's verdict
+    (graders.grading.policy) on the library functions it called."""
 
     def __init__(self, learner: LearnerProcess, name: str, exercise: Any, handle: int | None = None,
                  parent: "RemoteFunction | None" = None):
@@ -445,3 +448,10 @@ class RemoteFunction:
         out = ("".join(self._stdout), list(dict.fromkeys(self._mutated)), sorted(self._used))
         self._stdout, self._mutated, self._used = [], [], set()
         return out
+
+    def begin_case(self, timeout: float) -> None:
+        self.deadline = time.monotonic() + timeout        # shared by every call this case makes
+
+    def end_case(self, exercise: Any) -> CaseReport:
+        stdout, mutated, used = self.drain()
+        return CaseReport(stdout=stdout, mutated=mutated, refusal=refusal(exercise, used))
