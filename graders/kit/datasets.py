@@ -282,6 +282,22 @@ def refresh_manifest(source: Path | str, manifest: dict[str, Any] | None = None)
     return manifest
 
 
+def _fetch_and_say(name: str, dest: str | None, base_url: str | None) -> bool:
+    """Fetch one dataset for the command line: one line of progress per file, one line (no traceback) if it
+    fails; folders the failed fetch created and left empty are removed."""
+    print(f"{name}: fetching {info(name)['bytes'] / 1e6:.2f} MB", flush=True)
+    try:
+        print(f"{name}: ready in {fetch(name, dest, base_url=base_url, quiet=False)}")
+        return True
+    except (OSError, ChecksumError) as exc:     # urllib's URLError is an OSError
+        print(f"{name}: FAILED: {getattr(exc, 'reason', None) or exc}", file=sys.stderr)
+        folder = (Path(dest) if dest is not None else cache_dir()) / info(name)["folder"]
+        for d in sorted((p for p in [folder, *folder.rglob("*")] if p.is_dir()), key=lambda p: -len(p.parts)):
+            if not any(d.iterdir()):
+                d.rmdir()
+        return False
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m graders.datasets", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -314,10 +330,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.name and args.name not in names():
         parser.error(f"unknown dataset {args.name!r}; choose from {', '.join(names())}")
     if args.command == "fetch":
-        for name in chosen:
-            print(f"{name}: fetching {info(name)['bytes'] / 1e6:.2f} MB", flush=True)
-            print(f"{name}: ready in {fetch(name, args.dest, base_url=args.base_url, quiet=False)}")
-        return 0
+        failed = [name for name in chosen if not _fetch_and_say(name, args.dest, args.base_url)]
+        if failed:
+            print(f"not fetched: {', '.join(failed)}. Offline? Point $COURSE_DATA at a folder that holds the data "
+                  "(a copy of another machine's), or fetch from a mirror laid out like it: --base-url URL or "
+                  "$COURSE_DATA_URL. The notebooks run without the data, on synthetic stand-ins.", file=sys.stderr)
+        return 1 if failed else 0
     bad = 0
     for name in chosen:
         problems = verify(name)
