@@ -76,7 +76,7 @@ def chairs_like(rng, W: int = 512, H: int = 384) -> tuple[np.ndarray, np.ndarray
     """A synthetic FlyingChairs-like pair, the reference's tuning set: a textured plane under a small
     homography (0.3-6 px) and 2-5 chair-like objects (textured, or flat with a shading ramp) moving 3-45 px
     under a small rotation and scaling, blurred edges, 1 grey level of noise. -> (I1, I2, exact flow of the
-    frame-1 surface); FlyingChairs itself is rendered chairs over photos, moving by affine maps."""
+    frame-1 surface): FlyingChairs' own recipe (rendered chairs over photos) with polygons over skimage images."""
     from graders.ch09_flow.pairs import _texture, plane_pair
     bg = plane_pair(rng, W, H, shift=float(rng.uniform(0.3, 6.0)), warp=0.02)
     I1, I2, F = bg["I1"].copy(), bg["I2"].copy(), bg["flow"].copy()
