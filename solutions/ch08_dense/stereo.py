@@ -193,16 +193,29 @@ def census_volume(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3) -> n
     return _census_planes(np.asarray(I_l, float), np.asarray(I_r, float), int(d_max), r).transpose(0, 2, 1)
 
 
+def nan_median3(D: np.ndarray) -> np.ndarray:
+    """3×3 median of the kept disparities: each kept pixel takes the median of the finite values among its
+    9 neighbours (itself included; the mean of the two middle ones when their count is even); rejected
+    (NaN) pixels stay NaN and do not vote — read as 0, as ndimage.median_filter on nan_to_num(D) does, they
+    pull a pixel beside an occlusion towards disparity 0. D: (H, W) -> (H, W)."""
+    H, W = D.shape
+    w = np.lib.stride_tricks.sliding_window_view(np.pad(D, 1, constant_values=np.nan), (3, 3)).reshape(H, W, 9)
+    s = np.sort(w, axis=-1)                                   # NaN sorts last
+    n = np.count_nonzero(~np.isnan(w), axis=-1)
+    lo = np.take_along_axis(s, np.maximum((n - 1) // 2, 0)[..., None], -1)[..., 0]
+    hi = np.take_along_axis(s, (n // 2)[..., None], -1)[..., 0]
+    return np.where(np.isnan(D), D, 0.5 * (lo + hi))
+
+
 def sgm_stereo(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3, P1: float = 6.0, P2: float = 48.0,
-               paths: int = 4, max_lr_diff: float = 1.0, median: int = 3) -> np.ndarray:
-    """The full matcher of the benchmark: 7×7 census costs, SGM (int16), WTA + sub-pixel + left-right
-    check, then a 3×3 median filter of the kept disparities. Returns D: (H, W), NaN = none."""
-    from scipy import ndimage
+               paths: int = 8, max_lr_diff: float = 1.0, median: bool = True) -> np.ndarray:
+    """The full matcher of the benchmark: 7×7 census costs, SGM (int16) over 8 paths by default (4 for
+    speed), WTA + sub-pixel + left-right check, then the NaN-aware 3×3 median of the kept disparities.
+    Returns D: (H, W), NaN = none. On the motorcycle pair max_lr_diff 1 is the value that keeps the density
+    above SGBM's (0: bad > 2 px 3.9 % at 75 % density; 1: 5.1 % at 91 %; 2: 5.7 % at 92 %; SGBM 6.2 % at 85 %)."""
     C = _census_planes(np.asarray(I_l, float), np.asarray(I_r, float), int(d_max), r)
     S = _aggregate(C, np.int16(P1), np.int16(P2), paths)   # int16: sums <= 8 (48 + P2) < 2^15
     for d in range(1, d_max + 1):
         S[:, d, :d] = _worst(S)                                # x < d: no partner in the right view
     D = _wta_subpixel_lr(S, max_lr_diff)
-    if median:
-        D = np.where(np.isnan(D), D, ndimage.median_filter(np.nan_to_num(D, nan=0.0), size=median))
-    return D
+    return nan_median3(D) if median else D
