@@ -23,5 +23,6 @@ def test_reference_beats_dis_and_farneback_on_every_pair_and_the_mean():
         ours.append(_epe(dense_flow(I1, I2), F))
         dis.append(_epe(cv_dis(I1, I2), F))
         farn.append(_epe(cv_farneback(I1, I2), F))
-        assert ours[-1] < min(dis[-1], farn[-1]), f"pair {name}: {ours[-1]:.2f} px vs DIS {dis[-1]:.2f}, Farneback {farn[-1]:.2f}"
+        assert ours[-1] < min(dis[-1], farn[-1]), \
+            f"pair {name}: {ours[-1]:.2f} px vs DIS {dis[-1]:.2f}, Farneback {farn[-1]:.2f}"
     assert np.mean(ours) < min(np.mean(dis), np.mean(farn))
