@@ -14,16 +14,16 @@ How stereo is measured here (graders.ch08_dense.stereo_scores, Middlebury's "all
 Timing: each method's best CPU (process) time of 3 interleaved rounds, on the same loaded 2-core machine, the
 load average printed; the ratio to SGBM is the figure that carries over to another machine.
 Goal (the brief): our SGM at or below SGBM's bad > 2 px rate, at or above its density, time <= 10 × SGBM.
-Measured (issue 30, one run, load average 15.3 before / 13.8 after, 2 CPUs): SGM with 8 paths (the default now)
-bad > 2 px 5.1 % at 90.7 % density vs SGBM's 6.2 % at 85.0 % (0.82 × its bad rate, 1.07 × its density); on the
-pixels both matched 4.11 % vs 4.71 % (0.87 ×); CPU 12.8-17.9 × SGBM's over two runs at loads of 14-22 (time goal
-NOT met). 16 paths (optional): 5.4 % at 91.0 %, both matched 4.42 % vs 4.71 %, 18.9 × SGBM's CPU. The NaN-aware
-3×3 median (nan_median3) against the former one that read rejected pixels as 0: 5.1 % vs 5.3 % bad > 2 px at the
-same density. 4 paths: 4.9 % at 90.4 %, 10.5-12.9 × SGBM's CPU. max_lr_diff (motorcycle only): 0 -> 3.9 % at 75
-% density, 1 -> 5.1 % at 91 %, 2 -> 5.7 % at 92 %: 1 is the value meeting both goals, kept. On 6 synthetic pairs
-(synthetic_table): 8 paths 0.39 % at 97.1 % vs SGBM 0.55 % at 84.0 %, both matched 0.06 % vs 0.42 % (16 paths
-0.47 % at 97.1 %, 4 paths 0.30 %): more paths do not pay on these pairs (4 scores best on both sets); 8 stays
-the default, as issue 30 asks.
+Measured (issue 30, two runs, load average 15.3 before / 13.8 after the first, 2 CPUs): SGM with 8 paths (the
+default now) bad > 2 px 5.1 % at 90.7 % density vs SGBM's 6.2 % at 85.0 % (0.82 × its bad rate, 1.07 × its
+density); on the pixels both matched 4.11 % vs 4.71 % (0.87 ×); CPU 12.8-17.9 × SGBM's over two runs at loads of
+14-22 (time goal NOT met). 16 paths (optional): 5.4 % at 91.0 %, both matched 4.42 % vs 4.71 %, 18.9 × SGBM's
+CPU. The NaN-aware 3×3 median (nan_median3) against the former one that read rejected pixels as 0: 5.1 % vs 5.3
+% bad > 2 px at the same density. 4 paths: 4.9 % at 90.4 %, 10.5-12.9 × SGBM's CPU. max_lr_diff (motorcycle
+only): 0 -> 3.9 % at 75 % density, 1 -> 5.1 % at 91 %, 2 -> 5.7 % at 92 %: 1 is the value meeting both goals,
+kept. On 6 synthetic pairs (synthetic_table): 8 paths 0.39 % at 97.1 % vs SGBM 0.55 % at 84.0 %, both matched
+0.06 % vs 0.42 % (16 paths 0.47 % at 97.1 %, 4 paths 0.30 %): more paths do not pay on these pairs (4 scores
+best on both sets); 8 stays the default, as issue 30 asks.
 """
 from __future__ import annotations
 
