@@ -94,7 +94,7 @@ def block_matching(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3, max
 
 def _sweep(C: np.ndarray, P1, P2, dirs: list[tuple[int, int]], S: np.ndarray) -> None:
     """Adds sum_r L_r to S for paths that all travel along axis 0 of C: (N, D, M), forwards (dy = +1)
-    or backwards (dy = -1), with dx in {-1, 0, 1} along axis 2. All paths advance in one loop, stacked
+    or backwards (dy = -1), with dx in {-2, -1, 0, 1, 2} along axis 2. All paths advance in one loop, stacked
     (k, D, M): one step updates a whole scanline of every path with a few numpy calls on two
     alternating preallocated buffers (no allocation inside the loop).
 
@@ -117,9 +117,9 @@ def _sweep(C: np.ndarray, P1, P2, dirs: list[tuple[int, int]], S: np.ndarray) ->
                     if dx == 0:
                         pred[j] = prev[j]
                     elif dx > 0:
-                        pred[j, :, 1:] = prev[j, :, :-1]
+                        pred[j, :, dx:] = prev[j, :, :-dx]
                     else:
-                        pred[j, :, :-1] = prev[j, :, 1:]
+                        pred[j, :, :dx] = prev[j, :, -dx:]
             np.min(pred, axis=1, keepdims=True, out=best)
             np.add(best, P2, out=jump)                           # cur <- min(pred, best + P2)
             np.minimum(pred, jump, out=cur)
@@ -138,9 +138,12 @@ def _sweep(C: np.ndarray, P1, P2, dirs: list[tuple[int, int]], S: np.ndarray) ->
 
 
 def _aggregate(C: np.ndarray, P1, P2, paths: int) -> np.ndarray:
-    """S: (H, D, W) = sum over 4 or 8 paths of L_r, for C: (H, D, W) contiguous."""
+    """S: (H, D, W) = sum over 4, 8 or 16 paths of L_r, for C: (H, D, W) contiguous. 16 adds the 8 paths
+    that advance 2 px across for 1 px along (knight's moves), half of them swept with the rows, half with
+    the columns."""
     S = np.zeros_like(C)
-    vertical = [(1, 0), (-1, 0)] + ([(1, 1), (1, -1), (-1, 1), (-1, -1)] if int(paths) == 8 else [])
+    knights = [(1, 2), (1, -2), (-1, 2), (-1, -2)] if int(paths) == 16 else []
+    vertical = [(1, 0), (-1, 0)] + ([(1, 1), (1, -1), (-1, 1), (-1, -1)] if int(paths) >= 8 else []) + knights
     _sweep(C, P1, P2, vertical, S)                          # rows: down, up and the diagonals
     # Left and right paths are swept as the rows of the volume transposed to (W, D, H), accumulated in
     # their own contiguous array (column-wise writes into S would be strided and slow). The transposes
@@ -149,7 +152,7 @@ def _aggregate(C: np.ndarray, P1, P2, paths: int) -> np.ndarray:
     C_t, S_h = np.empty((W, D, H), C.dtype), np.zeros((W, D, H), C.dtype)
     for d in range(D):
         C_t[:, d] = C[:, d].T
-    _sweep(C_t, P1, P2, [(1, 0), (-1, 0)], S_h)
+    _sweep(C_t, P1, P2, [(1, 0), (-1, 0)] + knights, S_h)
     for d in range(D):
         S[:, d] += S_h[:, d].T
     return S
@@ -193,16 +196,29 @@ def census_volume(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3) -> n
     return _census_planes(np.asarray(I_l, float), np.asarray(I_r, float), int(d_max), r).transpose(0, 2, 1)
 
 
+def nan_median3(D: np.ndarray) -> np.ndarray:
+    """3×3 median of the kept disparities: each kept pixel takes the median of the finite values among its
+    9 neighbours (itself included; the mean of the two middle ones when their count is even); rejected
+    (NaN) pixels stay NaN and do not vote — read as 0, as ndimage.median_filter on nan_to_num(D) does, they
+    pull a pixel beside an occlusion towards disparity 0. D: (H, W) -> (H, W)."""
+    H, W = D.shape
+    w = np.lib.stride_tricks.sliding_window_view(np.pad(D, 1, constant_values=np.nan), (3, 3)).reshape(H, W, 9)
+    s = np.sort(w, axis=-1)                                   # NaN sorts last
+    n = np.count_nonzero(~np.isnan(w), axis=-1)
+    lo = np.take_along_axis(s, np.maximum((n - 1) // 2, 0)[..., None], -1)[..., 0]
+    hi = np.take_along_axis(s, (n // 2)[..., None], -1)[..., 0]
+    return np.where(np.isnan(D), D, 0.5 * (lo + hi))
+
+
 def sgm_stereo(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3, P1: float = 6.0, P2: float = 48.0,
-               paths: int = 4, max_lr_diff: float = 1.0, median: int = 3) -> np.ndarray:
-    """The full matcher of the benchmark: 7×7 census costs, SGM (int16), WTA + sub-pixel + left-right
-    check, then a 3×3 median filter of the kept disparities. Returns D: (H, W), NaN = none."""
-    from scipy import ndimage
+               paths: int = 8, max_lr_diff: float = 1.0, median: bool = True) -> np.ndarray:
+    """The full matcher of the benchmark: 7×7 census costs, SGM (int16) over 8 paths by default (4 for
+    speed, 16 optional), WTA + sub-pixel + left-right check, then the NaN-aware 3×3 median of the kept disparities.
+    Returns D: (H, W), NaN = none. On the motorcycle pair max_lr_diff 1 is the value that keeps the density
+    above SGBM's (0: bad > 2 px 3.9 % at 75 % density; 1: 5.1 % at 91 %; 2: 5.7 % at 92 %; SGBM 6.2 % at 85 %)."""
     C = _census_planes(np.asarray(I_l, float), np.asarray(I_r, float), int(d_max), r)
     S = _aggregate(C, np.int16(P1), np.int16(P2), paths)   # int16: sums <= 8 (48 + P2) < 2^15
     for d in range(1, d_max + 1):
         S[:, d, :d] = _worst(S)                                # x < d: no partner in the right view
     D = _wta_subpixel_lr(S, max_lr_diff)
-    if median:
-        D = np.where(np.isnan(D), D, ndimage.median_filter(np.nan_to_num(D, nan=0.0), size=median))
-    return D
+    return nan_median3(D) if median else D

@@ -242,26 +242,25 @@ def hs_sobel(I1, I2, alpha=10.0, iters=100):
 def _c2f(I1, I2, double=True, levels=True, fuse=True):
     """The reference coarse-to-fine flow with one piece missing."""
     I1, I2 = np.asarray(I1, float), np.asarray(I2, float)
-    P1, P2 = [gaussian_filter(I1, 1.0)], [gaussian_filter(I2, 1.0)]
-    while levels and min(P1[-1].shape) > 40:
-        P1.append(gaussian_filter(P1[-1], 1.0)[::2, ::2])
-        P2.append(gaussian_filter(P2[-1], 1.0)[::2, ::2])
-    f = np.zeros(P1[-1].shape + (2,))
-    for L in range(len(P1) - 1, -1, -1):
+    P1, P2 = ref_dense.gaussian_pyramids(I1, I2, 16 if levels else 10 ** 6)
+    f = np.zeros(P1[-1].shape + (2,), np.float32)
+    for L in range(len(P1) - 1, min(1, len(P1) - 1) - 1, -1):
         if f.shape[:2] != P1[L].shape:
             f = ref_dense._resize_flow(f, P1[L].shape) / (1 if double else 2)
-        f = ref_dense._dense_lk_level(P1[L], P2[L], f, 2.0, 5, 1.0)
+        if fuse:
+            f = ref_dense._fuse(P1[L], P2[L], f, ref_dense.affine_motion(f), 1.0).astype(np.float32)
+        for _ in range(3):
+            f = ref_dense._robust_warp_step(P1[L], P2[L], f, 4.0, 2.0, 0.2, 5.0, 0.7, 20)
+    f = ref_dense._resize_flow(f, I1.shape).astype(float)
     if not fuse:
         return f
-    T = np.broadcast_to(np.median(f.reshape(-1, 2), 0), f.shape).copy()
-    e_f, e_T = (gaussian_filter(np.abs(ref_tools.warp_backward(I2, g) - I1), 2.0) for g in (f, T))
-    f = np.where((e_f < 0.5 * e_T)[..., None], f, T)
+    f = ref_dense._fuse(I1, I2, f, ref_dense.affine_motion(f), 0.5)
     return np.stack([median_filter(f[..., k], 5, mode="nearest") for k in (0, 1)], -1)
 
 
 def dense_no_fusion(I1, I2):
-    """Coarse-to-fine dense LK alone: right on the planes, but on FlyingChairs the chairs' motion bleeds into
-    the flat background (EPE ~11 px, worse than zero flow)."""
+    """The coarse-to-fine robust flow alone, no fusion with the dominant motion: right on the planes, but on
+    FlyingChairs the chairs' motion bleeds into the flat background (EPE 8.6 px, worse than zero flow's 6.05)."""
     return _c2f(I1, I2, fuse=False)
 
 
