@@ -46,17 +46,7 @@ from benchmarks.timing import median_time, table
 
 GOALS = {"EPE vs DIS, Farneback (each FlyingChairs pair and their mean)": "lower", "CPU / Farneback": 10.0,
          "LK vs OpenCV (px)": 0.05}
-CHAIRS = ("0000000", "0000001", "0000002", "0000003", "0000004")
 TUNED_ON = ("0000000",)         # the reference's defaults were chosen on this pair and the synthetic scenes only
-
-
-def load_pair(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """FlyingChairs pair `name` from COURSE_DATA/flow: (I1, I2 grey float64, flow (H, W, 2))."""
-    from graders import datasets
-    from graders.ch09_flow.pairs import gt_read_flo
-    path = lambda s: datasets.path("flow", f"flyingchairs-{name}-{s}")          # noqa: E731
-    read = lambda s: cv2.imread(str(path(s)), cv2.IMREAD_GRAYSCALE).astype(float)   # noqa: E731
-    return read("img0.ppm"), read("img1.ppm"), gt_read_flo(path("gt.flo").read_bytes()).astype(float)
 
 
 def _chair_mask(rng, W, H, c, r):
@@ -173,8 +163,8 @@ def run() -> list[dict]:
     rows = []
     if ch9.real_available():
         real = []
-        for name in CHAIRS:
-            I1, I2, F = load_pair(name)
+        for name in ch9.CHAIRS:
+            I1, I2, F = ch9.load_chairs(name)
             tag = name + (" (tuning)" if name in TUNED_ON else " (held out)")
             real += _pair_rows(tag, I1, I2, F, np.ones(F.shape[:2], bool), methods, 3)
         held = [r for r in real if r["pair"].endswith("(held out)")]

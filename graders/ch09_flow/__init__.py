@@ -13,7 +13,7 @@ the API of the notebook, the tests and the benchmark.
 from __future__ import annotations
 
 from . import dense, lk, questions, tools  # noqa: F401 (register 9.1-9.4, 9.9-9.13, 9.21-9.23)
-from .pairs import (FLO_MAGIC, chairs_flo_bytes, gt_read_flo, gt_write_flo, homography_flow, load_chairs,
+from .pairs import (CHAIRS, FLO_MAGIC, chairs_flo_bytes, gt_read_flo, gt_write_flo, homography_flow, load_chairs,
                     plane_pair, real_available, small_homography)
 from .tools import cv_flow_tools, cv_warp, gt_epe, gt_epe_map, gt_fl, gt_warp
 
@@ -36,7 +36,7 @@ from .demo_tracks import draw_tracks  # noqa: E402
 
 __all__ = [
     "FLO_MAGIC", "chairs_flo_bytes", "cv_dense_flow", "cv_dis", "cv_farneback", "gt_horn_schunck", "cv_lucas_kanade", "cv_pyramidal_lk", "gt_min_eig", "lk_scene", "cv_flow_tools", "cv_warp", "gt_epe", "gt_epe_map", "gt_fl", "gt_read_flo",
-    "gt_warp", "gt_write_flo", "homography_flow", "load_chairs", "plane_pair", "real_available", "small_homography",
+    "CHAIRS", "gt_warp", "gt_write_flo", "homography_flow", "load_chairs", "plane_pair", "real_available", "small_homography",
     "chain_steps", "debug_case_a", "drift_sequence", "gt_reanchor",
 ]
 __all__ += ["fb_margin", "gt_joint_tracker", "gt_occlusion_mask", "gt_scene_flow", "independent_tracker",

@@ -44,20 +44,24 @@ def real_available() -> bool:
     return datasets.available("flow")
 
 
-@lru_cache(maxsize=1)
-def _chairs() -> tuple[np.ndarray, np.ndarray, np.ndarray, bytes]:
-    read = lambda n: cv2.imread(str(datasets.path("flow", f"flyingchairs-0000000-{n}")), cv2.IMREAD_GRAYSCALE)  # noqa: E731
-    raw = datasets.path("flow", "flyingchairs-0000000-gt.flo").read_bytes()
+CHAIRS = ("0000000", "0000001", "0000002", "0000003", "0000004")   # the FlyingChairs pairs in COURSE_DATA/flow
+
+
+@lru_cache(maxsize=len(CHAIRS))
+def _chairs(name: str = "0000000") -> tuple[np.ndarray, np.ndarray, np.ndarray, bytes]:
+    read = lambda n: cv2.imread(str(datasets.path("flow", f"flyingchairs-{name}-{n}")), cv2.IMREAD_GRAYSCALE)  # noqa: E731
+    raw = datasets.path("flow", f"flyingchairs-{name}-gt.flo").read_bytes()
     out = (read("img0.ppm").astype(float), read("img1.ppm").astype(float), gt_read_flo(raw).astype(float), raw)
     for a in out[:3]:
         a.setflags(write=False)
     return out
 
 
-def load_chairs() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The real FlyingChairs pair 0000000: (I1, I2: (384, 512) grey float64 in [0, 255], flow_gt: (384, 512, 2)).
-    Mean |flow| 6.05 px, 90th percentile 20 px, largest 78 px (the chairs move a lot, the background little)."""
-    I1, I2, F, _ = _chairs()
+def load_chairs(name: str = "0000000") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A real FlyingChairs pair (one of CHAIRS): (I1, I2: (384, 512) grey float64 in [0, 255], flow_gt: (384, 512, 2)).
+    Pair 0000000: mean |flow| 6.05 px, 90th percentile 20 px, largest 78 px (the chairs move a lot, the background
+    little)."""
+    I1, I2, F, _ = _chairs(name)
     return I1.copy(), I2.copy(), F.copy()
 
 
