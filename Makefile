@@ -25,7 +25,7 @@ $(STAMP): environment.txt pyproject.toml
 	touch $(STAMP)
 
 lab: install
-	$(BIN)/python -m graders.lab $(LAB_ARGS)
+	$(BIN)/python -m graders.study.lab $(LAB_ARGS)
 
 # Both cores (pytest-xdist); each notebook runs whole on one worker (conftest.py); the 25 slowest tests listed at the end.
 TEST_WORKERS ?= 2

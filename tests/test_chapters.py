@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_readme_chapter_list_is_the_table():
-    assert readme_table() in (ROOT / "README.md").read_text(), "run `python -m graders.chapters` and paste it"
+    assert readme_table() in (ROOT / "README.md").read_text(), "run `python -m graders.core.chapters` and paste it"
 
 
 @pytest.mark.parametrize("ch", READY, ids=lambda c: c.prefix)

@@ -131,5 +131,5 @@ def readme_table() -> str:
     return "\n".join(rows)
 
 
-if __name__ == "__main__":   # python -m graders.chapters: print the README's chapter table
+if __name__ == "__main__":   # python -m graders.core.chapters: print the README's chapter table
     print(readme_table())

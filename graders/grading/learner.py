@@ -1,6 +1,6 @@
 """The learner's side of graded mode: a process that holds only the learner's code.
 
-    python -m graders.learner REQUEST_FD RESPONSE_FD
+    python -m graders.grading.learner REQUEST_FD RESPONSE_FD
 
 The judge (`graders.grading.isolation.LearnerProcess`) sends requests — load this source, which names exist,
 give me this value, call this function with these inputs — and this process answers with plain data.

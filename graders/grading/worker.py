@@ -1,6 +1,6 @@
 """Worker process of `python -m graders check`: grades exercises of one submission.
 
-    python -m graders.worker SOURCE.py EVENTS_FD --ids 1.5,1.6 [--graded]
+    python -m graders.grading.worker SOURCE.py EVENTS_FD --ids 1.5,1.6 [--graded]
 
 The seed comes in the environment (`CV3D_SEED`), never on the command line (which every process can
 read). Events go to the pipe EVENTS_FD as JSON lines: {"start": id} before an exercise, then
