@@ -12,14 +12,24 @@ the grader's `solve` and `residuals`), the learner process calls them back throu
 judge runs them. Outputs are unpickled with an allow-list (numbers, strings, containers, numpy and
 scipy.sparse arrays, tensors sent as arrays): a learner object cannot run code in the judge.
 
-Where the OS allows it (Linux, as root, util-linux `unshare`), the learner process also gets its own
-PID, network and mount namespaces: every file system is read-only but its private working folder, the
-network is off, the judge's processes are invisible, and it drops every capability before loading
-the learner's code. `sandbox_level()` says which protection is in force.
+The learner process holds nothing graded work may not use: it runs an isolated interpreter (-I -S) from
+a copy of `graders/learner.py` and `graders/sandbox.py`, with the standard library and site-packages
+only on its import path, a stand-in `graders`, no `solutions`, and the libraries its exercises may not
+use (cv2, pycolmap, kornia for a from-scratch CODE exercise) as refusing stand-ins: one learner process
+per library policy. Its environment is an allow-list. Where the OS allows it (Linux, as root,
+util-linux `unshare`), it also gets its own PID, network, mount, UTS and IPC namespaces: the course
+tree, `solutions`, the refused libraries, /root, /home, the grader's temp folders and the secret are
+gone from its file system view, /tmp, /run and /dev/shm are its own (size-limited), everything else is
+read-only but its home, and it runs as `nobody` with no capabilities. Without namespaces (`process`
+level) the files stay readable by the learner's code, so the judge adds a static check of the
+learner's source (graders.static_check) and says the isolation is weaker. `sandbox_level()` says
+which level is in force; CV3D_SANDBOX=process forces the weaker one (to test it, or where namespaces
+misbehave).
 """
 from __future__ import annotations
 
 import io
+import json
 import os
 import pickle
 import resource
@@ -130,14 +140,18 @@ def _swap_callables(obj: Any, table: list[Callable]) -> Any:
 # ------------------------------------------------------------------ the learner process
 
 def sandbox_level() -> str:
-    """"namespaces" (read-only file systems, no network, own PIDs, no capabilities) or "process"."""
-    if sys.platform != "linux" or os.geteuid() != 0 or shutil.which("unshare") is None:
+    """"namespaces" (the learner's own file system view, no network, own PIDs, an unprivileged user) or
+    "process" (its own process only; CV3D_SANDBOX=process chooses it)."""
+    if (os.environ.get("CV3D_SANDBOX") == "process" or sys.platform != "linux" or os.geteuid() != 0
+            or shutil.which("unshare") is None):
         return "process"
-    probe = subprocess.run(["unshare", "--pid", "--fork", "--mount-proc", "--net", "--mount", "true"],
+    probe = subprocess.run(["unshare", *UNSHARE, "true"],
                            capture_output=True, timeout=20)
     return "namespaces" if probe.returncode == 0 else "process"
 
 
+UNSHARE = ("--pid", "--fork", "--kill-child", "--mount-proc", "--net", "--mount", "--uts", "--ipc",
+           "--propagation", "private")
 _LEVEL: str | None = None
 
 
@@ -267,34 +281,153 @@ def _processes_of_this_user() -> int:
     return count
 
 
-class LearnerProcess:
-    """One learner process for one submission: load its code once, then call its functions."""
+ENV_KEPT = ("PATH", "LANG", "LC_ALL", "LC_CTYPE", "TZ", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+            "CV3D_LEARNER_STDERR")   # what the learner's environment keeps of the judge's: nothing else
 
-    def __init__(self, source: str, memory_gb: float = 8.0, max_processes: int = 256, max_file_gb: float = 1.0):
+
+def _learner_env(home: str) -> dict[str, str]:
+    """An allow-list, not a deny-list: no token, socket, secret or seed of the instructor's reaches the learner."""
+    env = {k: os.environ[k] for k in ENV_KEPT if k in os.environ}
+    env.setdefault("PATH", "/usr/local/bin:/usr/bin:/bin")
+    env.setdefault("OMP_NUM_THREADS", "1")
+    env.update(HOME=home, TMPDIR=home, TMP=home, TEMP=home, MPLBACKEND="Agg", CV3D_NO_PROGRESS="1",
+               PYTHONDONTWRITEBYTECODE="1")
+    return env
+
+
+def _distribution_folders(library: str) -> list[str]:
+    """Every top-level folder the installed distributions of `library` put in site-packages (cv2/,
+    opencv_python_headless.libs/, its dist-info): hiding only the package would leave its binaries."""
+    import importlib.metadata as metadata
+    import importlib.util
+    folders = set()
+    try:
+        spec = importlib.util.find_spec(library)
+    except (ImportError, ValueError):
+        spec = None
+    if spec is not None and spec.submodule_search_locations:
+        folders |= {os.path.realpath(p) for p in spec.submodule_search_locations}
+    for dist in metadata.packages_distributions().get(library, []):
+        try:
+            files = metadata.distribution(dist).files or []
+        except metadata.PackageNotFoundError:
+            continue
+        for f in files:
+            if len(f.parts) > 1 and f.parts[0] != "..":
+                folders.add(os.path.realpath(os.path.join(str(f.locate())[:-len(str(f))], f.parts[0])))
+    return sorted(folders)
+
+
+def _course_roots() -> list[str]:
+    """Folders that hold the course's packages (graders, solutions, benchmarks): this checkout, and any an
+    editable install points to."""
+    import importlib.util
+    roots = {os.path.dirname(os.path.dirname(os.path.abspath(__file__)))}
+    for name in ("solutions", "graders", "benchmarks"):
+        try:
+            spec = importlib.util.find_spec(name)
+        except (ImportError, ValueError):
+            spec = None
+        for loc in (spec.submodule_search_locations or []) if spec else []:
+            roots.add(os.path.dirname(os.path.realpath(loc)))
+    for module in list(sys.modules.values()):
+        mapping = getattr(module, "MAPPING", None) if getattr(module, "__name__", "").startswith("__editable__") else None
+        for loc in (mapping or {}).values():
+            roots.add(os.path.dirname(os.path.realpath(loc)))
+    return sorted(roots)
+
+
+def _site_packages() -> list[str]:
+    import site
+    return [p for p in site.getsitepackages() if os.path.isdir(p)]
+
+
+def _nobody() -> tuple[int, int]:
+    import grp
+    import pwd
+    try:
+        uid = pwd.getpwnam("nobody").pw_uid
+    except KeyError:
+        uid = 65534
+    for group in ("nogroup", "nobody"):
+        try:
+            return uid, grp.getgrnam(group).gr_gid
+        except KeyError:
+            pass
+    return uid, 65534
+
+
+class LearnerProcess:
+    """One learner process for one submission and one library policy: load its code once, then call its
+    functions. `refused`: the libraries that are stand-ins there (all of LIBRARIES for a from-scratch CODE
+    exercise). The folder it works in:
+
+        private/            the judge's (read-only to the learner)
+          runtime/          the learner process's own code (copies of learner.py and sandbox.py)
+          from-the-grader/  the judge's temporary folders (cases that hand the learner files to read)
+          home/             the learner's: its working folder, HOME and TMPDIR
+    """
+
+    def __init__(self, source: str, memory_gb: float = 8.0, max_processes: int = 256, max_file_gb: float = 1.0,
+                 refused: tuple[str, ...] = ("cv2", "pycolmap", "kornia"), hide: tuple[str, ...] = ()):
         self.source, self.memory_gb = source, memory_gb
         self.max_processes, self.max_file_gb = max_processes, max_file_gb
+        self.refused, self.extra_hidden = tuple(refused), tuple(hide)
         self.proc: subprocess.Popen | None = None
-        self.problem = ""
+        self.problem, self.skipped = "", []
         self.private = tempfile.mkdtemp(prefix="cv3d-learner-")
+        os.chmod(self.private, 0o755)
+        self.level = _level()
+        self.uid, self.gid = _nobody() if self.level == "namespaces" else (os.getuid(), os.getgid())
+        self.home = self.writable_folder("home", exact=True)
+        self.exchange = os.path.join(self.private, "from-the-grader")
+        os.mkdir(self.exchange, 0o755)
+        self.runtime = os.path.join(self.private, "runtime")
+        os.mkdir(self.runtime, 0o755)
+        here = os.path.dirname(os.path.abspath(__file__))
+        for src, dst in (("learner.py", "cv3d_learner.py"), ("sandbox.py", "cv3d_sandbox.py")):
+            shutil.copyfile(os.path.join(here, src), os.path.join(self.runtime, dst))
         self.restarts = 0
+
+    def writable_folder(self, prefix: str, exact: bool = False) -> str:
+        """A new folder inside the private folder that the learner's code may write (owned by its user)."""
+        path = os.path.join(self.private, prefix) if exact else tempfile.mkdtemp(prefix=prefix, dir=self.private)
+        if exact:
+            os.mkdir(path, 0o700)
+        os.chown(path, self.uid, self.gid)
+        os.chmod(path, 0o700)
+        return path
+
+    def _config(self, req_r: int, res_w: int) -> dict:
+        hide = list(self.extra_hidden)
+        if self.level == "namespaces":
+            grades = os.path.dirname(os.path.dirname(os.path.dirname(self.private)))   # the grader's temp root
+            hide += ["/root", "/home", "/autograder", "/etc/shadow", "/etc/gshadow", "/srv", "/mnt", "/media",
+                     *_course_roots(), *(lib for name in self.refused for lib in _distribution_folders(name))]
+            hide += [grades] if grades not in ("/", "") else []
+        reference = os.environ.get("CV3D_GRADE_REFERENCE") == "1"     # the test suite grading `solutions`
+        keep = [os.path.realpath(p) for p in dict.fromkeys([sys.base_prefix, sys.prefix, *_site_packages(),
+                                                             self.private])]
+        if reference:
+            keep += [os.path.dirname(os.path.realpath(p)) + "/solutions" for p in _course_roots()[:1]]
+        return {"fds": [req_r, res_w], "home": self.home, "lockdown": self.level == "namespaces",
+                "refused": list(self.refused), "allow_solutions": reference, "site": _site_packages(),
+                "extra_path": _course_roots()[:1] if reference else [], "hide": hide, "keep": keep,
+                "uid": self.uid, "gid": self.gid, "tmpfs_mb": 256}
 
     # -- life cycle
     def start(self) -> None:
         req_r, req_w = os.pipe()
         res_r, res_w = os.pipe()
-        lockdown = _level() == "namespaces"
-        cmd = [sys.executable, "-m", "graders.learner", str(req_r), str(res_w), self.private, str(int(lockdown))]
-        if lockdown:
-            cmd = ["unshare", "--pid", "--fork", "--kill-child", "--mount-proc", "--net", "--mount",
-                   "--propagation", "private"] + cmd
-        env = {k: v for k, v in os.environ.items() if not k.startswith(("COURSE_GRADING", "CV3D_SECRET"))}
-        env.update(TMPDIR=self.private, TMP=self.private, TEMP=self.private, HOME=self.private, MPLBACKEND="Agg",
-                   OMP_NUM_THREADS=env.get("OMP_NUM_THREADS", "1"))
+        config = self._config(req_r, res_w)
+        cmd = [sys.executable, "-I", "-S", os.path.join(self.runtime, "cv3d_learner.py"), json.dumps(config)]
+        if config["lockdown"]:
+            cmd = ["unshare", *UNSHARE] + cmd
         self.pids = _PidsLimit(self.max_processes)
         self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                      stderr=None if os.environ.get("CV3D_LEARNER_STDERR") else subprocess.DEVNULL,
-                                     pass_fds=(req_r, res_w), cwd=self.private,
-                                     env=env, start_new_session=True,
+                                     pass_fds=(req_r, res_w), cwd=self.home,
+                                     env=_learner_env(self.home), start_new_session=True,
                                      preexec_fn=_limits(self.memory_gb, self.pids, self.max_file_gb))
         os.close(req_r)
         os.close(res_w)
@@ -302,6 +435,7 @@ class LearnerProcess:
         try:
             reply = self._exchange({"op": "load", "source": self.source}, timeout=120.0)
             self.problem = "" if reply.get("ok") else reply.get("error", "your code failed to load")
+            self.skipped = reply.get("skipped", [])
         except (RemoteError, TimeLimitExceeded) as exc:
             self.problem = f"your code failed to load: {exc}"
         self.residents = self.pids.members() | {self.proc.pid}   # what may live between calls
@@ -442,6 +576,8 @@ class RemoteFunction:
         raise RemoteError(kind or "exception", reply.get("error", "failed"), reply.get("traceback", ""))
 
     def drain(self) -> tuple[str, list[str], list[str]]:
+        """What the calls since the last drain printed and mutated, and every refused name this function's
+        calls have reached so far: a run shared by several cases (engine.shared_run) is refused on each."""
         out = ("".join(self._stdout), list(dict.fromkeys(self._mutated)), sorted(self._used))
-        self._stdout, self._mutated, self._used = [], [], set()
+        self._stdout, self._mutated = [], []
         return out
