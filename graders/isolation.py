@@ -318,11 +318,14 @@ def _distribution_folders(library: str) -> list[str]:
     return sorted(folders)
 
 
+CHECKOUT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))   # the folder that holds graders/
+
+
 def _course_roots() -> list[str]:
     """Folders that hold the course's packages (graders, solutions, benchmarks): this checkout, and any an
     editable install points to."""
     import importlib.util
-    roots = {os.path.dirname(os.path.dirname(os.path.abspath(__file__)))}
+    roots = {CHECKOUT}
     for name in ("solutions", "graders", "benchmarks"):
         try:
             spec = importlib.util.find_spec(name)
@@ -405,14 +408,16 @@ class LearnerProcess:
             hide += ["/root", "/home", "/autograder", "/etc/shadow", "/etc/gshadow", "/srv", "/mnt", "/media",
                      *_course_roots(), *(lib for name in self.refused for lib in _distribution_folders(name))]
             hide += [grades] if grades not in ("/", "") else []
-        reference = os.environ.get("CV3D_GRADE_REFERENCE") == "1"     # the test suite grading `solutions`
+        # The test suite grading the course's own reference in graded mode (never set it to grade learners):
+        # `solutions` of this checkout stays importable and visible.
+        reference = os.environ.get("CV3D_GRADE_REFERENCE") == "1"
         keep = [os.path.realpath(p) for p in dict.fromkeys([sys.base_prefix, sys.prefix, *_site_packages(),
                                                              self.private])]
         if reference:
-            keep += [os.path.dirname(os.path.realpath(p)) + "/solutions" for p in _course_roots()[:1]]
+            keep += [os.path.join(CHECKOUT, "solutions")]
         return {"fds": [req_r, res_w], "home": self.home, "lockdown": self.level == "namespaces",
                 "refused": list(self.refused), "allow_solutions": reference, "site": _site_packages(),
-                "extra_path": _course_roots()[:1] if reference else [], "hide": hide, "keep": keep,
+                "extra_path": [CHECKOUT] if reference else [], "hide": hide, "keep": keep,
                 "uid": self.uid, "gid": self.gid, "tmpfs_mb": 256}
 
     # -- life cycle

@@ -81,7 +81,8 @@ def findings(source: str, name: str, refused: tuple[str, ...]) -> list[str]:
                     found.append(f"`{where}` uses {n.id} ({bound[n.id]})")
                 elif n.id in EVASIVE_CALLS:
                     found.append(f"`{where}` calls {n.id}")
-            elif isinstance(n, ast.Attribute) and n.attr in EVASIVE_ATTRIBUTES:
+            elif isinstance(n, ast.Attribute) and (n.attr in EVASIVE_ATTRIBUTES or n.attr == "path"
+                                                   and isinstance(n.value, ast.Name) and n.value.id == "sys"):
                 found.append(f"`{where}` reaches .{n.attr}")
             elif isinstance(n, ast.Constant) and isinstance(n.value, str) and _names_course(n.value, refused):
                 found.append(f"`{where}` names {n.value!r}")

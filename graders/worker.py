@@ -76,7 +76,7 @@ class _Graded:
         self.static = {}
         if self.level == "process":   # the files are not hidden: a static look at the source, marked weaker
             from .static_check import findings
-            self.static = {ex.id: findings(source, ex.name, self.refused(ex)) for ex in exercises if not ex.value}
+            self.static = {ex.id: findings(source, ex.name, self.refused(ex)) for ex in exercises}
         self.problem = ""
         self._present: dict[tuple[str, ...], set[str]] = {}
 
@@ -153,6 +153,23 @@ def _grade(ex, answer, seed: int, hidden_seed: int | None) -> ExerciseResult:
     return graded
 
 
+def judge_one(judge: "_Graded | _SelfStudy", ex, seed: int, hidden_seed: int | None = None) -> ExerciseResult:
+    """One exercise's result: not there, refused by the static check (process mode), or graded."""
+    graded = isinstance(judge, _Graded)
+    problem = judge.problem_for(ex) if graded else judge.problem
+    if problem or not judge.has(ex):
+        return _not_there(ex, seed, problem)
+    refusal = judge.refusal(ex) if graded else ""
+    if refusal:
+        result = _not_there(ex, seed, refusal)
+        result.status = "failed"
+        return result
+    try:
+        return _grade(ex, judge.answer(ex), seed, hidden_seed)
+    except Exception as exc:   # a value that cannot cross from the learner's process
+        return _not_there(ex, seed, f"could not read `{ex.name}`: {exc}")
+
+
 def _not_dumpable() -> None:
     """Neither the learner's code (same user in process mode) nor anyone else may read this process's
     memory, environment or descriptors through /proc or ptrace: it holds the hidden seeds."""
@@ -191,18 +208,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             for ex in exercises:
                 out.write(json.dumps({"start": ex.id}) + "\n")
-                problem = judge.problem_for(ex) if args.graded else judge.problem
-                refusal = judge.refusal(ex) if args.graded and not problem and judge.has(ex) else ""
-                if problem or not judge.has(ex):
-                    result = _not_there(ex, seed, problem)
-                elif refusal:
-                    result = _not_there(ex, seed, refusal)
-                    result.status = "failed"
-                else:
-                    try:
-                        result = _grade(ex, judge.answer(ex), seed, hidden.get(ex.id))
-                    except Exception as exc:   # a value that cannot cross from the learner's process
-                        result = _not_there(ex, seed, f"could not read `{ex.name}`: {exc}")
+                result = judge_one(judge, ex, seed, hidden.get(ex.id))
                 out.write(json.dumps({"result": result.to_dict()}) + "\n")
         finally:
             judge.close()
