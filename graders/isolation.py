@@ -124,10 +124,15 @@ def _gradients_back(value: Any, reply: dict, args: tuple, cotangent: Any) -> Any
 # ------------------------------------------------------------------ callbacks into the judge
 
 def _swap_callables(obj: Any, table: list[Callable]) -> Any:
-    """Replace grader callables in the inputs (top level, containers, dict values) by callback handles."""
+    """Replace grader callables in the inputs (top level, containers, dict values) by callback handles, and
+    grader objects (a pipeline's stages) by handles whose public attributes the learner reads through the
+    pipe: the learner's process has no `graders` to rebuild them from."""
     if callable(obj) and not isinstance(obj, type) and not hasattr(obj, "__array__"):
         table.append(obj)
         return {"__callback__": len(table) - 1}
+    if type(obj).__module__.split(".")[0] == "graders" and not isinstance(obj, (tuple, list, dict, type)):
+        table.append(obj)
+        return {"__object__": len(table) - 1}
     if isinstance(obj, tuple):
         return tuple(_swap_callables(o, table) for o in obj)
     if isinstance(obj, list):
@@ -415,7 +420,7 @@ class LearnerProcess:
                                                              self.private])]
         if reference:
             keep += [os.path.join(CHECKOUT, "solutions")]
-        return {"fds": [req_r, res_w], "home": self.home, "lockdown": self.level == "namespaces",
+        return {"fds": [req_r, res_w], "home": self.home, "writable": self.private, "lockdown": self.level == "namespaces",
                 "refused": list(self.refused), "allow_solutions": reference, "site": _site_packages(),
                 "extra_path": [CHECKOUT] if reference else [], "hide": hide, "keep": keep,
                 "uid": self.uid, "gid": self.gid, "tmpfs_mb": 256}
@@ -425,7 +430,10 @@ class LearnerProcess:
         req_r, req_w = os.pipe()
         res_r, res_w = os.pipe()
         config = self._config(req_r, res_w)
-        cmd = [sys.executable, "-I", "-S", os.path.join(self.runtime, "cv3d_learner.py"), json.dumps(config)]
+        # Imported by name (not run as __main__) so that its classes pickle by reference (a Dask pool in
+        # the learner's code ships the grader's callbacks to its threads).
+        boot = f"import sys; sys.path.append({self.runtime!r}); import cv3d_learner; cv3d_learner.main()"
+        cmd = [sys.executable, "-I", "-S", "-c", boot, json.dumps(config)]
         if config["lockdown"]:
             cmd = ["unshare", *UNSHARE] + cmd
         self.pids = _PidsLimit(self.max_processes)
@@ -501,10 +509,17 @@ class LearnerProcess:
 
     def _serve_callback(self, request: dict, callbacks: list[Callable]) -> None:
         try:
-            value = callbacks[request["index"]](*_tensors_back(request["args"]), **request["kwargs"])
-            reply = {"ok": True, "value": value}
+            target = callbacks[request["index"]]
+            if "attr" in request:        # a public attribute of a grader object the case handed over
+                if request["attr"].startswith("_"):
+                    raise AttributeError(f"{type(target).__name__} has no public attribute {request['attr']!r}")
+                value = getattr(target, request["attr"])
+            else:
+                value = target(*_tensors_back(request["args"]), **request["kwargs"])
+            reply = {"ok": True, "value": _swap_callables(value, callbacks)}
         except Exception as exc:   # the grader's callback failing on the learner's inputs: the learner's error
-            reply = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
+            reply = {"ok": False, "error": f"{type(exc).__name__}: {exc}",
+                     "type": type(exc).__name__ if type(exc).__module__.startswith("graders") else ""}
         send(self.req, reply)
 
     def _death(self) -> str:

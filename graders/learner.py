@@ -26,6 +26,7 @@ import pickle
 import select
 import struct
 import sys
+import threading
 import time
 import types
 from typing import Any, Callable
@@ -122,7 +123,21 @@ class _StandInModule(types.ModuleType):
     def __getattr__(self, attr: str) -> Any:
         if attr.startswith("__") and attr.endswith("__"):
             raise AttributeError(attr)
+        if self.__name__.startswith("graders") and attr[:1].isupper() and attr.endswith(("Error", "Exception")):
+            return _exception_class(attr)     # what the learner catches is not an answer
         return _Refused(f"{self.__name__}.{attr}")
+
+
+_EXCEPTIONS: dict[str, type] = {}
+
+
+def _exception_class(name: str) -> type:
+    """The stand-in of a grader exception class (`ch10.TransientTaskError`): a real class, the same one
+    whichever module path names it, raised when a grader callback fails with that class, so the learner's
+    `except` clauses work."""
+    if name not in _EXCEPTIONS:
+        _EXCEPTIONS[name] = type(name, (RuntimeError,), {"__module__": "graders"})
+    return _EXCEPTIONS[name]
 
 
 def _graders_stand_in(name: str) -> types.ModuleType:
@@ -169,21 +184,70 @@ def _receive() -> Any:
     return pickle.loads(receive_bytes(_fds[0]))
 
 
-def callback_proxy(index: int) -> Callable:
-    """A grader function passed as an input: calling it asks the judge to run it and waits for its answer."""
-    def callback(*args, **kwargs):
-        send(_fds[1], {"op": "callback", "index": index, "args": _plain(args), "kwargs": _plain(kwargs)})
+_channel = threading.Lock()    # callbacks from the learner's threads (a Dask pool) take turns on the pipe
+
+
+def _ask_judge(request: dict, error: type = RuntimeError) -> Any:
+    with _channel:
+        send(_fds[1], request)
         reply = _receive()
-        if not reply["ok"]:
-            raise RuntimeError(f"the grader's callback failed on your inputs: {reply['error']}")
-        return reply["value"]
-    return callback
+    if not reply["ok"]:
+        kind = _exception_class(reply["type"]) if reply.get("type") else error
+        raise kind(f"the grader's callback failed on your inputs: {reply['error']}")
+    return _unswap(reply["value"])
+
+
+class _Callback:
+    """A grader function passed as an input: calling it asks the judge to run it and waits for its answer.
+    An object, not a closure, so a task scheduler can name it (Dask tokenizes the functions it runs)."""
+    __slots__ = ("index",)
+
+    def __init__(self, index: int):
+        self.index = index
+
+    def __call__(self, *args, **kwargs):
+        return _ask_judge({"op": "callback", "index": self.index, "args": _plain(args), "kwargs": _plain(kwargs)})
+
+    def __dask_tokenize__(self):
+        return ("cv3d-grader-callback", self.index)
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, _Callback) and other.index == self.index
+
+    def __hash__(self) -> int:
+        return hash(("cv3d-grader-callback", self.index))
+
+
+callback_proxy = _Callback
+
+
+class _RemoteObject:
+    """A grader object a case handed to the learner (a pipeline's stages): it stays in the judge; reading
+    one of its public attributes asks the judge (methods come back as callbacks)."""
+    __slots__ = ("_index",)
+
+    def __init__(self, index: int):
+        object.__setattr__(self, "_index", index)
+
+    def __getattr__(self, attr: str) -> Any:
+        if attr.startswith("__") and attr.endswith("__"):
+            raise AttributeError(attr)
+        return _ask_judge({"op": "callback", "index": self._index, "attr": attr, "args": (), "kwargs": {}},
+                          AttributeError)
+
+    def __eq__(self, other) -> bool:      # the sandbox compares a copy of the inputs after the call
+        return isinstance(other, _RemoteObject) and other._index == self._index
+
+    def __hash__(self) -> int:
+        return hash(self._index)
 
 
 def _unswap(obj: Any) -> Any:
     if isinstance(obj, dict):
         if set(obj) == {"__callback__"}:
             return callback_proxy(obj["__callback__"])
+        if set(obj) == {"__object__"}:
+            return _RemoteObject(obj["__object__"])
         return {k: _unswap(v) for k, v in obj.items()}
     if isinstance(obj, tuple):
         return tuple(_unswap(o) for o in obj)
@@ -357,12 +421,14 @@ def _lock_down(config: dict) -> None:
     import ctypes
     libc = ctypes.CDLL(None, use_errno=True)
     libc.mount.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_char_p, ctypes.c_ulong, ctypes.c_char_p]
-    home = config["home"]
-    _mount(libc, home.encode(), home, None, MS_BIND)
+    home, writable = config["home"], config["writable"]
+    # The private folder stays a writable mount, but its user may write only where it owns the folder
+    # (its home, the folders a case hands it to write in); the judge's own folders there are root's.
+    _mount(libc, writable.encode(), writable, None, MS_BIND)
     with open("/proc/self/mountinfo") as f:
         points = [line.split()[4].replace("\\040", " ") for line in f]
     for point in sorted(set(points), key=len):
-        if point.startswith(("/proc", "/sys", "/dev")) or point == home:
+        if point.startswith(("/proc", "/sys", "/dev")) or point == writable:
             continue
         try:
             _mount(libc, None, point, None, MS_REMOUNT | MS_BIND | MS_RDONLY | (MS_REC if point == "/" else 0))
@@ -370,7 +436,7 @@ def _lock_down(config: dict) -> None:
             pass   # a mount that cannot be remounted (already read-only, or gone) stays as it is
     # What the learner keeps (python, its packages, its runtime, its home), held open by descriptor before
     # the folders around them are hidden, then bound back at the same paths.
-    keep = [(path, os.open(path, os.O_PATH | os.O_DIRECTORY)) for path in config["keep"] + [home]]
+    keep = [(path, os.open(path, os.O_PATH | os.O_DIRECTORY)) for path in config["keep"] + [writable]]
     inside_kept = lambda p: any(p != k and p.startswith(k.rstrip("/") + "/") for k, _ in keep)  # noqa: E731
     scratch = {"/tmp": "1777", "/var/tmp": "1777", "/dev/shm": "1777", "/run": "755"}
     for path in sorted(set(config["hide"]) | set(scratch), key=len):
