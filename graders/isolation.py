@@ -530,11 +530,16 @@ class LearnerProcess:
             return "your code closed the grading channel"
         return f"your code stopped the grading process (exit status {code})"
 
+    def _running(self) -> "LearnerProcess":
+        if self.proc is None:
+            self._restart()
+        return self
+
     def names(self, wanted: list[str]) -> list[str]:
-        return self._exchange({"op": "names", "names": wanted}, timeout=30.0)["names"]
+        return self._running()._exchange({"op": "names", "names": wanted}, timeout=30.0)["names"]
 
     def value(self, name: str) -> Any:
-        return _tensors_back(self._exchange({"op": "value", "name": name}, timeout=30.0)["value"])
+        return _tensors_back(self._running()._exchange({"op": "value", "name": name}, timeout=30.0)["value"])
 
     def function(self, name: str, exercise: Any) -> "RemoteFunction":
         return RemoteFunction(self, name, exercise)
@@ -550,6 +555,7 @@ class RemoteFunction:
         self.handle, self.parent = handle, parent
         self.deadline: float | None = None
         self._stdout, self._mutated, self._used = [], [], set()
+        self.died = ""    # how its process ended, if a call ended it (os._exit, a crash): later calls fail at once
 
     def returned(self, handle: int) -> "RemoteFunction":
         """A function the learner's code returned: calling it runs it in the learner process; what it
@@ -567,13 +573,20 @@ class RemoteFunction:
         request = {"op": "call", "name": self.__name__, "handle": self.handle, "args": _swap_callables(args, table),
                    "kwargs": _swap_callables(kwargs, table), "timeout": timeout, "names": self.exercise.arg_names,
                    "cotangent": current_cotangent()}
+        if owner.died:                    # it ended its process on an earlier case: not again, not per case
+            raise RemoteError("crash", f"{owner.died} (on an earlier case; this one was not run)")
+        if self.learner.proc is None:     # another exercise's code ended it: a fresh process for this one
+            self.learner._restart()
         try:
             reply = self.learner._exchange(request, timeout + MARGIN_S, table)
         except TimeLimitExceeded:
             self.learner._restart()       # it did not answer: a fresh process for the next case
             raise
         except RemoteError as exc:
-            if exc.kind in ("crash", "garbage"):   # a dead process, or a channel that cannot be trusted now
+            if exc.kind == "crash":       # a dead process: the next exercise that needs one starts it
+                owner.died = exc.error
+                self.learner.stop()
+            elif exc.kind == "garbage":   # a channel that cannot be trusted now
                 self.learner._restart()
             raise
         if self.learner.pids.kill_all_but(self.learner.residents):   # processes it started and left running

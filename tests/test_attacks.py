@@ -237,8 +237,8 @@ def test_the_learner_sees_no_secret_socket_or_instructor_environment(tmp_path, m
             with isolation.LearnerProcess(PROBE, hide=(str(secret),)) as learner:
                 seen = learner.function("probe", get("1.5"))(abstract, unix_path, str(secret))
             assert not {"INSTRUCTOR_API_TOKEN", "SSH_AUTH_SOCK", "CV3D_GRADING_SECRET"} & set(seen["env"]), seen
-            assert not seen["seeds"], seen
-            if level == "namespaces":
+            if level == "namespaces":     # (as root without namespaces it could read every process's files)
+                assert not seen["seeds"], seen
                 assert seen["uid"] != 0 and int(seen["caps"], 16) == 0, seen
                 assert seen["abstract"] != "connected" and seen["unix"] != "connected", seen
                 assert seen["secret"] != "s3cret", seen
@@ -296,3 +296,67 @@ def test_the_learner_cannot_swap_the_judges_folder_for_a_link(tmp_path, monkeypa
         assert list(canary.iterdir()) == []
     finally:
         graded.close()
+
+
+def test_the_judge_reads_what_the_learner_wrote_without_following_its_links(tmp_path):
+    """4.16 / 6.27 / 10.10 read back files the learner's code wrote: a link it left there (to a file only
+    root may read, to the secret) is not followed."""
+    from graders.sandbox import copy_out, read_text_no_link
+    private = tmp_path / "private"
+    private.mkdir()
+    (tmp_path / "shadow").write_text("root's secret")
+    (private / "cameras.txt").write_text("# a model")
+    (private / "images.txt").symlink_to(tmp_path / "shadow")
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    copy_out(str(private), str(mine))
+    assert sorted(p.name for p in mine.iterdir()) == ["cameras.txt"]
+    assert read_text_no_link(str(private / "images.txt")) is None
+    assert read_text_no_link(str(private / "cameras.txt")) == "# a model"
+
+
+# ------------------------------------------------------------------ item 4 of the brief: deaths cost one restart, not one per case
+
+def test_a_learner_that_ends_its_process_costs_one_start_not_one_per_case(level):
+    source = "import os\ndef project_points(X, K, R, t, dist=None):\n    os._exit(3)\n" \
+             "def undistort_points(uv, K, dist):\n    return uv\n"
+    exercises = [get("1.5"), get("1.6")]
+    graded = worker._Graded(source, exercises)
+    try:
+        dead = worker.judge_one(graded, exercises[0], 7, hidden_seed=8)
+        learner = graded.process(exercises[0])
+        assert dead.score == 0 and learner.restarts == 0, (learner.restarts, text(dead))
+        assert all("exit status 3" in c.message for c in dead.cases), text(dead)
+        alive = worker.judge_one(graded, exercises[1], 7)      # the next exercise gets a fresh process
+        assert learner.restarts == 1 and len(alive.cases) > 1 and "exit status" not in text(alive), text(alive)
+    finally:
+        graded.close()
+
+
+def test_hidden_seeds_reach_the_worker_through_a_pipe_not_its_environment_or_argv(tmp_path, monkeypatch):
+    """A learner running as the grader's user could read /proc/<worker>/environ and every cmdline."""
+    import subprocess
+    from graders import cli
+    seen = {}
+
+    class Recorder:
+        def __init__(self, cmd, env, pass_fds, **kwargs):
+            seen["cmd"], seen["env"] = cmd, env
+            seen["seeds_fd"] = os.dup(int(cmd[cmd.index("--hidden-fd") + 1]))
+    monkeypatch.setattr(subprocess, "Popen", Recorder)
+    proc, fd = cli._worker(tmp_path / "learner.py", ["1.5"], 7, tmp_path, 1.0, True, {"1.5": 987654321})
+    os.close(fd)
+    with os.fdopen(seen["seeds_fd"], "rb") as f:
+        assert f.read() == b'{"1.5": 987654321}'
+    assert "987654321" not in " ".join(seen["cmd"]) and "987654321" not in " ".join(seen["env"].values())
+    assert "CV3D_HIDDEN_SEEDS" not in seen["env"] and "CV3D_GRADING_SECRET" not in seen["env"]
+
+
+def test_the_judges_are_not_dumpable():
+    """PR_SET_DUMPABLE 0: a process of the same user cannot read their /proc/<pid>/environ, mem or fds."""
+    import subprocess
+    import sys
+    code = ("from graders.worker import _not_dumpable; _not_dumpable(); import ctypes; "
+            "print(ctypes.CDLL(None).prctl(3, 0, 0, 0, 0))")     # PR_GET_DUMPABLE
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.stdout.strip() == "0", out.stderr[-500:]
