@@ -165,7 +165,7 @@ def test_a_shared_run_is_refused_on_every_case(level, monkeypatch):
                      call=run) for k in range(3)]
     ex = Exercise(id="1.5", title="shared run", name="double", kind="code", points=3, cases=cases)
     monkeypatch.setitem(__import__("graders.engine", fromlist=["_REGISTRY"])._REGISTRY, "1.5", ex)
-    source = ("def double(x):\n    try:\n        import cv2\n        return cv2.add(x, x)\n"
+    source = ("def double(x):\n    try:\n        import cv2\n        return cv2.addWeighted(x, 1.0, x, 1.0, 0.0).ravel()\n"
               "    except Exception:\n        return x * 2\n")
     result = judge(source, ["1.5"])["1.5"]
     assert result.score == 0, text(result)
