@@ -413,13 +413,14 @@ class LearnerProcess:
             hide += ["/root", "/home", "/autograder", "/etc/shadow", "/etc/gshadow", "/srv", "/mnt", "/media",
                      *_course_roots(), *(lib for name in self.refused for lib in _distribution_folders(name))]
             hide += [grades] if grades not in ("/", "") else []
-        # The test suite grading the course's own reference in graded mode (never set it to grade learners):
-        # `solutions` of this checkout stays importable and visible.
+        # The test suite grading the course's own reference (and mutant catalogues) in graded mode, never
+        # set to grade learners: this checkout's `solutions` and `tests/mutants` stay importable and visible.
         reference = os.environ.get("CV3D_GRADE_REFERENCE") == "1"
         keep = [os.path.realpath(p) for p in dict.fromkeys([sys.base_prefix, sys.prefix, *_site_packages(),
                                                              self.private])]
         if reference:
-            keep += [os.path.join(CHECKOUT, "solutions")]
+            keep += [p for p in (os.path.join(CHECKOUT, "solutions"), os.path.join(CHECKOUT, "tests", "mutants"))
+                     if os.path.isdir(p)]
         return {"fds": [req_r, res_w], "home": self.home, "writable": self.private, "lockdown": self.level == "namespaces",
                 "refused": list(self.refused), "allow_solutions": reference, "site": _site_packages(),
                 "extra_path": [CHECKOUT] if reference else [], "hide": hide, "keep": keep,
