@@ -11,6 +11,7 @@ learner can hide intent from an AST), which is why the results say so.
 from __future__ import annotations
 
 import ast
+import re
 
 COURSE = ("graders", "solutions")
 # Import machinery and interpreter internals: an honest from-scratch answer has no use for them.
@@ -54,13 +55,16 @@ def _reachable(tree: ast.Module, name: str) -> list[ast.AST]:
     return nodes
 
 
-def _blocked(module: str, refused: tuple[str, ...]) -> bool:
+def _blocked(module: str, blocked: tuple[str, ...]) -> bool:
     top = module.split(".")[0]
-    return top in refused or top in COURSE or top in EVASIVE_MODULES
+    return top in blocked or top in EVASIVE_MODULES
 
 
-def findings(source: str, name: str, refused: tuple[str, ...]) -> list[str]:
-    """What the code behind the learner's `name` uses that graded work may not (empty: nothing found)."""
+def findings(source: str, name: str, refused: tuple[str, ...], allowed: tuple[str, ...] = ()) -> list[str]:
+    """What the code behind the learner's `name` uses that graded work may not (empty: nothing found).
+    refused: the libraries this exercise may not use; allowed: course packages let in (the test suite
+    grading `solutions` with CV3D_GRADE_REFERENCE)."""
+    refused = tuple(refused) + tuple(m for m in COURSE if m not in allowed)
     try:
         tree = ast.parse(source)
     except SyntaxError:
@@ -90,6 +94,8 @@ def findings(source: str, name: str, refused: tuple[str, ...]) -> list[str]:
 
 
 def _names_course(text: str, refused: tuple[str, ...]) -> bool:
-    """A string that spells a blocked module's name (for importlib or a path built by hand)."""
-    words = {w for w in text.replace("/", ".").replace("\\", ".").split(".") if w}
-    return bool(words & (set(COURSE) | set(refused)))
+    """A string that is a blocked module's dotted name (for importlib) or a path into one (to read it by
+    hand); prose that mentions one (a docstring citing cv2.pyrDown) is not."""
+    blocked = "|".join(re.escape(m) for m in refused)
+    return bool(re.fullmatch(rf"\s*(?:{blocked})(?:\.\w+)*\s*", text)
+                or re.search(rf"(?:^|[/\\])(?:{blocked})(?:[/\\]|$)", text))

@@ -76,7 +76,8 @@ class _Graded:
         self.static = {}
         if self.level == "process":   # the files are not hidden: a static look at the source, marked weaker
             from .static_check import findings
-            self.static = {ex.id: findings(source, ex.name, self.refused(ex)) for ex in exercises}
+            reference = ("solutions",) if os.environ.get("CV3D_GRADE_REFERENCE") == "1" else ()
+            self.static = {ex.id: findings(source, ex.name, self.refused(ex), reference) for ex in exercises}
         self.problem = ""
         self._present: dict[tuple[str, ...], set[str]] = {}
 
