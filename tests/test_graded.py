@@ -123,7 +123,8 @@ def test_cheating_earns_nothing_and_changes_nothing(tmp_path):
     before = (ROOT / "graders" / "__init__.py").read_bytes()
     tests = _grade(learner, tmp_path / "r.json", "--only", "1.5,1.6,1.7,1.9")
     assert all(t["score"] == 0 for t in tests.values()), {k: t["output"][:300] for k, t in tests.items()}
-    assert "no expected value in reach" in tests["1.5"]["output"]
+    out = tests["1.5"]["output"]      # process mode: the static check refuses `inspect` before any case runs
+    assert "no expected value in reach" in out or sandbox_level() == "process" and "weaker isolation" in out, out
     assert (ROOT / "graders" / "__init__.py").read_bytes() == before
     if sandbox_level() == "namespaces":   # the course tree is not even in the learner's view
         assert re.search("No such file|Read-only file system", tests["1.9"]["output"]), tests["1.9"]["output"][:500]
