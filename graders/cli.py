@@ -126,13 +126,15 @@ def hidden_seeds(secret: bytes, submission: str, ids: list[str]) -> dict[str, in
             for i in ids}
 
 
-SECRET_PATHS: list[str] = []   # files that hold the secret: hidden from the learner's file system view
+# What the learner's file system view must not show (namespaces level): the secret's file, and a batch's
+# submissions and grades folders (other learners' work).
+HIDDEN_PATHS: list[str] = []
 
 
 def read_secret(path: str | None) -> bytes | None:
     """The instructor's secret: a file (`--secret-file`) or $CV3D_GRADING_SECRET; None in self-study."""
     if path:
-        SECRET_PATHS.append(os.path.realpath(path))
+        HIDDEN_PATHS.append(os.path.realpath(path))
         return Path(path).read_bytes().strip()
     value = os.environ.get("CV3D_GRADING_SECRET")
     return value.encode() if value else None
@@ -148,7 +150,7 @@ def _worker(src: Path, ids: list[str], seed: int, scratch: Path, memory_gb: floa
            "--hidden-fd", str(seeds_r)]
     cmd += ["--graded"] if graded else []
     env = dict(os.environ, MPLBACKEND="Agg", TMPDIR=str(scratch), TEMP=str(scratch), TMP=str(scratch),
-               CV3D_SEED=str(seed), CV3D_HIDE_PATHS=os.pathsep.join(SECRET_PATHS),
+               CV3D_SEED=str(seed), CV3D_HIDE_PATHS=os.pathsep.join(HIDDEN_PATHS),
                CV3D_NO_PROGRESS="1")   # grading is not practice: only check() and drills record progress
     env.pop("CV3D_GRADING_SECRET", None)        # the worker needs the seeds, not the secret
     env.pop("CV3D_HIDDEN_SEEDS", None)
