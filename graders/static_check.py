@@ -75,7 +75,12 @@ def findings(source: str, name: str, refused: tuple[str, ...], allowed: tuple[st
         found.append(f"`{name}` is imported from {bound[name]}")
     for node in _reachable(tree, name):
         where = getattr(node, "name", name)
+        bases = {id(n.value): f"{bound[n.value.id]}.{n.attr}" for n in ast.walk(node) if isinstance(n, ast.Attribute)
+                 and isinstance(n.value, ast.Name) and n.value.id in bound and _blocked(bound[n.value.id], refused)}
         for n in ast.walk(node):
+            if id(n) in bases:                 # cv2.projectPoints: name what it calls, not only the module
+                found.append(f"`{where}` uses {bases[id(n)]}")
+                continue
             if isinstance(n, ast.Import):
                 found += [f"`{where}` imports {a.name}" for a in n.names if _blocked(a.name, refused)]
             elif isinstance(n, ast.ImportFrom) and _blocked(n.module or "", refused):

@@ -114,7 +114,8 @@ class _Graded:
         """Process mode only: what the static check found in the code this exercise runs."""
         found = self.static.get(ex.id)
         return ("weaker isolation (process mode: the grader's files stay readable to your code), so your source "
-                f"was checked statically: {'; '.join(found[:4])}. Graded work may not use these") if found else ""
+                f"was checked statically: {'; '.join(found[:4])}. Exercise {ex.id} is from scratch in graded work, "
+                "which may not use these (self-study checks allow them)") if found else ""
 
     def close(self) -> None:
         for learner in self.processes.values():
