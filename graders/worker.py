@@ -113,9 +113,14 @@ class _Graded:
     def refusal(self, ex) -> str:
         """Process mode only: what the static check found in the code this exercise runs."""
         found = self.static.get(ex.id)
+        if not found:
+            return ""
+        course = any("graders" in f or "solutions" in f for f in found)
         return ("weaker isolation (process mode: the grader's files stay readable to your code), so your source "
-                f"was checked statically: {'; '.join(found[:4])}. Exercise {ex.id} is from scratch in graded work, "
-                "which may not use these (self-study checks allow them)") if found else ""
+                f"was checked statically: {'; '.join(found[:4])}. "
+                + ("The course's stand-ins, oracles and reference answers are not an answer in graded work"
+                   if course else f"Exercise {ex.id} is from scratch in graded work, which may not use these")
+                + " (self-study checks allow them)")
 
     def close(self) -> None:
         for learner in self.processes.values():
