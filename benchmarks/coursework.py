@@ -149,7 +149,9 @@ def run_batch(subs: Path, grades: Path, workers: int, secret_file: Path | None =
     cmd = [sys.executable, "-m", "graders", "batch", str(subs), "--out", str(grades), "--workers", str(workers)]
     if secret_file:
         cmd += ["--secret-file", str(secret_file)]
-    env = dict(os.environ, **({"TMPDIR": str(tmpdir)} if tmpdir else {}))
+    # The reference and mutant submissions import the course's `solutions` and tests/mutants, which graded
+    # work may not: CV3D_GRADE_REFERENCE lets exactly those in (graders/grading/isolation.py).
+    env = dict(os.environ, CV3D_GRADE_REFERENCE="1", **({"TMPDIR": str(tmpdir)} if tmpdir else {}))
     start = time.monotonic()
     subprocess.run(cmd, check=True, cwd=ROOT, stdout=subprocess.DEVNULL, env=env)
     return time.monotonic() - start

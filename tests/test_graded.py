@@ -5,6 +5,8 @@ writing into the course tree — earns nothing and changes nothing."""
 from __future__ import annotations
 
 import json
+import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -19,9 +21,10 @@ from test_notebooks import OPENCV_STUBS_CH01, ROOT, _replace_stubs, _solved
 CH01 = ROOT / "notebooks" / "01_camera_models.ipynb"
 
 
-def _grade(file: Path, out: Path, *extra: str) -> dict:
+def _grade(file: Path, out: Path, *extra: str, env: dict | None = None) -> dict:
     proc = subprocess.run([sys.executable, "-m", "graders", "check", str(file), "--json", str(out), "--graded",
-                           *extra], capture_output=True, text=True, timeout=900, cwd=ROOT)
+                           *extra], capture_output=True, text=True, timeout=900, cwd=ROOT,
+                          env=None if env is None else {**os.environ, **env})
     assert proc.returncode == 0, proc.stderr[-3000:]
     return {t["name"].split()[0]: t for t in json.loads(out.read_text())["tests"]}
 
@@ -30,7 +33,8 @@ def _grade(file: Path, out: Path, *extra: str) -> dict:
 def test_solved_chapter_gets_full_marks_in_graded_mode(ch, tmp_path):
     path = ROOT / ch.notebook
     nbformat.write(_solved(path), tmp_path / path.name)
-    tests = _grade(tmp_path / path.name, tmp_path / "r.json")
+    # The solved notebook imports `solutions`, which graded work may not: the reference is let in by name.
+    tests = _grade(tmp_path / path.name, tmp_path / "r.json", env={"CV3D_GRADE_REFERENCE": "1"})
     # Whole reports: the rows say which case lost points, the last line the seed that replays it.
     lost = [f"{k}: {t['score']}/{t['max_score']}\n{t['output']}" for k, t in tests.items() if t["score"] < t["max_score"]]
     assert not lost, "\n\n".join(lost)
@@ -119,10 +123,11 @@ def test_cheating_earns_nothing_and_changes_nothing(tmp_path):
     before = (ROOT / "graders" / "__init__.py").read_bytes()
     tests = _grade(learner, tmp_path / "r.json", "--only", "1.5,1.6,1.7,1.9")
     assert all(t["score"] == 0 for t in tests.values()), {k: t["output"][:300] for k, t in tests.items()}
-    assert "no expected value in reach" in tests["1.5"]["output"]
+    out = tests["1.5"]["output"]      # process mode: the static check refuses `inspect` before any case runs
+    assert "no expected value in reach" in out or sandbox_level() == "process" and "weaker isolation" in out, out
     assert (ROOT / "graders" / "__init__.py").read_bytes() == before
-    if sandbox_level() == "namespaces":
-        assert "Read-only file system" in tests["1.9"]["output"], tests["1.9"]["output"][:500]
+    if sandbox_level() == "namespaces":   # the course tree is not even in the learner's view
+        assert re.search("No such file|Read-only file system", tests["1.9"]["output"]), tests["1.9"]["output"][:500]
         assert not Path("/tmp/cv3d-cheat-was-here").exists()
     else:
         pytest.skip("this machine cannot give the learner a read-only file system (needs Linux namespaces as root)")

@@ -13,6 +13,7 @@ import numpy as np
 from graders.core.compare import rotation_angle_deg
 from graders.core.engine import Case, Exercise, Hint, OutputError, register, shared_run
 from ..oracles.colmap import colmap_read_text, gt_write_colmap_text
+from graders.core.sandbox import copy_out, folder_for_learner
 from .sfm_scenes import _convert_recon, sfm_scene
 
 
@@ -124,10 +125,11 @@ def _io_cases(rng: np.random.Generator, run) -> list[Case]:
 def _write_and_read_back(fn, recon) -> dict:
     """The learner writes the model into a temporary folder (removed afterwards, also when the learner's
     code fails); pycolmap reads it back."""
-    with tempfile.TemporaryDirectory(prefix="cv3d-colmap-") as folder:
+    with folder_for_learner(fn, "cv3d-colmap-") as folder, tempfile.TemporaryDirectory(prefix="cv3d-colmap-") as mine:
         fn(copy.deepcopy(recon), folder)
+        copy_out(folder, mine)          # what the learner wrote, never through a link it left there
         try:
-            return colmap_read_text(folder)
+            return colmap_read_text(mine)
         except Exception as e:      # what pycolmap says about the files is the learner's feedback
             raise OutputError(f"pycolmap cannot read the model you wrote: {e}") from None
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from graders.kit import datasets
 from graders.core.engine import Case, Exercise, Hint, OutputError, like, raised, register
+from graders.core.sandbox import folder_for_learner, read_text_no_link
 
 from .manifold import gt_exp, random_poses
 from .posegraphs import POSEGRAPH_FILES, gtsam_pose, make_graph
@@ -259,10 +260,10 @@ def _scan_g2o(text: str) -> None:
 def _written_by(graph: dict):
     """How 6.27 calls the learner: write_g2o(path, graph) with a fresh path; the file's text is the output."""
     def call(fn):
-        with tempfile.TemporaryDirectory(prefix="cv3d_ch06_") as folder:
+        with folder_for_learner(fn, "cv3d_ch06_") as folder:
             path = os.path.join(folder, "graph.g2o")
             fn(path, {k: np.array(v) for k, v in graph.items()})
-            return open(path).read() if os.path.exists(path) else None
+            return read_text_no_link(path)      # never through a link the learner's code left there
     return call
 
 

@@ -189,11 +189,18 @@ def gt_run_pipeline(images, pairs, stages, out_path, address=None, n_workers=2, 
 # ----------------------------------------------------------------- judging
 
 def _folder_for(fn) -> str:
-    """Where the learner's process may write: its private folder in graded mode (the judge sees the same
-    path), a fresh temporary folder otherwise."""
+    """Where the learner's process may write: a folder its user owns in its private folder in graded mode
+    (the judge sees the same path), a fresh temporary folder otherwise."""
     learner = getattr(fn, "learner", None) or getattr(getattr(fn, "parent", None), "learner", None)
-    base = getattr(learner, "private", None)
-    return tempfile.mkdtemp(prefix="cv3d-10.10-", dir=base)
+    if learner is not None:
+        return learner.writable_folder("cv3d-10.10-")
+    return tempfile.mkdtemp(prefix="cv3d-10.10-")
+
+
+def _open_no_link(path: str, mode: str):
+    """The judge never follows a link the learner's code may have put in its folder."""
+    flags = (os.O_WRONLY | os.O_CREAT | os.O_TRUNC if "w" in mode else os.O_RDONLY) | os.O_NOFOLLOW
+    return os.fdopen(os.open(path, flags, 0o644), mode)
 
 
 def _run_and_inspect(fn, images, pairs, flaky_kinds: tuple[str, ...]) -> dict:
@@ -202,7 +209,7 @@ def _run_and_inspect(fn, images, pairs, flaky_kinds: tuple[str, ...]) -> dict:
     folder = _folder_for(fn)
     try:
         out_path = os.path.join(folder, "matches.json")
-        with open(out_path, "w") as f:
+        with _open_no_link(out_path, "w") as f:
             json.dump(STALE, f)
         inode = os.stat(out_path).st_ino
         reference = PipelineStages().reliable()
@@ -210,11 +217,11 @@ def _run_and_inspect(fn, images, pairs, flaky_kinds: tuple[str, ...]) -> dict:
         keys = {"extract": task_key("extract", images[len(images) // 2]),
                 "verify": task_key("verify", feats[0][0], feats[2][0])}
         stages = PipelineStages(flaky=tuple(keys[k] for k in flaky_kinds), scratch=folder)
-        with open(out_path) as reader:                       # a reader of the previous version
+        with _open_no_link(out_path, "r") as reader:         # a reader of the previous version
             rows = fn(images, list(pairs), stages, out_path)
             old_text = reader.read()
         try:
-            with open(out_path) as f:
+            with _open_no_link(out_path, "r") as f:
                 written = json.load(f)
         except (OSError, ValueError) as exc:
             written = f"unreadable ({type(exc).__name__}: {exc})"

@@ -199,3 +199,61 @@ def safe_call(fn: Callable, args: tuple = (), kwargs: dict | None = None,
         if old is not None and not _same(old, kwargs[key]):
             out.mutated.append(key)
     return out
+
+
+# ------------------------------------------------------------------ files the learner's code writes for the judge
+
+def _learner_of(fn: Callable) -> Any:
+    """The learner process behind a graded-mode function (graders.grading.isolation.RemoteFunction), or None."""
+    return getattr(fn, "learner", None) or getattr(getattr(fn, "parent", None), "learner", None)
+
+
+@contextlib.contextmanager
+def folder_for_learner(fn: Callable, prefix: str):
+    """A fresh folder the learner's code may write into, removed afterwards. In graded mode it is owned by
+    the learner's user inside its private folder (whose other entries it cannot touch); the judge reads
+    what it left there only through `copy_out` / `read_text_no_link`, never following a link."""
+    import shutil
+    import tempfile
+    learner = _learner_of(fn)
+    folder = learner.writable_folder(prefix) if learner is not None else tempfile.mkdtemp(prefix=prefix)
+    try:
+        yield folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def read_text_no_link(path: str, max_bytes: int = 256 << 20) -> str | None:
+    """The text of a regular file the learner's code wrote (None if there is none); a link is not followed."""
+    import os
+    import stat
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+    except OSError:
+        return None
+    with os.fdopen(fd, "rb") as f:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return None
+        return f.read(max_bytes).decode("utf-8", errors="replace")
+
+
+def copy_out(folder: str, dest: str, max_bytes: int = 256 << 20) -> None:
+    """Copy the regular files the learner's code left in `folder` (its top level) into the judge's `dest`,
+    opened relative to the folder's descriptor and never through a link."""
+    import os
+    import stat
+    dfd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW)
+    try:
+        for name in os.listdir(dfd):
+            try:
+                fd = os.open(name, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK, dir_fd=dfd)
+            except OSError:
+                continue
+            with os.fdopen(fd, "rb") as f:
+                if not stat.S_ISREG(os.fstat(fd).st_mode):
+                    continue
+                data = f.read(max_bytes)
+            with open(os.path.join(dest, name), "wb") as out:
+                out.write(data)
+    finally:
+        os.close(dfd)

@@ -25,7 +25,7 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 from graders.core.chapters import by_number
-from graders.grading.runner import MAX_TIMEOUTS, MEMORY_GB, TIME_BUDGET, check_file, read_secret
+from graders.grading.runner import HIDDEN_PATHS, MAX_TIMEOUTS, MEMORY_GB, TIME_BUDGET, check_file, read_secret
 from graders.core.engine import chapter
 from graders.core.report import ExerciseResult, gradescope, write_gradescope
 
@@ -131,6 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     subs = submissions(Path(args.submissions))
     secret = read_secret(args.secret_file)
+    HIDDEN_PATHS.extend(os.path.realpath(p) for p in (args.submissions, out))   # other learners' work
     only = [ex.id for ex in chapter(by_number(args.chapter).key)] if args.chapter else None
     rows = {sid: row_of(sid, json.loads((out / sid / "results.json").read_text()))
             for sid in subs if _complete(out / sid / "results.json")}

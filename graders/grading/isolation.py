@@ -12,14 +12,24 @@ the grader's `solve` and `residuals`), the learner process calls them back throu
 judge runs them. Outputs are unpickled with an allow-list (numbers, strings, containers, numpy and
 scipy.sparse arrays, tensors sent as arrays): a learner object cannot run code in the judge.
 
-Where the OS allows it (Linux, as root, util-linux `unshare`), the learner process also gets its own
-PID, network and mount namespaces: every file system is read-only but its private working folder, the
-network is off, the judge's processes are invisible, and it drops every capability before loading
-the learner's code. `sandbox_level()` says which protection is in force.
+The learner process holds nothing graded work may not use: it runs an isolated interpreter (-I -S) from
+a copy of `graders/grading/learner.py` and `graders/core/sandbox.py`, with the standard library and site-packages
+only on its import path, a stand-in `graders`, no `solutions`, and the libraries its exercises may not
+use (cv2, pycolmap, kornia for a from-scratch CODE exercise) as refusing stand-ins: one learner process
+per library policy. Its environment is an allow-list. Where the OS allows it (Linux, as root,
+util-linux `unshare`), it also gets its own PID, network, mount, UTS and IPC namespaces: the course
+tree, `solutions`, the refused libraries, /root, /home, the grader's temp folders and the secret are
+gone from its file system view, /tmp, /run and /dev/shm are its own (size-limited), everything else is
+read-only but its home, and it runs as `nobody` with no capabilities. Without namespaces (`process`
+level) the files stay readable by the learner's code, so the judge adds a static check of the
+learner's source (graders.grading.static_check) and says the isolation is weaker. `sandbox_level()` says
+which level is in force; CV3D_SANDBOX=process forces the weaker one (to test it, or where namespaces
+misbehave).
 """
 from __future__ import annotations
 
 import io
+import json
 import os
 import pickle
 import resource
@@ -32,118 +42,34 @@ import time
 from typing import Any, Callable
 
 from graders.core.attempt import CaseReport
+from graders.core.sandbox import TimeLimitExceeded, current_cotangent
 from graders.grading.learner import receive_bytes, send
 from graders.grading.policy import refusal
-from graders.core.sandbox import TimeLimitExceeded, current_cotangent
+from graders.grading.transport import RemoteError, gradients_back, loads, swap_callables, tensors_back
 
 MARGIN_S = 5.0          # the judge waits this much longer than the learner's own time limit
 CPU_SECONDS = 1800      # CPU time of one learner process (it is restarted after every time-out)
 
 
-class RemoteError(Exception):
-    """The learner's function failed in the learner process: kind (exception | exit | crash), the
-    message and the learner's own traceback, reported by the sandbox as if it had happened here."""
-
-    def __init__(self, kind: str, error: str, traceback: str = ""):
-        super().__init__(error)
-        self.kind, self.error, self.traceback = kind, error, traceback
-        self.remote_kind = {"crash": "exit", "garbage": "exception"}.get(kind, kind)   # what graders.core.sandbox reports
-
-
-# ------------------------------------------------------------------ what may come back
-
-_ALLOWED = {
-    ("builtins", n) for n in ("list", "tuple", "dict", "set", "frozenset", "complex", "slice", "range",
-                              "bytearray", "object", "bool", "int", "float", "str", "bytes")
-} | {
-    ("collections", "OrderedDict"), ("copyreg", "_reconstructor"),
-    ("numpy", "ndarray"), ("numpy", "dtype"), ("numpy.core.multiarray", "_reconstruct"),
-    ("numpy.core.multiarray", "scalar"), ("numpy._core.multiarray", "_reconstruct"),
-    ("numpy._core.multiarray", "scalar"), ("numpy._core.numeric", "_frombuffer"),
-    ("numpy.core.numeric", "_frombuffer"),
-}
-class _Unpickler(pickle.Unpickler):
-    def find_class(self, module: str, name: str):
-        if ((module, name) in _ALLOWED or module.startswith("numpy.dtypes") and name[:1].isupper()
-                or module.startswith("scipy.sparse._") and name.endswith(("_matrix", "_array"))):
-            return super().find_class(module, name)
-        raise pickle.UnpicklingError(f"{module}.{name}")
-
-
-def _loads(data: bytes) -> Any:
-    return _Unpickler(io.BytesIO(data)).load()
-
-
-def _tensors_back(value: Any, parent: "RemoteFunction | None" = None) -> Any:
-    """Arrays the learner process sent for torch tensors become tensors again; a function it returned
-    becomes a handle that calls it there."""
-    if isinstance(value, dict) and set(value) == {"__handle__"} and parent is not None:
-        return parent.returned(value["__handle__"])
-    if isinstance(value, dict) and "__tensor__" in value:
-        import torch
-        return torch.from_numpy(value["__tensor__"].copy())
-    if isinstance(value, (list, tuple)):
-        return type(value)(_tensors_back(v, parent) for v in value)
-    if isinstance(value, dict):
-        return {k: _tensors_back(v, parent) for k, v in value.items()}
-    return value
-
-
-def _with_gradients(value: Any, grads: list, args: tuple, cotangent: Any = None) -> Any:
-    """A tensor equal to the learner's value whose gradients on the judge's own input tensors are the
-    learner's: value + L/|L|² Σ <g_i, x_i − x_i.detach()>, with g_i = d(value · L)/dx_i computed on the
-    learner's side (L = 1 for a scalar cost). Backward of (out · L).sum() then gives exactly g_i."""
-    import torch
-    flat = [a for arg in args for a in (arg if isinstance(arg, (list, tuple)) else [arg])]
-    leaves = [a for a in flat if isinstance(a, torch.Tensor) and a.requires_grad]
-    out = torch.as_tensor(value, dtype=leaves[0].dtype).reshape(value.shape)
-    L = torch.ones((), dtype=out.dtype) if cotangent is None else torch.as_tensor(cotangent, dtype=out.dtype)
-    first_order = sum((torch.as_tensor(g, dtype=x.dtype) * (x - x.detach())).sum()
-                      for x, g in zip(leaves, grads) if g is not None)
-    return out + L / (L * L).sum() * first_order
-
-
-def _gradients_back(value: Any, reply: dict, args: tuple, cotangent: Any) -> Any:
-    """Put the learner's gradients on the output they belong to: the value itself, or element `at` of it."""
-    at = reply.get("grad_at")
-    if at is None:
-        return _with_gradients(reply["value"]["__tensor__"], reply["grads"], args, cotangent)
-    parts = list(value)
-    parts[at] = _with_gradients(reply["value"][at]["__tensor__"], reply["grads"], args, cotangent)
-    return type(value)(parts)
-
-
-# ------------------------------------------------------------------ callbacks into the judge
-
-def _swap_callables(obj: Any, table: list[Callable]) -> Any:
-    """Replace grader callables in the inputs (top level, containers, dict values) by callback handles."""
-    if callable(obj) and not isinstance(obj, type) and not hasattr(obj, "__array__"):
-        table.append(obj)
-        return {"__callback__": len(table) - 1}
-    if isinstance(obj, tuple):
-        return tuple(_swap_callables(o, table) for o in obj)
-    if isinstance(obj, list):
-        return [_swap_callables(o, table) for o in obj]
-    if isinstance(obj, dict):
-        return {k: _swap_callables(v, table) for k, v in obj.items()}
-    return obj
-
-
 # ------------------------------------------------------------------ the learner process
 
 def sandbox_level() -> str:
-    """"namespaces" (read-only file systems, no network, own PIDs, no capabilities) or "process"."""
-    if sys.platform != "linux" or os.geteuid() != 0 or shutil.which("unshare") is None:
+    """"namespaces" (the learner's own file system view, no network, own PIDs, an unprivileged user) or
+    "process" (its own process only; CV3D_SANDBOX=process chooses it)."""
+    if (os.environ.get("CV3D_SANDBOX") == "process" or sys.platform != "linux" or os.geteuid() != 0
+            or shutil.which("unshare") is None):
         return "process"
-    probe = subprocess.run(["unshare", "--pid", "--fork", "--mount-proc", "--net", "--mount", "true"],
+    probe = subprocess.run(["unshare", *UNSHARE, "true"],
                            capture_output=True, timeout=20)
     return "namespaces" if probe.returncode == 0 else "process"
 
 
+UNSHARE = ("--pid", "--fork", "--kill-child", "--mount-proc", "--net", "--mount", "--uts", "--ipc",
+           "--propagation", "private")
 _LEVEL: str | None = None
 
 
-def _level() -> str:
+def level() -> str:
     global _LEVEL
     if _LEVEL is None:
         _LEVEL = sandbox_level()
@@ -269,34 +195,162 @@ def _processes_of_this_user() -> int:
     return count
 
 
-class LearnerProcess:
-    """One learner process for one submission: load its code once, then call its functions."""
+ENV_KEPT = ("PATH", "LANG", "LC_ALL", "LC_CTYPE", "TZ", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+            "CV3D_LEARNER_STDERR")   # what the learner's environment keeps of the judge's: nothing else
 
-    def __init__(self, source: str, memory_gb: float = 8.0, max_processes: int = 256, max_file_gb: float = 1.0):
+
+def _learner_env(home: str) -> dict[str, str]:
+    """An allow-list, not a deny-list: no token, socket, secret or seed of the instructor's reaches the learner."""
+    env = {k: os.environ[k] for k in ENV_KEPT if k in os.environ}
+    env.setdefault("PATH", "/usr/local/bin:/usr/bin:/bin")
+    env.setdefault("OMP_NUM_THREADS", "1")
+    env.update(HOME=home, TMPDIR=home, TMP=home, TEMP=home, MPLBACKEND="Agg", CV3D_NO_PROGRESS="1",
+               PYTHONDONTWRITEBYTECODE="1")
+    return env
+
+
+def _distribution_folders(library: str) -> list[str]:
+    """Every top-level folder the installed distributions of `library` put in site-packages (cv2/,
+    opencv_python_headless.libs/, its dist-info): hiding only the package would leave its binaries."""
+    import importlib.metadata as metadata
+    import importlib.util
+    folders = set()
+    try:
+        spec = importlib.util.find_spec(library)
+    except (ImportError, ValueError):
+        spec = None
+    if spec is not None and spec.submodule_search_locations:
+        folders |= {os.path.realpath(p) for p in spec.submodule_search_locations}
+    for dist in metadata.packages_distributions().get(library, []):
+        try:
+            files = metadata.distribution(dist).files or []
+        except metadata.PackageNotFoundError:
+            continue
+        for f in files:
+            if len(f.parts) > 1 and f.parts[0] != "..":
+                folders.add(os.path.realpath(os.path.join(str(f.locate())[:-len(str(f))], f.parts[0])))
+    return sorted(folders)
+
+
+CHECKOUT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))   # holds graders/
+
+
+def _course_roots() -> list[str]:
+    """Folders that hold the course's packages (graders, solutions, benchmarks): this checkout, and any an
+    editable install points to."""
+    import importlib.util
+    roots = {CHECKOUT}
+    for name in ("solutions", "graders", "benchmarks"):
+        try:
+            spec = importlib.util.find_spec(name)
+        except (ImportError, ValueError):
+            spec = None
+        for loc in (spec.submodule_search_locations or []) if spec else []:
+            roots.add(os.path.dirname(os.path.realpath(loc)))
+    for module in list(sys.modules.values()):
+        mapping = getattr(module, "MAPPING", None) if getattr(module, "__name__", "").startswith("__editable__") else None
+        for loc in (mapping or {}).values():
+            roots.add(os.path.dirname(os.path.realpath(loc)))
+    return sorted(roots)
+
+
+def _site_packages() -> list[str]:
+    import site
+    return [p for p in site.getsitepackages() if os.path.isdir(p)]
+
+
+def _nobody() -> tuple[int, int]:
+    import grp
+    import pwd
+    try:
+        uid = pwd.getpwnam("nobody").pw_uid
+    except KeyError:
+        uid = 65534
+    for group in ("nogroup", "nobody"):
+        try:
+            return uid, grp.getgrnam(group).gr_gid
+        except KeyError:
+            pass
+    return uid, 65534
+
+
+class LearnerProcess:
+    """One learner process for one submission and one library policy: load its code once, then call its
+    functions. `refused`: the libraries that are stand-ins there (all of LIBRARIES for a from-scratch CODE
+    exercise). The folder it works in:
+
+        private/            the judge's (read-only to the learner)
+          runtime/          the learner process's own code (copies of learner.py and sandbox.py)
+          from-the-grader/  the judge's temporary folders (cases that hand the learner files to read)
+          home/             the learner's: its working folder, HOME and TMPDIR
+    """
+
+    def __init__(self, source: str, memory_gb: float = 8.0, max_processes: int = 256, max_file_gb: float = 1.0,
+                 refused: tuple[str, ...] = ("cv2", "pycolmap", "kornia"), hide: tuple[str, ...] = ()):
         self.source, self.memory_gb = source, memory_gb
         self.max_processes, self.max_file_gb = max_processes, max_file_gb
+        self.refused, self.extra_hidden = tuple(refused), tuple(hide)
         self.proc: subprocess.Popen | None = None
-        self.problem = ""
+        self.problem, self.skipped = "", []
         self.private = tempfile.mkdtemp(prefix="cv3d-learner-")
+        os.chmod(self.private, 0o755)
+        self.level = level()
+        self.uid, self.gid = _nobody() if self.level == "namespaces" else (os.getuid(), os.getgid())
+        self.home = self.writable_folder("home", exact=True)
+        self.exchange = os.path.join(self.private, "from-the-grader")
+        os.mkdir(self.exchange, 0o755)
+        self.runtime = os.path.join(self.private, "runtime")
+        os.mkdir(self.runtime, 0o755)
+        graders_dir = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        for src, dst in (("grading/learner.py", "cv3d_learner.py"), ("core/sandbox.py", "cv3d_sandbox.py")):
+            shutil.copyfile(os.path.join(graders_dir, src), os.path.join(self.runtime, dst))
         self.restarts = 0
+
+    def writable_folder(self, prefix: str, exact: bool = False) -> str:
+        """A new folder inside the private folder that the learner's code may write (owned by its user)."""
+        path = os.path.join(self.private, prefix) if exact else tempfile.mkdtemp(prefix=prefix, dir=self.private)
+        if exact:
+            os.mkdir(path, 0o700)
+        os.chown(path, self.uid, self.gid)
+        os.chmod(path, 0o700)
+        return path
+
+    def _config(self, req_r: int, res_w: int) -> dict:
+        hide = list(self.extra_hidden)
+        if self.level == "namespaces":
+            grades = os.path.dirname(os.path.dirname(os.path.dirname(self.private)))   # the grader's temp root
+            hide += ["/root", "/home", "/autograder", "/etc/shadow", "/etc/gshadow", "/srv", "/mnt", "/media",
+                     *_course_roots(), *(lib for name in self.refused for lib in _distribution_folders(name))]
+            hide += [grades] if grades not in ("/", "") else []
+        # The test suite grading the course's own reference (and mutant catalogues) in graded mode, never
+        # set to grade learners: this checkout's `solutions` and `tests/mutants` stay importable and visible.
+        reference = os.environ.get("CV3D_GRADE_REFERENCE") == "1"
+        keep = [os.path.realpath(p) for p in dict.fromkeys([sys.base_prefix, sys.prefix, *_site_packages(),
+                                                             self.private])]
+        if reference:
+            keep += [p for p in (os.path.join(CHECKOUT, "solutions"), os.path.join(CHECKOUT, "tests", "mutants"))
+                     if os.path.isdir(p)]
+        return {"fds": [req_r, res_w], "home": self.home, "writable": self.private, "lockdown": self.level == "namespaces",
+                "refused": list(self.refused), "allow_solutions": reference, "site": _site_packages(),
+                "extra_path": [CHECKOUT] if reference else [], "hide": hide, "keep": keep,
+                "uid": self.uid, "gid": self.gid, "tmpfs_mb": 256}
 
     # -- life cycle
     def start(self) -> None:
         req_r, req_w = os.pipe()
         res_r, res_w = os.pipe()
-        lockdown = _level() == "namespaces"
-        cmd = [sys.executable, "-m", "graders.grading.learner", str(req_r), str(res_w), self.private, str(int(lockdown))]
-        if lockdown:
-            cmd = ["unshare", "--pid", "--fork", "--kill-child", "--mount-proc", "--net", "--mount",
-                   "--propagation", "private"] + cmd
-        env = {k: v for k, v in os.environ.items() if not k.startswith(("COURSE_GRADING", "CV3D_SECRET"))}
-        env.update(TMPDIR=self.private, TMP=self.private, TEMP=self.private, HOME=self.private, MPLBACKEND="Agg",
-                   OMP_NUM_THREADS=env.get("OMP_NUM_THREADS", "1"))
+        config = self._config(req_r, res_w)
+        # Imported by name (not run as __main__) so that its classes pickle by reference (a Dask pool in
+        # the learner's code ships the grader's callbacks to its threads).
+        boot = f"import sys; sys.path.append({self.runtime!r}); import cv3d_learner; cv3d_learner.main()"
+        cmd = [sys.executable, "-I", "-S", "-c", boot, json.dumps(config)]
+        if config["lockdown"]:
+            cmd = ["unshare", *UNSHARE] + cmd
         self.pids = _PidsLimit(self.max_processes)
         self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                      stderr=None if os.environ.get("CV3D_LEARNER_STDERR") else subprocess.DEVNULL,
-                                     pass_fds=(req_r, res_w), cwd=self.private,
-                                     env=env, start_new_session=True,
+                                     pass_fds=(req_r, res_w), cwd=self.home,
+                                     env=_learner_env(self.home), start_new_session=True,
                                      preexec_fn=_limits(self.memory_gb, self.pids, self.max_file_gb))
         os.close(req_r)
         os.close(res_w)
@@ -304,6 +358,7 @@ class LearnerProcess:
         try:
             reply = self._exchange({"op": "load", "source": self.source}, timeout=120.0)
             self.problem = "" if reply.get("ok") else reply.get("error", "your code failed to load")
+            self.skipped = reply.get("skipped", [])
         except (RemoteError, TimeLimitExceeded) as exc:
             self.problem = f"your code failed to load: {exc}"
         self.residents = self.pids.members() | {self.proc.pid}   # what may live between calls
@@ -350,7 +405,7 @@ class LearnerProcess:
         deadline = time.monotonic() + timeout
         while True:
             try:
-                reply = _loads(receive_bytes(self.res, deadline))
+                reply = loads(receive_bytes(self.res, deadline))
             except TimeoutError:
                 raise TimeLimitExceeded(f"time limit of {max(timeout - MARGIN_S, 0.05):.3g} s exceeded") from None
             except EOFError:
@@ -364,10 +419,17 @@ class LearnerProcess:
 
     def _serve_callback(self, request: dict, callbacks: list[Callable]) -> None:
         try:
-            value = callbacks[request["index"]](*_tensors_back(request["args"]), **request["kwargs"])
-            reply = {"ok": True, "value": value}
+            target = callbacks[request["index"]]
+            if "attr" in request:        # a public attribute of a grader object the case handed over
+                if request["attr"].startswith("_"):
+                    raise AttributeError(f"{type(target).__name__} has no public attribute {request['attr']!r}")
+                value = getattr(target, request["attr"])
+            else:
+                value = target(*tensors_back(request["args"]), **request["kwargs"])
+            reply = {"ok": True, "value": swap_callables(value, callbacks)}
         except Exception as exc:   # the grader's callback failing on the learner's inputs: the learner's error
-            reply = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
+            reply = {"ok": False, "error": f"{type(exc).__name__}: {exc}",
+                     "type": type(exc).__name__ if type(exc).__module__.startswith("graders") else ""}
         send(self.req, reply)
 
     def _death(self) -> str:
@@ -378,11 +440,16 @@ class LearnerProcess:
             return "your code closed the grading channel"
         return f"your code stopped the grading process (exit status {code})"
 
+    def _running(self) -> "LearnerProcess":
+        if self.proc is None:
+            self._restart()
+        return self
+
     def names(self, wanted: list[str]) -> list[str]:
-        return self._exchange({"op": "names", "names": wanted}, timeout=30.0)["names"]
+        return self._running()._exchange({"op": "names", "names": wanted}, timeout=30.0)["names"]
 
     def value(self, name: str) -> Any:
-        return _tensors_back(self._exchange({"op": "value", "name": name}, timeout=30.0)["value"])
+        return tensors_back(self._running()._exchange({"op": "value", "name": name}, timeout=30.0)["value"])
 
     def function(self, name: str, exercise: Any) -> "RemoteFunction":
         return RemoteFunction(self, name, exercise)
@@ -399,6 +466,7 @@ class RemoteFunction:
         self.handle, self.parent = handle, parent
         self.deadline: float | None = None
         self._stdout, self._mutated, self._used = [], [], set()
+        self.died = ""    # how its process ended, if a call ended it (os._exit, a crash): later calls fail at once
 
     def returned(self, handle: int) -> "RemoteFunction":
         """A function the learner's code returned: calling it runs it in the learner process; what it
@@ -413,16 +481,23 @@ class RemoteFunction:
         owner = self.parent or self
         if self.parent is not None:
             self.deadline = self.parent.deadline
-        request = {"op": "call", "name": self.__name__, "handle": self.handle, "args": _swap_callables(args, table),
-                   "kwargs": _swap_callables(kwargs, table), "timeout": timeout, "names": self.exercise.arg_names,
+        request = {"op": "call", "name": self.__name__, "handle": self.handle, "args": swap_callables(args, table),
+                   "kwargs": swap_callables(kwargs, table), "timeout": timeout, "names": self.exercise.arg_names,
                    "cotangent": current_cotangent()}
+        if owner.died:                    # it ended its process on an earlier case: not again, not per case
+            raise RemoteError("crash", f"{owner.died} (on an earlier case; this one was not run)")
+        if self.learner.proc is None:     # another exercise's code ended it: a fresh process for this one
+            self.learner._restart()
         try:
             reply = self.learner._exchange(request, timeout + MARGIN_S, table)
         except TimeLimitExceeded:
             self.learner._restart()       # it did not answer: a fresh process for the next case
             raise
         except RemoteError as exc:
-            if exc.kind in ("crash", "garbage"):   # a dead process, or a channel that cannot be trusted now
+            if exc.kind == "crash":       # a dead process: the next exercise that needs one starts it
+                owner.died = exc.error
+                self.learner.stop()
+            elif exc.kind == "garbage":   # a channel that cannot be trusted now
                 self.learner._restart()
             raise
         if self.learner.pids.kill_all_but(self.learner.residents):   # processes it started and left running
@@ -433,9 +508,9 @@ class RemoteFunction:
         owner._used |= set(reply.get("used", []))
         kind = reply.get("kind")
         if kind == "ok":
-            value = _tensors_back(reply["value"], owner)
+            value = tensors_back(reply["value"], owner)
             if reply.get("grads") is not None:
-                value = _gradients_back(value, reply, args, request["cotangent"])
+                value = gradients_back(value, reply, args, request["cotangent"])
             return value
         if kind == "not_implemented":
             raise NotImplementedError
@@ -445,8 +520,10 @@ class RemoteFunction:
         raise RemoteError(kind or "exception", reply.get("error", "failed"), reply.get("traceback", ""))
 
     def drain(self) -> tuple[str, list[str], list[str]]:
+        """What the calls since the last drain printed and mutated, and every refused name this function's
+        calls have reached so far: a run shared by several cases (engine.shared_run) is refused on each."""
         out = ("".join(self._stdout), list(dict.fromkeys(self._mutated)), sorted(self._used))
-        self._stdout, self._mutated, self._used = [], [], set()
+        self._stdout, self._mutated = [], []
         return out
 
     def begin_case(self, timeout: float) -> None:

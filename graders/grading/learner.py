@@ -1,17 +1,20 @@
 """The learner's side of graded mode: a process that holds only the learner's code.
 
-    python -m graders.grading.learner REQUEST_FD RESPONSE_FD
+    python -I -S RUNTIME/cv3d_learner.py CONFIG_JSON      (started by graders.grading.isolation.LearnerProcess)
 
-The judge (`graders.grading.isolation.LearnerProcess`) sends requests — load this source, which names exist,
-give me this value, call this function with these inputs — and this process answers with plain data.
-It never sees a case's expected value, the seed, the grader's state or the results channel, so code
-that walks the call stack, patches numpy or the engine, or writes fake results changes nothing but
-its own outputs.
+The judge sends requests — load this source, which names exist, give me this value, call this function
+with these inputs — and this process answers with plain data. It never sees a case's expected value,
+the seed, the grader's state or the results channel, so code that walks the call stack, patches numpy
+or the engine, or writes fake results changes nothing but its own outputs.
 
-From-scratch policy: `cv2`, `pycolmap` and `kornia` are importable, but every call into them is
-recorded and reported with the call's outcome; the judge decides, per exercise, whether it is allowed.
-`graders` is replaced by a stand-in whose `check`/`use`/`answer_key` do nothing (a notebook's own
-imports still load) and whose other names refuse to run: the course's stand-ins are not an answer.
+From-scratch policy, enforced by absence: the interpreter starts isolated (-I -S) from a copy of this
+file and of graders/core/sandbox.py, with an import path of the standard library and site-packages only.
+`graders` is a stand-in whose `check`/`use`/`answer_key` do nothing (a notebook's own imports still
+load) and whose every other name refuses to run; the libraries this process's exercises may not use
+(cv2, pycolmap, kornia for a from-scratch CODE exercise) are stand-ins that refuse the same way;
+`solutions` is not importable. Where the judge runs as root with namespaces, their files are also gone
+from this process's view (see `_lock_down`), so undoing the import hook brings nothing back. What the
+learner's code tried to use is reported only to explain a refusal; the judge never relies on it.
 """
 from __future__ import annotations
 
@@ -23,12 +26,12 @@ import pickle
 import select
 import struct
 import sys
+import threading
 import time
 import types
 from typing import Any, Callable
 
-WATCHED = ("cv2", "pycolmap", "kornia")
-_used: list[str] = []            # library calls made during the current request
+_used: list[str] = []            # refused names the learner's code called during the current request
 _safe_call: Callable | None = None   # graders.core.sandbox.safe_call, kept before `graders` is replaced
 
 
@@ -70,96 +73,106 @@ def receive_bytes(fd: int, deadline: float | None = None) -> bytes:
     return _read_exact(fd, n, deadline)
 
 
-# ------------------------------------------------------------------ watched libraries
+# ------------------------------------------------------------------ what graded work cannot import
 
-def _record(name: str, fn: Callable) -> Callable:
-    def watched(*args, **kwargs):
-        _used.append(name)
-        return fn(*args, **kwargs)
-    watched.__name__ = getattr(fn, "__name__", name)
-    watched.__doc__ = getattr(fn, "__doc__", None)
-    watched.__wrapped_real__ = fn
-    return watched
+class GradedWorkRefusal(Exception):
+    """Raised by every name of a module graded work may not use (a library the exercise is not allowed,
+    the course's graders): the module is not in this process, only a stand-in that says so."""
 
 
-class _WatchedModule(types.ModuleType):
-    """A library module whose functions record their use (classes and constants pass through)."""
+def _refusal_text(name: str) -> str:
+    if name.startswith("graders"):
+        return (f"{name} is not available in graded work: the course's stand-ins and oracles are not an answer "
+                "(self-study checks allow them)")
+    return (f"{name} is not available here: this exercise is from scratch in graded work, so "
+            f"{name.split('.')[0]} is not installed in the process that runs your code (self-study checks allow it)")
 
-    def __init__(self, real: types.ModuleType, name: str):
-        super().__init__(name)
-        self.__dict__["_real"] = real
+
+class _Refused:
+    """What `cv2.projectPoints`, `graders.get` or `ch1._real.cv_undistort` is in the learner's process: any
+    attribute is another refusal, a call raises. The real object was never loaded here."""
+    __slots__ = ("_name",)
+
+    def __init__(self, name: str):
+        object.__setattr__(self, "_name", name)
 
     def __getattr__(self, attr: str) -> Any:
-        value = getattr(self.__dict__["_real"], attr)
-        if attr.startswith("__"):
-            return value
-        full = f"{self.__name__}.{attr}"
-        if isinstance(value, types.ModuleType):
-            return _WatchedModule(value, full)
-        if callable(value) and not isinstance(value, type):   # classes pass (isinstance, subclassing)
-            return _record(full, value)
-        return value
+        if attr.startswith("__") and attr.endswith("__"):
+            raise AttributeError(attr)
+        return _Refused(f"{self._name}.{attr}")
 
-    def __dir__(self):
-        return dir(self.__dict__["_real"])
+    def __call__(self, *args, **kwargs):
+        _used.append(self._name)     # only for the message: the refusal itself does not depend on it
+        raise GradedWorkRefusal(_refusal_text(self._name))
 
+    def __mro_entries__(self, bases):
+        _used.append(self._name)
+        raise GradedWorkRefusal(_refusal_text(self._name))
 
-WATCHED_GRADERS = ("graders.ch", "graders.oracles", "graders.kit.geometry", "graders.core.compare")
-
-
-def _watched_name(fullname: str) -> bool:
-    return ("." not in fullname and fullname in WATCHED) or fullname.startswith(WATCHED_GRADERS)
+    def __repr__(self) -> str:
+        return f"<{self._name}: not available in graded work>"
 
 
-class _Finder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
-    """Serves watched wrappers for cv2/pycolmap/kornia and for the graders' chapter packages, oracles
-    and primitives (the course's own answers); data loaders and scene generators load as they are."""
+class _StandInModule(types.ModuleType):
+    """A refused module: importing it works (a notebook's imports still load), using it refuses."""
+
+    def __init__(self, name: str):
+        super().__init__(name, _refusal_text(name))
+        self.__dict__["__path__"] = []          # a package: its submodules are stand-ins too
+
+    def __getattr__(self, attr: str) -> Any:
+        if attr.startswith("__") and attr.endswith("__"):
+            raise AttributeError(attr)
+        if self.__name__.startswith("graders") and attr[:1].isupper() and attr.endswith(("Error", "Exception")):
+            return _exception_class(attr)     # what the learner catches is not an answer
+        return _Refused(f"{self.__name__}.{attr}")
+
+
+_EXCEPTIONS: dict[str, type] = {}
+
+
+def _exception_class(name: str) -> type:
+    """The stand-in of a grader exception class (`ch10.TransientTaskError`): a real class, the same one
+    whichever module path names it, raised when a grader callback fails with that class, so the learner's
+    `except` clauses work."""
+    if name not in _EXCEPTIONS:
+        _EXCEPTIONS[name] = type(name, (RuntimeError,), {"__module__": "graders"})
+    return _EXCEPTIONS[name]
+
+
+def _graders_stand_in(name: str) -> types.ModuleType:
+    """`graders` in the learner's process: `check` does nothing, `use` returns the learner's own function,
+    `answer_key` says nothing; every other name (get, chapter packages, oracles, data loaders) refuses."""
+    module = _StandInModule(name)
+    if name == "graders":
+        module.check = lambda *a, **k: None
+        module.use = lambda exercise_id, attempt: attempt
+        module.answer_key = lambda *a, **k: ""
+    return module
+
+
+class _Policy(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    """First on sys.meta_path: `graders` and the refused libraries load as stand-ins, `solutions` not at all.
+    It only says what the learner may not have; the modules are also absent from the process's file
+    system view where the OS allows it (graders.grading.isolation), so removing this finder brings nothing back."""
+
+    def __init__(self, refused: tuple[str, ...], allow_solutions: bool):
+        self.refused, self.allow_solutions = set(refused), allow_solutions
 
     def find_spec(self, fullname, path, target=None):
-        if _watched_name(fullname):
-            return importlib.util.spec_from_loader(fullname, self, is_package=fullname.startswith("graders."))
+        top = fullname.split(".")[0]
+        if top == "graders" or top in self.refused:
+            return importlib.util.spec_from_loader(fullname, self, is_package=True)
+        if top == "solutions" and not self.allow_solutions:
+            raise ModuleNotFoundError(f"No module named {fullname!r}: the reference answers are not part of "
+                                      "graded work", name=fullname)
         return None
 
     def create_module(self, spec):
-        sys.meta_path.remove(self)
-        try:
-            real = importlib.import_module(spec.name)
-        finally:
-            sys.meta_path.insert(0, self)
-        if spec.name.startswith("graders.ch"):
-            _watch_fallbacks()
-        for name in [m for m in sys.modules if m.startswith(spec.name + ".")]:   # its submodules, watched too
-            if not isinstance(sys.modules[name], _WatchedModule):
-                sys.modules[name] = _package_like(_WatchedModule(sys.modules[name], name), sys.modules[name])
-        return _package_like(_WatchedModule(real, spec.name), real)
+        return _graders_stand_in(spec.name)
 
     def exec_module(self, module):
         pass
-
-
-def _package_like(watched: "_WatchedModule", real: types.ModuleType) -> "_WatchedModule":
-    if hasattr(real, "__path__"):
-        watched.__dict__["__path__"] = real.__path__
-    return watched
-
-
-def _watch_fallbacks() -> None:
-    """Every registered exercise's stand-in records its use, however the learner's code reaches it."""
-    engine = sys.modules.get("graders.core.engine")
-    for ex in getattr(engine, "_REGISTRY", {}).values():
-        if ex.fallback is not None and not getattr(ex.fallback, "_cv3d_watched", False):
-            ex.fallback = _record(f"graders stand-in of {ex.id}", ex.fallback)
-            ex.fallback._cv3d_watched = True
-
-
-def _graded_mode_graders() -> None:
-    """In the learner's process `check` does nothing and `use` returns the learner's own function:
-    demo helpers still load, but no course stand-in answers for the learner. The package is loaded already
-    (this module is `graders.grading.learner`): it is patched, not imported from below."""
-    graders = sys.modules["graders"]
-    graders.check = lambda *a, **k: None
-    graders.use = lambda exercise_id, attempt: attempt
-    graders.answer_key = lambda *a, **k: ""
 
 
 # ------------------------------------------------------------------ requests and callbacks
@@ -167,35 +180,74 @@ def _graded_mode_graders() -> None:
 _fds: tuple[int, int] = (-1, -1)     # (requests from the judge, responses to it)
 
 
-class _RequestUnpickler(pickle.Unpickler):
-    """The judge's requests may hold objects of grader classes: find them under the names the real
-    modules were moved to when `graders` was replaced by its stand-in."""
-
-    def find_class(self, module: str, name: str):
-        value = super().find_class(module, name)
-        return getattr(value, "__wrapped_real__", value)
-
-
 def _receive() -> Any:
-    import io
-    return _RequestUnpickler(io.BytesIO(receive_bytes(_fds[0]))).load()
+    return pickle.loads(receive_bytes(_fds[0]))
 
 
-def callback_proxy(index: int) -> Callable:
-    """A grader function passed as an input: calling it asks the judge to run it and waits for its answer."""
-    def callback(*args, **kwargs):
-        send(_fds[1], {"op": "callback", "index": index, "args": _plain(args), "kwargs": _plain(kwargs)})
+_channel = threading.Lock()    # callbacks from the learner's threads (a Dask pool) take turns on the pipe
+
+
+def _ask_judge(request: dict, error: type = RuntimeError) -> Any:
+    with _channel:
+        send(_fds[1], request)
         reply = _receive()
-        if not reply["ok"]:
-            raise RuntimeError(f"the grader's callback failed on your inputs: {reply['error']}")
-        return reply["value"]
-    return callback
+    if not reply["ok"]:
+        kind = _exception_class(reply["type"]) if reply.get("type") else error
+        raise kind(f"the grader's callback failed on your inputs: {reply['error']}")
+    return _unswap(reply["value"])
+
+
+class _Callback:
+    """A grader function passed as an input: calling it asks the judge to run it and waits for its answer.
+    An object, not a closure, so a task scheduler can name it (Dask tokenizes the functions it runs)."""
+    __slots__ = ("index",)
+
+    def __init__(self, index: int):
+        self.index = index
+
+    def __call__(self, *args, **kwargs):
+        return _ask_judge({"op": "callback", "index": self.index, "args": _plain(args), "kwargs": _plain(kwargs)})
+
+    def __dask_tokenize__(self):
+        return ("cv3d-grader-callback", self.index)
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, _Callback) and other.index == self.index
+
+    def __hash__(self) -> int:
+        return hash(("cv3d-grader-callback", self.index))
+
+
+callback_proxy = _Callback
+
+
+class _RemoteObject:
+    """A grader object a case handed to the learner (a pipeline's stages): it stays in the judge; reading
+    one of its public attributes asks the judge (methods come back as callbacks)."""
+    __slots__ = ("_index",)
+
+    def __init__(self, index: int):
+        object.__setattr__(self, "_index", index)
+
+    def __getattr__(self, attr: str) -> Any:
+        if attr.startswith("__") and attr.endswith("__"):
+            raise AttributeError(attr)
+        return _ask_judge({"op": "callback", "index": self._index, "attr": attr, "args": (), "kwargs": {}},
+                          AttributeError)
+
+    def __eq__(self, other) -> bool:      # the sandbox compares a copy of the inputs after the call
+        return isinstance(other, _RemoteObject) and other._index == self._index
+
+    def __hash__(self) -> int:
+        return hash(self._index)
 
 
 def _unswap(obj: Any) -> Any:
     if isinstance(obj, dict):
         if set(obj) == {"__callback__"}:
             return callback_proxy(obj["__callback__"])
+        if set(obj) == {"__object__"}:
+            return _RemoteObject(obj["__object__"])
         return {k: _unswap(v) for k, v in obj.items()}
     if isinstance(obj, tuple):
         return tuple(_unswap(o) for o in obj)
@@ -207,10 +259,22 @@ def _unswap(obj: Any) -> Any:
 # ------------------------------------------------------------------ the request loop
 
 def _load(source: str, namespace: dict) -> dict:
-    outcome = _safe_call(lambda: exec(compile(source, "<your notebook>", "exec"), namespace), timeout=60.0)
+    """Run the learner's definitions, statement by statement: a statement that uses what graded work may
+    not have (a constant from `datasets.available(...)`, a refused library) is skipped and noted, so the
+    rest still loads; any other failure stops the load, as in self-study."""
+    import ast
+    skipped: list[str] = []
+
+    def run() -> None:
+        for stmt in ast.parse(source, "<your notebook>").body:
+            try:
+                exec(compile(ast.Module([stmt], []), "<your notebook>", "exec"), namespace)
+            except GradedWorkRefusal as exc:
+                skipped.append(f"line {stmt.lineno}: {exc}")
+    outcome = _safe_call(run, timeout=60.0)
     if outcome.kind != "ok":
         return {"ok": False, "error": f"your code failed to load: {outcome.error}\n{outcome.traceback}".rstrip()}
-    return {"ok": True}
+    return {"ok": True, "skipped": skipped}
 
 
 def _call(namespace: dict, request: dict) -> dict:
@@ -331,61 +395,104 @@ def serve(request_fd: int, response_fd: int) -> None:
                                         "return numpy arrays, numbers, lists, tuples or dicts"})
 
 
-def _lock_down(private: str) -> None:
-    """Inside fresh mount/PID/network namespaces (see graders.grading.isolation): every mount but the private
-    folder (and /proc, /sys, /dev) becomes read-only, then every capability is dropped, so the learner's
-    code can neither undo it nor write anywhere else."""
+MS_RDONLY, MS_NOSUID, MS_NODEV, MS_REMOUNT, MS_BIND, MS_REC = 1, 2, 4, 32, 4096, 16384
+
+
+def _mount(libc, src: bytes | None, target: str, fstype: bytes | None, flags: int, data: bytes | None = None) -> None:
+    import ctypes
+    if libc.mount(src, target.encode(), fstype, flags, data) != 0:
+        raise OSError(ctypes.get_errno(), f"mount {target}")
+
+
+def _hide(libc, path: str, size: str = "16k", mode: str = "755") -> None:
+    """An empty file system over `path` (a tmpfs; /dev/null over a file): what was there is gone from this view."""
+    if os.path.isdir(path):
+        _mount(libc, b"tmpfs", path, b"tmpfs", MS_NOSUID | MS_NODEV, f"size={size},mode={mode}".encode())
+    elif os.path.exists(path):
+        _mount(libc, b"/dev/null", path, None, MS_BIND)
+
+
+def _lock_down(config: dict) -> None:
+    """Inside fresh mount/PID/network/UTS/IPC namespaces (see graders.grading.isolation), as root, before any learner
+    code: every mount read-only but the learner's home; the course tree, `solutions`, the refused libraries,
+    /root, /home, the grader's temp folders (other submissions) and the secret's folder replaced by empty
+    file systems; private /tmp, /var/tmp, /run and /dev/shm (size-limited); then an unprivileged user with
+    no capabilities, so none of it can be undone."""
     import ctypes
     libc = ctypes.CDLL(None, use_errno=True)
-    MS_RDONLY, MS_REMOUNT, MS_BIND, MS_REC = 1, 32, 4096, 16384
-
-    def mount(src, target, flags):
-        if libc.mount(src, target.encode(), None, flags, None) != 0:
-            raise OSError(ctypes.get_errno(), f"mount {target}")
-    mount(private.encode(), private, MS_BIND)
+    libc.mount.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_char_p, ctypes.c_ulong, ctypes.c_char_p]
+    home, writable = config["home"], config["writable"]
+    # The private folder stays a writable mount, but its user may write only where it owns the folder
+    # (its home, the folders a case hands it to write in); the judge's own folders there are root's.
+    _mount(libc, writable.encode(), writable, None, MS_BIND)
     with open("/proc/self/mountinfo") as f:
         points = [line.split()[4].replace("\\040", " ") for line in f]
     for point in sorted(set(points), key=len):
-        if point.startswith(("/proc", "/sys", "/dev")) or point == private:
+        if point.startswith(("/proc", "/sys", "/dev")) or point == writable:
             continue
         try:
-            mount(None, point, MS_REMOUNT | MS_BIND | MS_RDONLY | (MS_REC if point == "/" else 0))
+            _mount(libc, None, point, None, MS_REMOUNT | MS_BIND | MS_RDONLY | (MS_REC if point == "/" else 0))
         except OSError:
             pass   # a mount that cannot be remounted (already read-only, or gone) stays as it is
+    # What the learner keeps (python, its packages, its runtime, its home), held open by descriptor before
+    # the folders around them are hidden, then bound back at the same paths.
+    keep = [(path, os.open(path, os.O_PATH | os.O_DIRECTORY)) for path in config["keep"] + [writable]]
+    inside_kept = lambda p: any(p != k and p.startswith(k.rstrip("/") + "/") for k, _ in keep)  # noqa: E731
+    scratch = {"/tmp": "1777", "/var/tmp": "1777", "/dev/shm": "1777", "/run": "755"}
+    for path in sorted(set(config["hide"]) | set(scratch), key=len):
+        if not inside_kept(path):
+            _hide(libc, path, f"{config['tmpfs_mb']}m" if path in scratch else "16k", scratch.get(path, "755"))
+    for path, fd in keep:
+        if not os.path.isdir(path):            # hidden with a folder around it: put it back
+            os.makedirs(path, mode=0o755, exist_ok=True)
+            _mount(libc, f"/proc/self/fd/{fd}".encode(), path, None, MS_BIND | MS_REC)
+        os.close(fd)
+    for path in sorted(set(config["hide"]), key=len):
+        if inside_kept(path):                  # a refused library inside the packages folder, ...
+            _hide(libc, path)
+    host = b"learner"
+    libc.sethostname(host, len(host))
+    # An unprivileged user: it owns nothing but its home, so it can neither undo the mounts nor write the
+    # cgroup that holds its process limit, nor read what root keeps private.
+    uid, gid = config["uid"], config["gid"]
     PR_SET_NO_NEW_PRIVS, PR_CAPBSET_DROP = 38, 24
     libc.prctl(PR_SET_NO_NEW_PRIVS, 1, 0, 0, 0)
     for cap in range(64):
         libc.prctl(PR_CAPBSET_DROP, cap, 0, 0, 0)
+    os.setgroups([])
+    os.setresgid(gid, gid, gid)
+    os.setresuid(uid, uid, uid)                # from root to another uid: every capability is cleared
+    os.chdir(home)
 
-    class Header(ctypes.Structure):
-        _fields_ = [("version", ctypes.c_uint32), ("pid", ctypes.c_int)]
 
-    class Data(ctypes.Structure):
-        _fields_ = [("effective", ctypes.c_uint32), ("permitted", ctypes.c_uint32), ("inheritable", ctypes.c_uint32)]
-    header, data = Header(0x20080522, 0), (Data * 2)()
-    if libc.capset(ctypes.byref(header), data) != 0:
-        raise OSError(ctypes.get_errno(), "capset")
+def _python_path(config: dict) -> None:
+    """The learner's import path: the standard library (already there: the interpreter runs with -I -S),
+    the site-packages folders, nothing of the course."""
+    runtime = os.path.dirname(os.path.abspath(__file__))     # this file and its copy of sandbox.py
+    sys.path[:] = [p for p in sys.path if p] + config["site"] + [runtime] + config.get("extra_path", [])
 
 
 def main() -> None:
-    request_fd, response_fd = int(sys.argv[1]), int(sys.argv[2])
-    private, lockdown = sys.argv[3], sys.argv[4] == "1"
-    os.chdir(private)
-    if lockdown:
-        _lock_down(private)
+    import json
+    config = json.loads(sys.argv[1])
+    request_fd, response_fd = config["fds"]
+    if config["lockdown"]:
+        _lock_down(config)
+    else:
+        os.chdir(config["home"])
     # The learner's prints are captured per call; anything written at the C level goes nowhere.
     devnull = os.open(os.devnull, os.O_WRONLY)
     os.dup2(devnull, 1)
     if not os.environ.get("CV3D_LEARNER_STDERR"):   # set to see the learner process's own errors
         os.dup2(devnull, 2)
     os.environ["MPLBACKEND"] = "Agg"
+    _python_path(config)
     global _safe_call
-    from graders.core.sandbox import safe_call
+    from cv3d_sandbox import safe_call       # graders/core/sandbox.py, copied beside this file by the judge
     _safe_call = safe_call
-    _graded_mode_graders()
-    for name in [m for m in sys.modules if _watched_name(m)]:   # none yet; a fresh import goes through the finder
-        del sys.modules[name]
-    sys.meta_path.insert(0, _Finder())
+    for name in [m for m in sys.modules if m.split(".")[0] in ("graders", "solutions", *config["refused"])]:
+        del sys.modules[name]                  # none: this interpreter imported nothing of them
+    sys.meta_path.insert(0, _Policy(tuple(config["refused"]), config.get("allow_solutions", False)))
     serve(request_fd, response_fd)
 
 

@@ -128,9 +128,15 @@ def hidden_seeds(secret: bytes, submission: str, ids: list[str]) -> dict[str, in
             for i in ids}
 
 
+# What the learner's file system view must not show (namespaces level): the secret's file, and a batch's
+# submissions and grades folders (other learners' work).
+HIDDEN_PATHS: list[str] = []
+
+
 def read_secret(path: str | None) -> bytes | None:
     """The instructor's secret: a file (`--secret-file`) or $CV3D_GRADING_SECRET; None in self-study."""
     if path:
+        HIDDEN_PATHS.append(os.path.realpath(path))
         return Path(path).read_bytes().strip()
     value = os.environ.get("CV3D_GRADING_SECRET")
     return value.encode() if value else None
@@ -138,18 +144,25 @@ def read_secret(path: str | None) -> bytes | None:
 
 def _worker(src: Path, ids: list[str], seed: int, scratch: Path, memory_gb: float,
             graded: bool, hidden: dict[str, int] | None = None) -> tuple[subprocess.Popen, int]:
-    """A worker and the read end of its event pipe. The seed travels in the environment, not argv."""
+    """A worker and the read end of its event pipe. The seed travels in the environment, the hidden seeds
+    through a pipe: neither is on argv, and the worker is not dumpable (its /proc files stay closed)."""
     read_fd, write_fd = os.pipe()
-    cmd = [sys.executable, "-m", "graders.grading.worker", str(src), str(write_fd), "--ids", ",".join(ids)]
+    seeds_r, seeds_w = os.pipe()
+    cmd = [sys.executable, "-m", "graders.grading.worker", str(src), str(write_fd), "--ids", ",".join(ids),
+           "--hidden-fd", str(seeds_r)]
     cmd += ["--graded"] if graded else []
     env = dict(os.environ, MPLBACKEND="Agg", TMPDIR=str(scratch), TEMP=str(scratch), TMP=str(scratch),
-               CV3D_SEED=str(seed), CV3D_HIDDEN_SEEDS=json.dumps(hidden or {}),
+               CV3D_SEED=str(seed), CV3D_HIDE_PATHS=os.pathsep.join(HIDDEN_PATHS),
                CV3D_NO_PROGRESS="1")   # grading is not practice: only check() and drills record progress
     env.pop("CV3D_GRADING_SECRET", None)        # the worker needs the seeds, not the secret
+    env.pop("CV3D_HIDDEN_SEEDS", None)
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
-                            cwd=scratch, env=env, start_new_session=True, pass_fds=(write_fd,),
+                            cwd=scratch, env=env, start_new_session=True, pass_fds=(write_fd, seeds_r),
                             preexec_fn=_limit_memory(memory_gb))
     os.close(write_fd)
+    os.close(seeds_r)
+    with os.fdopen(seeds_w, "wb") as f:         # a few hundred bytes: fits the pipe's buffer
+        f.write(json.dumps(hidden or {}).encode())
     os.set_blocking(read_fd, False)
     return proc, read_fd
 
@@ -225,6 +238,16 @@ def run_workers(source: str, exercises: list, seed: int, hard_limit: float = HAR
     return grade.ordered()
 
 
+def isolation_note() -> str:
+    """Said first in every graded result: how far the learner's code is kept from the grader here."""
+    from graders.grading.isolation import level
+    if level() == "namespaces":
+        return ""
+    return ("weaker isolation: this machine cannot give your code its own file system view (that needs Linux "
+            "namespaces as root), so the grader's files stay readable to it; the from-scratch rules are enforced "
+            "by import stand-ins and a static check of your source instead")
+
+
 def check_file(path: str | Path, seed: int | None = None, only: list[str] | None = None,
                hard_limit: float = HARD_LIMIT, time_budget: float = TIME_BUDGET, max_timeouts: int = MAX_TIMEOUTS,
                memory_gb: float = MEMORY_GB, graded: bool = False,
@@ -250,6 +273,8 @@ def check_file(path: str | Path, seed: int | None = None, only: list[str] | None
         msg = f"{path} does not exist"
         return [_failed(ex, msg, seed) for ex in exercises], msg
     message = "\n".join(extracted.problems)
+    if graded or secret is not None:
+        message = "\n".join(filter(None, [isolation_note(), message]))
     hidden = hidden_seeds(secret, submission or path.stem, [ex.id for ex in exercises]) if secret else None
     return run_workers(extracted.source, exercises, seed, hard_limit, time_budget, max_timeouts, memory_gb,
                        graded or secret is not None, on_result, hidden), message

@@ -3,7 +3,8 @@
     python -m graders.grading.worker SOURCE.py EVENTS_FD --ids 1.5,1.6 [--graded]
 
 The seed comes in the environment (`CV3D_SEED`), never on the command line (which every process can
-read). Events go to the pipe EVENTS_FD as JSON lines: {"start": id} before an exercise, then
+read); the instructor's hidden seeds come through a pipe (`--hidden-fd`), and this process is not
+dumpable, so /proc/<pid>/environ and its memory stay closed to code running as the same user. Events go to the pipe EVENTS_FD as JSON lines: {"start": id} before an exercise, then
 {"result": {...}}. The parent kills this process if an exercise overruns and starts a new worker
 for the exercises that remain.
 
@@ -18,6 +19,7 @@ import argparse
 import json
 import os
 import sys
+import tempfile
 
 os.environ.setdefault("MPLBACKEND", "Agg")  # a learner's plt.show() must not block
 
@@ -62,27 +64,83 @@ class _SelfStudy:
 
 
 class _Graded:
-    def __init__(self, source: str, exercises: list):
-        import tempfile
-        from graders.grading.isolation import LearnerProcess
-        self.learner = LearnerProcess(source)
-        # Folders the cases hand to the learner (a COLMAP model to read, a folder to write into) must be
-        # writable there: the judge makes its temporary folders inside the learner's private folder.
-        shared = os.path.join(self.learner.private, "from-the-grader")
-        os.makedirs(shared)
-        tempfile.tempdir = shared
-        self.learner.start()
-        self.problem = self.learner.problem
-        self.present = set(self.learner.names([ex.name for ex in exercises])) if not self.problem else set()
+    """Graded mode: one learner process per library policy (a from-scratch CODE exercise's process has no
+    cv2, pycolmap or kornia; the others may use them), started when an exercise first needs it."""
+
+    def __init__(self, source: str, exercises: list, hide: tuple[str, ...] = ()):
+        from graders.grading.isolation import LearnerProcess, level
+        self.source, self.exercises, self.hide = source, exercises, hide
+        self._new = LearnerProcess
+        self.level = level()
+        self.processes: dict[tuple[str, ...], LearnerProcess] = {}
+        self.static = {}
+        if self.level == "process":   # the files are not hidden: a static look at the source, marked weaker
+            from graders.grading.static_check import findings
+            reference = ("solutions",) if os.environ.get("CV3D_GRADE_REFERENCE") == "1" else ()
+            self.static = {ex.id: findings(source, ex.name, self.refused(ex), reference) for ex in exercises}
+        self.problem = ""
+        self._present: dict[tuple[str, ...], set[str]] = {}
+
+    @staticmethod
+    def refused(ex) -> tuple[str, ...]:
+        from graders.core.engine import LIBRARIES
+        return tuple(lib for lib in LIBRARIES if lib not in (ex.libraries or ()))
+
+    def process(self, ex):
+        key = self.refused(ex)
+        if key not in self.processes:
+            learner = self._new(self.source, refused=key, hide=self.hide)
+            _judge_folders_readable_by(learner)
+            learner.start()
+            self.processes[key] = learner
+        learner = self.processes[key]
+        tempfile.tempdir = learner.exchange    # the judge's folders for this exercise's cases: where it can read them
+        return learner
+
+    def problem_for(self, ex) -> str:
+        return self.process(ex).problem
 
     def has(self, ex) -> bool:
-        return ex.name in self.present
+        learner = self.process(ex)
+        if learner.refused not in self._present:
+            self._present[learner.refused] = set(learner.names([e.name for e in self.exercises]))
+        return ex.name in self._present[learner.refused]
 
     def answer(self, ex):
-        return self.learner.value(ex.name) if ex.value else self.learner.function(ex.name, ex)
+        learner = self.process(ex)
+        return learner.value(ex.name) if ex.value else learner.function(ex.name, ex)
+
+    def refusal(self, ex) -> str:
+        """Process mode only: what the static check found in the code this exercise runs."""
+        found = self.static.get(ex.id)
+        if not found:
+            return ""
+        course = any("graders" in f or "solutions" in f for f in found)
+        return ("weaker isolation (process mode: the grader's files stay readable to your code), so your source "
+                f"was checked statically: {'; '.join(found[:4])}. "
+                + ("The course's stand-ins, oracles and reference answers are not an answer in graded work"
+                   if course else f"Exercise {ex.id} is from scratch in graded work, which may not use these")
+                + " (self-study checks allow them)")
 
     def close(self) -> None:
-        self.learner.close()
+        for learner in self.processes.values():
+            learner.close()
+
+
+def _judge_folders_readable_by(learner) -> None:
+    """The judge's temporary folders (a COLMAP model a case hands over) are made inside the learner's
+    `from-the-grader` folder, which only the judge can write; the learner's user may read them."""
+    if getattr(tempfile.mkdtemp, "_cv3d", False):
+        return
+    made = tempfile.mkdtemp
+
+    def mkdtemp(*args, **kwargs):
+        path = made(*args, **kwargs)
+        if os.path.basename(os.path.dirname(os.path.abspath(path))) == "from-the-grader":
+            os.chmod(path, 0o755)
+        return path
+    mkdtemp._cv3d = True
+    tempfile.mkdtemp = mkdtemp
 
 
 def _grade(ex, answer, seed: int, hidden_seed: int | None) -> ExerciseResult:
@@ -102,30 +160,62 @@ def _grade(ex, answer, seed: int, hidden_seed: int | None) -> ExerciseResult:
     return graded
 
 
+def judge_one(judge: "_Graded | _SelfStudy", ex, seed: int, hidden_seed: int | None = None) -> ExerciseResult:
+    """One exercise's result: not there, refused by the static check (process mode), or graded."""
+    graded = isinstance(judge, _Graded)
+    problem = judge.problem_for(ex) if graded else judge.problem
+    if problem or not judge.has(ex):
+        return _not_there(ex, seed, problem)
+    refusal = judge.refusal(ex) if graded else ""
+    if refusal:
+        result = _not_there(ex, seed, refusal)
+        result.status = "failed"
+        return result
+    try:
+        return _grade(ex, judge.answer(ex), seed, hidden_seed)
+    except Exception as exc:   # a value that cannot cross from the learner's process
+        return _not_there(ex, seed, f"could not read `{ex.name}`: {exc}")
+
+
+def not_dumpable() -> None:
+    """Neither the learner's code (same user in process mode) nor anyone else may read this process's
+    memory, environment or descriptors through /proc or ptrace: it holds the hidden seeds."""
+    try:
+        import ctypes
+        ctypes.CDLL(None).prctl(4, 0, 0, 0, 0)     # PR_SET_DUMPABLE = 4
+    except (OSError, AttributeError):
+        pass
+
+
+def _read_hidden(fd: int | None) -> dict:
+    """Instructor grading: id -> secret seed, read from a pipe the parent wrote (never argv or environment)."""
+    if fd is None:
+        return {}
+    with os.fdopen(fd, "rb") as f:
+        return json.loads(f.read() or b"{}")
+
+
 def main(argv: list[str] | None = None) -> int:
+    not_dumpable()
     ap = argparse.ArgumentParser()
     ap.add_argument("source")
     ap.add_argument("events_fd", type=int)
     ap.add_argument("--ids", required=True)
     ap.add_argument("--graded", action="store_true")
+    ap.add_argument("--hidden-fd", type=int)
     args = ap.parse_args(argv)
     seed = int(os.environ.pop("CV3D_SEED", "0"))
-    hidden = json.loads(os.environ.pop("CV3D_HIDDEN_SEEDS", "{}"))   # instructor grading: id -> secret seed
+    hidden = _read_hidden(args.hidden_fd)
+    hide = tuple(p for p in os.environ.pop("CV3D_HIDE_PATHS", "").split(os.pathsep) if p)
     with open(args.source, encoding="utf-8") as f:
         source = f.read()
     exercises = [get(i) for i in args.ids.split(",")]
-    judge = _Graded(source, exercises) if args.graded else _SelfStudy(source)
+    judge = _Graded(source, exercises, hide) if args.graded else _SelfStudy(source)
     with os.fdopen(args.events_fd, "w", encoding="utf-8", buffering=1) as out:
         try:
             for ex in exercises:
                 out.write(json.dumps({"start": ex.id}) + "\n")
-                if judge.problem or not judge.has(ex):
-                    result = _not_there(ex, seed, judge.problem)
-                else:
-                    try:
-                        result = _grade(ex, judge.answer(ex), seed, hidden.get(ex.id))
-                    except Exception as exc:   # a value that cannot cross from the learner's process
-                        result = _not_there(ex, seed, f"could not read `{ex.name}`: {exc}")
+                result = judge_one(judge, ex, seed, hidden.get(ex.id))
                 out.write(json.dumps({"result": result.to_dict()}) + "\n")
         finally:
             judge.close()
