@@ -17,7 +17,7 @@ import pytest
 
 from graders.core.chapters import READY
 from graders.grading.release import gradescope_bundle, student_release
-from test_notebooks import ROOT, _solved
+from notebook_stubs import ROOT, solved as _solved
 
 SITE = next(p for p in sys.path if p.endswith("site-packages") and Path(p, "numpy").exists())
 

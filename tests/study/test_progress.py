@@ -17,7 +17,7 @@ from graders import check
 from graders.study import progress
 from graders.core.report import ExerciseResult
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture
@@ -87,7 +87,7 @@ def _appender(folder: str, tag: int, n: int) -> None:
 
 def test_concurrent_appends_from_several_processes_never_interleave(store):
     n, procs = 60, 4
-    code = "import sys; from tests.test_progress import _appender; _appender(sys.argv[1], int(sys.argv[2]), int(sys.argv[3]))"
+    code = "import sys; from tests.study.test_progress import _appender; _appender(sys.argv[1], int(sys.argv[2]), int(sys.argv[3]))"
     jobs = [subprocess.Popen([sys.executable, "-c", code, str(store), str(k), str(n)], cwd=ROOT) for k in range(procs)]
     assert [j.wait(timeout=120) for j in jobs] == [0] * procs
     with warnings.catch_warnings():

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from benchmarks.coursework import HOSTILE, build, escaped, judge, run_batch
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _processes() -> set[str]:

@@ -478,7 +478,7 @@ def test_pycolmap_log_is_quiet_unless_asked(how, loud):
     if how == "environment":
         env["GLOG_minloglevel"] = "0"
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300,
-                         cwd=str(Path(__file__).resolve().parents[1]))
+                         cwd=str(Path(__file__).resolve().parents[2]))
     assert run.returncode == 0, run.stderr[-2000:]
     assert int(run.stdout.split()[-1]) >= 2                     # the mapper did run and register images
     lines = re.findall(_GLOG_LINE, run.stderr)

@@ -6,7 +6,6 @@ notebooks from the shell as an instructor would.
 """
 from __future__ import annotations
 
-import ast
 import importlib
 import json
 import re
@@ -21,10 +20,10 @@ import pytest
 from nbclient import NotebookClient
 
 from graders.core.chapters import READY
+from notebook_stubs import CHAPTER_OF, OPENCV_STUBS_CH01, ROOT, replace_stubs as _replace_stubs, solved as _solved
+from notebook_stubs import tags as _tags
 
-ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = [ROOT / c.notebook for c in READY]
-CHAPTER_OF = {c.notebook.split("/")[-1]: c for c in READY}
 BUDGET_S = 60.0
 PLOT_CALL = re.compile(r"\b(plt|ax|axes|fig)\.\w*(plot|imshow|scatter|quiver|hist|bar|contour)\w*\(")
 
@@ -58,10 +57,6 @@ def _cells(path):
     return nbformat.read(path, as_version=4).cells
 
 
-def _tags(cell):
-    return set(cell.get("metadata", {}).get("tags", []))
-
-
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
 def test_stored_without_outputs(path):
     dirty = [i for i, c in enumerate(_cells(path), 1)
@@ -88,33 +83,6 @@ def test_cell_conventions(path):
         if re.search(r"^(\w+)\s*=\s*use\(\"[\d.]+\",\s*\1\)", src, re.M):
             problems.append(f"cell {i}: rebinds the learner's name to use(...); use a new name")
     assert not problems, "\n".join(problems)
-
-
-def _replace_stubs(path: Path, source_for) -> nbformat.NotebookNode:
-    """The notebook with each stub cell's names defined by `source_for(name)` (or left as is: None)."""
-    nb = nbformat.read(path, as_version=4)
-    for cell in nb.cells:
-        if "stub" not in _tags(cell):
-            continue
-        names = [n.name if isinstance(n, ast.FunctionDef) else n.targets[0].id
-                 for n in ast.parse(cell.source).body if isinstance(n, (ast.FunctionDef, ast.Assign))]
-        sources = [source_for(name) for name in names]
-        if all(sources):
-            cell.source = "\n".join(sources)
-    return nb
-
-
-def _solved(path: Path) -> nbformat.NotebookNode:
-    """The notebook with every stub cell replaced by imports of the reference answers."""
-    package = CHAPTER_OF[path.name].solutions     # exports every learner name of the chapter
-    module = importlib.import_module(package)
-
-    def source_for(name):
-        if not hasattr(module, name):
-            raise LookupError(f"{package} does not export `{name}`, which a stub of {path.name} defines")
-        return f"from {package} import {name}"
-
-    return _replace_stubs(path, source_for)
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
@@ -186,19 +154,6 @@ def test_shell_grader_on_solved_notebook(tmp_path):
     nbformat.write(_solved(path), solved)
     doc = _grade(solved, tmp_path / "r.json")
     assert doc["score"] == doc["max_score"], [t["output"] for t in doc["tests"] if t["score"] < t["max_score"]]
-
-
-# Chapter 1 stubs answered by OpenCV (or scipy where a fix is a fit): every exercise OpenCV can
-# answer gets full marks; OpenCV's fisheye model stops at 90°, which costs exactly those cases.
-OPENCV_STUBS_CH01 = {
-    "project_points": "from graders.ch01_camera_models import cv_project as project_points",
-    "undistort_points": "from graders.ch01_camera_models import cv_undistort as undistort_points",
-    "fisheye_project": "from graders.ch01_camera_models import cv_fisheye_project as fisheye_project",
-    "fix_distortion": "from graders.ch01_camera_models import cv_fix_distortion as fix_distortion",
-    "fix_extrinsics": "from graders.ch01_camera_models import cv_fix_extrinsics as fix_extrinsics",
-    "fix_principal_point": "from graders.ch01_camera_models import cv_fix_principal_point as fix_principal_point",
-    "fit_focal_k1": "from graders.ch01_camera_models import scipy_fit_focal_k1 as fit_focal_k1",
-}
 
 
 def test_shell_grader_on_opencv_notebook(tmp_path):

@@ -9,7 +9,7 @@ import pytest
 
 from graders.core.chapters import CHAPTERS, READY, by_number, readme_table
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_readme_chapter_list_is_the_table():
@@ -19,7 +19,8 @@ def test_readme_chapter_list_is_the_table():
 @pytest.mark.parametrize("ch", READY, ids=lambda c: c.prefix)
 def test_every_file_of_a_chapter_uses_its_stem(ch):
     for rel in (ch.notebook, f"graders/{ch.prefix}/__init__.py", f"solutions/{ch.prefix}/__init__.py",
-                f"tests/mutants/{ch.prefix}.py", f"tests/test_{ch.prefix}.py", f"benchmarks/{ch.prefix}.py"):
+                f"tests/mutants/{ch.prefix}.py", f"tests/mutants/{ch.prefix}_contract.py",
+                f"tests/chapters/test_{ch.prefix}.py", f"benchmarks/{ch.prefix}.py"):
         assert (ROOT / rel).exists() or (ROOT / rel.removesuffix(".py") / "__init__.py").exists(), rel  # or a package
     importlib.import_module(ch.grader)
     importlib.import_module(ch.solutions)

@@ -14,7 +14,7 @@ import pytest
 
 from graders.core.chapters import READY
 from graders.grading.isolation import sandbox_level
-from test_notebooks import OPENCV_STUBS_CH01, ROOT, _replace_stubs, _solved
+from notebook_stubs import OPENCV_STUBS_CH01, ROOT, replace_stubs as _replace_stubs, solved as _solved
 
 CH01 = ROOT / "notebooks" / "01_camera_models.ipynb"
 

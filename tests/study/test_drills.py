@@ -22,7 +22,7 @@ from graders.core.compare import max_abs
 from graders.study.reference import CORRECTIONS, TABLES, pipeline_numbers, reference_cards
 
 # The course's source text, outside the repo: ../shared beside the checkout (as in CI and the workplace).
-SEED_LESSON = Path(__file__).resolve().parents[2] / "shared" / "seed" / "000_222a4a16e5d953e6.txt"
+SEED_LESSON = Path(__file__).resolve().parents[3] / "shared" / "seed" / "000_222a4a16e5d953e6.txt"
 
 
 @pytest.fixture

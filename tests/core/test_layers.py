@@ -7,7 +7,7 @@ from pathlib import Path
 
 from graders.layers import BY_NAME, LAYERS, layer_of, markdown
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 GRADERS = ROOT / "graders"
 MAX_MODULE_LINES = 600
 MAX_FUNCTION_LINES = 80

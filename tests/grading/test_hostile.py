@@ -16,7 +16,7 @@ import nbformat
 import pytest
 
 from graders.core.chapters import READY
-from test_notebooks import ROOT, _replace_stubs
+from notebook_stubs import ROOT, replace_stubs as _replace_stubs
 
 MARKER = f"cv3d-hostile-{uuid.uuid4().hex[:8]}"
 

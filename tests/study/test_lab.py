@@ -14,7 +14,7 @@ from pathlib import Path
 
 from graders.core.chapters import READY
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _free_port() -> int:

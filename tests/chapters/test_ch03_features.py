@@ -181,7 +181,7 @@ def test_notebook_states_the_numbers_the_grader_uses():
     # The questions' numbers live in the grader (answers computed from them) and in the notebook's text.
     import json
     from pathlib import Path
-    nb = json.loads((Path(__file__).resolve().parents[1] / "notebooks" / "03_features.ipynb").read_text())
+    nb = json.loads((Path(__file__).resolve().parents[2] / "notebooks" / "03_features.ipynb").read_text())
     text = {i: "".join(c["source"]) for i, c in enumerate(nb["cells"]) if c["cell_type"] == "markdown"}
     q = {qid: next(t for t in text.values() if f"Question {qid} " in t) for qid in ("3.20", "3.21", "3.22")}
     assert f"$s = {ch3.S_320}$" in q["3.20"] and f"$\\sigma_0 = {ch3.SIGMA0_320:g}$" in q["3.20"]

@@ -22,7 +22,7 @@ from solutions.geometry import rodrigues  # the exponential map 1.10 uses (one c
 
 SEEDS = [0, 1, 2]
 W, H = 1280, 960
-SOLUTION = Path(__file__).resolve().parents[1] / "solutions" / "ch01_camera_models" / "__init__.py"
+SOLUTION = Path(__file__).resolve().parents[2] / "solutions" / "ch01_camera_models" / "__init__.py"
 
 
 # ============================================================ scene helpers ====

@@ -7,7 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-GRADERS = Path(__file__).resolve().parents[1] / "graders"
+GRADERS = Path(__file__).resolve().parents[2] / "graders"
 
 
 def test_no_graders_module_mentions_solutions_in_an_import():
