@@ -1,7 +1,7 @@
-"""Chapter 6 graders (core: 6.1-6.11, 6.18, 6.19, 6.21-6.27): the reference and the gtsam-backed versions
-pass; every mutant fails. Front-end's exercises are tested in tests/test_ch06_slam_frontend.py.
-
-Seeds are fixed so a failure here is reproducible; the graders themselves draw fresh seeds for learners.
+"""Chapter 6 beyond the contract suite (tests/chapters/test_contract.py, data in
+tests/mutants/ch06_slam_contract.py): the reference's Jacobians and objective against GTSAM, the g2o writer
+through gtsam.readG2o, the real pose graphs' objectives, evo's APE on the TUM pair and its association, and the
+IMU truth.
 """
 from __future__ import annotations
 
@@ -9,31 +9,12 @@ import numpy as np
 import pytest
 
 import grader_checks as checks
-from graders import chapter, get
+from graders import chapter
 from graders.kit import datasets
 from graders import ch06_slam as ch6
-from mutants.ch06_slam import MUTANTS
 from solutions import ch06_slam as slam
 
-SEEDS = [0, 1, 2]
-FRONT_END = {"6.12", "6.13", "6.14", "6.15", "6.16", "6.17", "6.20"}
-EXERCISES = {ex.id: ex for ex in chapter(6) if ex.id not in FRONT_END}
-CORE_MUTANTS = [m for m in MUTANTS if m[0] not in FRONT_END]
-
-
-def reference(ex) -> object:
-    return checks.reference(ex, (slam,))
-
-
-# Library-backed implementations: exercise id -> (function, cases it cannot answer and why).
-LIBRARY = {
-    "6.7": (ch6.gt_lie_ops, {}),
-    "6.8": (ch6.gt_read_g2o, {}),
-    "6.27": (ch6.gt_write_g2o, {}),       # gtsam.writeG2o: 6 significant digits, inside 6.27's tolerance
-    "6.9": (ch6.gt_between_residuals, {}),
-    "6.10": (ch6.gt_optimize_pose_graph, {}),
-    "6.11": (ch6.gt_robust_pose_graph, {}),
-}
+EXERCISES = {ex.id: ex for ex in chapter(6)}
 HAVE_POSEGRAPH = datasets.available("posegraph")
 
 
@@ -91,33 +72,35 @@ def test_real_graph_objectives():
     assert abs(ch6.g2o_chi2(T, *ch6.graph_args(intel)[1:]) / 45.005 - 1) < 1e-4
 
 
-@pytest.mark.parametrize("seed", SEEDS)
-@pytest.mark.parametrize("exercise_id", list(EXERCISES))
-def test_reference_gets_full_marks(exercise_id, seed):
-    checks.assert_full_marks(EXERCISES[exercise_id], reference(EXERCISES[exercise_id]), seed)
+# ----------------------------------------------------------------- front-end (6.12-6.17, 6.20)
+
+needs_tum = pytest.mark.skipif(not datasets.available("trajectories"),
+                               reason="TUM trajectories not available (python -m graders.datasets fetch trajectories)")
 
 
-@pytest.mark.parametrize("seed", SEEDS)
-@pytest.mark.parametrize("exercise_id", list(LIBRARY))
-def test_library_backed_implementation_passes(exercise_id, seed):
-    fn, cannot = LIBRARY[exercise_id]
-    checks.assert_library_passes(get(exercise_id), fn, seed, cannot)
+@needs_tum
+def test_evo_ape_figure_on_the_tum_pair():
+    # `evo_ape tum freiburg1_xyz-groundtruth.txt freiburg1_xyz-rgbdslam.txt -a` (evo 1.38.1) prints
+    # rmse 0.013470 m; the oracle and the reference both reproduce it.
+    pair = ch6.load_tum_pair()
+    assert abs(ch6.evo_trajectory_errors(**pair)[0] - 0.013470) < 5e-7
+    assert abs(slam.trajectory_errors(**pair)[0] - 0.013470) < 5e-7
 
 
-@pytest.mark.parametrize("exercise_id", [i for i, ex in EXERCISES.items() if ex.fallback is not None])
-def test_fallback_passes(exercise_id):
-    checks.assert_fallback_passes(EXERCISES[exercise_id])
+def test_association_matches_evo_on_a_gap():
+    # evo's association keeps an estimate pose only if a ground-truth stamp lies within 0.01 s.
+    from evo.core import sync
+
+    pair = ch6.synthetic_pair(np.random.default_rng(5))
+    ia, ib = slam.associate(pair["stamps_est"], pair["stamps_gt"])
+    ea, eb = sync.matching_time_indices(pair["stamps_est"], pair["stamps_gt"], 0.01)
+    assert list(ia) == list(ea) and list(ib) == list(eb)
+    assert len(ia) < len(pair["stamps_est"])   # the planted gap drops some poses
 
 
-@pytest.mark.parametrize("exercise_id, name, mutant, hint", CORE_MUTANTS, ids=[f"{m[0]}-{m[1]}" for m in CORE_MUTANTS])
-def test_mutant_is_caught(exercise_id, name, mutant, hint):
-    checks.assert_mutant_caught(EXERCISES[exercise_id], name, mutant, hint, SEEDS)
-
-
-def test_every_code_and_debug_exercise_has_mutants():
-    checks.assert_enough_mutants(EXERCISES, CORE_MUTANTS)
-
-
-@pytest.mark.parametrize("exercise_id", [i for i, ex in EXERCISES.items() if ex.value])
-def test_value_hints_are_quiet_on_the_answer(exercise_id):
-    checks.assert_value_hints_quiet(EXERCISES[exercise_id], reference(EXERCISES[exercise_id]))
+def test_imu_truth_is_exact_for_zero_order_hold_data():
+    # The synthetic windows are built so that Forster's discrete scheme is exact (the truth case's premise).
+    w = ch6.imu_window(np.random.default_rng(3), noise=False)
+    dR, dv, dp = ch6.gtsam_deltas(w["omega_m"], w["acc_m"], w["dt"], w["b_g"], w["b_a"])
+    tR, tv, tp = ch6.true_deltas(w)
+    assert np.abs(dR - tR).max() < 1e-12 and np.abs(dv - tv).max() < 1e-10 and np.abs(dp - tp).max() < 1e-10

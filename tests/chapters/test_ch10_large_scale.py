@@ -1,8 +1,7 @@
-"""Chapter 10 graders, part A (10.1-10.3, 10.6-10.8, 10.11, 10.14-10.16): the reference and the
-library-backed versions pass; every mutant fails and its hint fires.
-
-Seeds are fixed so a failure here is reproducible; the graders themselves draw fresh seeds for
-learners. Part B's exercises are tested in tests/test_ch10_large_scale_learned.py.
+"""Chapter 10 beyond the contract suite (tests/chapters/test_contract.py, data in
+tests/mutants/ch10_large_scale_contract.py): the vocabulary tree's words and baseline, Sim(3) moving cameras with
+the world, the broken capture of 10.11, the value answers, the pose model's memory limit, the domain gap of 10.12
+and the classical-vs-pointmap race.
 """
 from __future__ import annotations
 
@@ -14,64 +13,8 @@ from graders.core.chapters import READY
 if 10 not in {c.number for c in READY}:   # a planned chapter: its graders are work in progress, not yet held to the tests
     pytest.skip("chapter 10 is planned (ready=False in graders/core/chapters.py)", allow_module_level=True)
 
-import grader_checks as checks
-from graders import chapter, get
 from graders import ch10_large_scale as ch10
-from mutants.ch10_large_scale import MUTANTS
-from solutions import ch10_large_scale as large_scale
-
-SEEDS = [0, 1, 2]
-PART_A = ("10.1", "10.2", "10.3", "10.6", "10.7", "10.8", "10.11", "10.14", "10.15", "10.16")
-EXERCISES = {ex.id: ex for ex in chapter(10) if ex.id in PART_A}
-
-
-def reference(ex) -> object:
-    return checks.reference(ex, (large_scale,))
-
-
-# Library-backed implementations: exercise id -> (function, cases it cannot answer and why).
-LIBRARY = {
-    "10.6": (ch10.cv_vocab_tree_retrieve, {}),      # cv2.kmeans (k-means++) per node
-    # pycolmap.estimate_sim3d_robust returns None on exactly coplanar landmarks (degenerate for its solver).
-    "10.7": (ch10.cv_sim3_ransac, {"6 exact pairs on a façade: rotation": "pycolmap refuses coplanar sets",
-                                   "6 exact pairs on a façade: scale": "pycolmap refuses coplanar sets"}),
-}
-
-
-def test_part_a_exercises_are_registered():
-    assert set(EXERCISES) == set(PART_A)
-
-
-@pytest.mark.parametrize("seed", SEEDS)
-@pytest.mark.parametrize("exercise_id", list(EXERCISES))
-def test_reference_gets_full_marks(exercise_id, seed):
-    checks.assert_full_marks(EXERCISES[exercise_id], reference(EXERCISES[exercise_id]), seed)
-
-
-@pytest.mark.parametrize("seed", SEEDS)
-@pytest.mark.parametrize("exercise_id", list(LIBRARY))
-def test_library_backed_implementation_passes(exercise_id, seed):
-    fn, cannot = LIBRARY[exercise_id]
-    checks.assert_library_passes(get(exercise_id), fn, seed, cannot)
-
-
-@pytest.mark.parametrize("exercise_id", [i for i, ex in EXERCISES.items() if ex.fallback is not None])
-def test_fallback_passes(exercise_id):
-    checks.assert_fallback_passes(EXERCISES[exercise_id])
-
-
-@pytest.mark.parametrize("exercise_id, name, mutant, hint", MUTANTS, ids=[f"{m[0]}-{m[1]}" for m in MUTANTS])
-def test_mutant_is_caught(exercise_id, name, mutant, hint):
-    checks.assert_mutant_caught(EXERCISES[exercise_id], name, mutant, hint, SEEDS)
-
-
-def test_every_code_and_debug_exercise_has_mutants():
-    checks.assert_enough_mutants(EXERCISES, MUTANTS)
-
-
-@pytest.mark.parametrize("exercise_id", [i for i, ex in EXERCISES.items() if ex.value])
-def test_value_hints_are_quiet_on_the_answer(exercise_id):
-    checks.assert_value_hints_quiet(EXERCISES[exercise_id], reference(EXERCISES[exercise_id]))
+from solutions import ch10_large_scale as ref
 
 
 def test_structured_words_are_recovered_by_hierarchical_kmeans():
@@ -115,3 +58,41 @@ def test_broken_capture_falls_apart_and_the_fallback_joins_it():
     case = ch10.debug_case("10.11", seed=4)
     assert case["components_before"] > 10
     assert ch10.components_after(4, ch10.cv_fix_components(case)) <= 2
+
+
+def test_the_value_answers_are_the_solutions_package_s():
+    # the answers as the questions state them, against the solutions package the contract suite grades
+    assert ref.pointmap_costs == [2 * 4 * 512 * 384, 50 * 49, 500, 4.0]
+    assert ref.pipeline_choices == ["learned", "classical", "learned", "hybrid", "classical", "classical"]
+
+
+def test_the_pose_model_refuses_more_views_than_it_holds():
+    case = ch10.debug_case("10.13", seed=3)
+    with pytest.raises(MemoryError):
+        case["model"](list(range(case["max_views"] + 1)))
+    out = case["model"](list(range(case["max_views"])))
+    assert out["Rs"].shape == (case["max_views"], 3, 3)
+    assert np.allclose(out["Rs"][0], np.eye(3)) and np.allclose(out["ts"][0], 0)   # the first view's frame
+
+
+def test_out_of_domain_scenes_show_low_confidence_and_textureless_ones_lose_views():
+    # The diagnosis 10.12 teaches rests on this: each failure is visible in the case, not only in the truth.
+    for seed in range(5):
+        case = ch10.debug_case("10.12", seed=seed)
+        ratios = [np.median(s["learned"]["confidence"]) / case["indoor_confidence"] for s in case["scenes"]]
+        lost = [not np.isfinite(s["classical"]["Rs"]).all() for s in case["scenes"]]
+        assert min(ratios) < 0.3 and max(ratios) > 0.5 and any(lost)
+
+
+def test_the_race_scores_both_routes_on_one_scene():
+    # The experiment's two rows: with 120 keypoints a view classical SfM registers every view and is the more
+    # accurate route; with 30 (textureless) too few are shared between views and it registers none, while the
+    # pointmaps (the grader's alignment) place all six within 1 degree either way.
+    for keypoints, registered in ((120, 6), (30, 0)):
+        sc = ch10.race_scene(np.random.default_rng(7), n_views=6, keypoints=keypoints)
+        res = ch10.race(sc, ch10.gt_global_alignment)
+        assert res["classical"]["registered"] == registered and res["pointmaps"]["registered"] == 6
+        assert res["pointmaps"]["rot_deg"] < 1.0
+    sc = ch10.race_scene(np.random.default_rng(7), n_views=6, keypoints=120)
+    res = ch10.race(sc, ch10.gt_global_alignment)
+    assert res["classical"]["rot_deg"] < res["pointmaps"]["rot_deg"]
