@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import uuid
 from pathlib import Path
 
 import nbformat
@@ -104,7 +105,7 @@ def fisheye_project(X_c, K, D):
 
 def frame_change(src, dst):
     here = os.path.dirname(os.path.abspath(__file__)) if "__file__" in globals() else os.getcwd()
-    for target in ("%s/graders/__init__.py" % ROOT_DIR, "/tmp/cv3d-cheat-was-here"):
+    for target in ("%s/graders/__init__.py" % ROOT_DIR, "%CHEAT%"):
         with open(target, "a") as f:
             f.write("# cheat\\n")
     return np.eye(3)
@@ -115,7 +116,8 @@ ROOT_DIR = "%ROOT%"
 
 def test_cheating_earns_nothing_and_changes_nothing(tmp_path):
     learner = tmp_path / "01_camera_models.py"
-    learner.write_text(CHEATS.replace("%ROOT%", str(ROOT)))
+    cheat = Path(f"/tmp/cv3d-cheat-was-here-{uuid.uuid4().hex[:8]}")   # this run's own: no stale file, no neighbour
+    learner.write_text(CHEATS.replace("%ROOT%", str(ROOT)).replace("%CHEAT%", str(cheat)))
     before = (ROOT / "graders" / "__init__.py").read_bytes()
     tests = _grade(learner, tmp_path / "r.json", "--only", "1.5,1.6,1.7,1.9")
     assert all(t["score"] == 0 for t in tests.values()), {k: t["output"][:300] for k, t in tests.items()}
@@ -123,6 +125,7 @@ def test_cheating_earns_nothing_and_changes_nothing(tmp_path):
     assert (ROOT / "graders" / "__init__.py").read_bytes() == before
     if sandbox_level() == "namespaces":
         assert "Read-only file system" in tests["1.9"]["output"], tests["1.9"]["output"][:500]
-        assert not Path("/tmp/cv3d-cheat-was-here").exists()
+        assert not cheat.exists()
     else:
+        cheat.unlink(missing_ok=True)
         pytest.skip("this machine cannot give the learner a read-only file system (needs Linux namespaces as root)")
