@@ -17,6 +17,10 @@ from graders.ch11_capstone import demo as D
 from graders.ch11_capstone.degradation import MODES
 from graders.ch11_capstone.pipeline import STANDINS
 
+# Tests that use the drive runs (a module-scoped fixture) run on one worker of a parallel run, so it is built once
+# (pytest-xdist, --dist loadgroup).
+SHARED = pytest.mark.xdist_group("ch11_drive_runs")
+
 SEED = 0
 K, HOLD = 3, 4
 DARK = [{"kind": "exposure_drop", "start": 5, "stop": 10, "gain": 0.03}]     # frames 5-9: the image goes dark
@@ -50,6 +54,7 @@ def test_the_monitor_stream_is_finite_where_a_stage_measured_nothing():
     assert np.allclose(cols["vo_error_deg"], [0.1, A.VO_LOST_DEG, A.VO_LOST_DEG, 0.2])
 
 
+@SHARED
 def test_drive_run_shapes(dark_run):
     r, T, M = dark_run, 21, len(A.MONITORED)
     assert list(r["frames"]) == list(range(1, 22))
@@ -61,6 +66,7 @@ def test_drive_run_shapes(dark_run):
     assert r["faults"][4] == ["exposure_drop"] and r["faults"][9] == []        # frame 5 (index 4) .. frame 9
 
 
+@SHARED
 def test_a_total_feature_loss_drives_the_machine_down_and_recovery_brings_it_back(dark_run):
     r = dark_run
     assert A.mode_changes(r["modes"]) == ["stereo VIO", "direct VO", "stereo VIO"]   # stereo stays healthy
@@ -78,6 +84,7 @@ def test_a_total_feature_loss_drives_the_machine_down_and_recovery_brings_it_bac
     assert not r["alerts"][back:].any()
 
 
+@SHARED
 def test_the_learner_functions_drive_it_the_same_way(dark_run):
     from solutions.ch11_capstone import degradation_modes, health_monitor
     r = A.drive_run(DARK, monitor=health_monitor, modes=degradation_modes, k=K, hold=HOLD, n_frames=22, seed=SEED)
@@ -110,6 +117,7 @@ def test_the_data_flow():
     assert D.downstream_of("images") == set(D.STAGE_FAULTS) and D.downstream_of("VO") == set()
 
 
+@SHARED
 def test_no_fault_no_flag_and_the_stand_ins_untouched(clean):
     assert D.stage_faults({}, {"frames": []}) == STANDINS
     assert not any(r["flag"] for r in clean["rows"]) and clean["faulted"] == [] and clean["moved"] == []
@@ -124,6 +132,7 @@ def test_no_fault_no_flag_and_the_stand_ins_untouched(clean):
 @pytest.mark.parametrize("stage, must", [
     ("features", {"stereo matching", "map"}), ("stereo matching", {"map", "VO"}), ("tracking", {"RANSAC", "VO"}),
     ("RANSAC", set()), ("VO", set()), ("dense stereo", set()), ("map", {"VO"})])
+@SHARED
 def test_one_stage_in_isolation_moves_its_own_metrics_and_only_downstream(clean, stage, must):
     r = D.stage_run({stage: 1.0}, seed=SEED, clean=clean["clean"])
     assert r["faulted"] == [stage]
@@ -131,6 +140,7 @@ def test_one_stage_in_isolation_moves_its_own_metrics_and_only_downstream(clean,
     assert any(row["flag"] for row in r["rows"] if row["own"])                # the fault shows at its own stage
 
 
+@SHARED
 def test_the_drawings_run(dark_run, clean):
     import matplotlib
     matplotlib.use("Agg")

@@ -14,6 +14,10 @@ from graders.kit import corridor, scene
 from graders.ch11_capstone import pipeline as P
 from graders.oracles import camera, features, flow, stereo, two_view
 
+# Tests that use the fault table (a module-scoped fixture) run on one worker of a parallel run, so it is built once
+# (pytest-xdist, --dist loadgroup).
+SHARED = pytest.mark.xdist_group("ch11_fault_table")
+
 SEED = 0
 
 
@@ -48,6 +52,7 @@ def table():
     return P.fault_table(SEED)
 
 
+@SHARED
 def test_a_clean_run_is_healthy(table):
     c = table["clean"]
     # seeds 0-3: 2,370-2,380 FAST corners, coverage 0.90, row error 0.04 px, inliers 0.997-1.0, rotation
@@ -66,6 +71,7 @@ def test_a_clean_run_is_healthy(table):
     ("calibration_drift", "stereo_matches", 0.6),   # matches off their row refused: 298 -> ~100
     ("exposure_drop", "landmarks", 0.5),       # 298 -> 95
 ])
+@SHARED
 def test_a_fault_lowers_its_stage_metric(table, kind, metric, factor):
     assert table[kind][metric] < factor * table["clean"][metric], (kind, metric, table[kind][metric])
 
@@ -78,10 +84,12 @@ def test_a_fault_lowers_its_stage_metric(table, kind, metric, factor):
     ("dropped_frames", "vo_trans_pct", 50.0),       # ~100 %: a repeated frame reads as standing still
     ("dropped_frames", "vo_rot_deg", 0.5),          # 1.35°/frame
 ])
+@SHARED
 def test_a_fault_raises_its_stage_metric(table, kind, metric, least):
     assert table[kind][metric] > least > 2 * table["clean"][metric], (kind, metric, table[kind][metric])
 
 
+@SHARED
 def test_a_stage_swaps_for_the_learners(table):
     """A stage passed in replaces the stand-in: FAST at a higher threshold finds fewer corners, nothing else
     changes its signature."""

@@ -19,6 +19,10 @@ from graders.core.chapters import READY
 from graders.grading.release import gradescope_bundle, student_release
 from notebook_stubs import ROOT, solved as _solved
 
+# Tests that use the student release (a module-scoped fixture) run on one worker of a parallel run, so it is built once
+# (pytest-xdist, --dist loadgroup).
+SHARED = pytest.mark.xdist_group("release")
+
 SITE = next(p for p in sys.path if p.endswith("site-packages") and Path(p, "numpy").exists())
 
 
@@ -49,6 +53,7 @@ def release(tmp_path_factory):
     return student_release(tmp_path_factory.mktemp("rel") / "course")
 
 
+@SHARED
 def test_release_has_no_reference_code(release):
     assert not (release / "solutions").exists()
     texts = {p: p.read_text(errors="ignore") for p in release.rglob("*") if p.is_file() and p.suffix in (".py", ".ipynb", ".md", ".toml")}
@@ -66,6 +71,7 @@ def test_release_has_no_reference_code(release):
         assert (release / ch.notebook).exists() and (release / "graders" / ch.prefix).is_dir()
 
 
+@SHARED
 def test_release_installs_in_a_fresh_venv_and_every_notebook_runs(release, tmp_path):
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)  # pip and setuptools come with the pinned packages
