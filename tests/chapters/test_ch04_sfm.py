@@ -206,13 +206,19 @@ def test_real_photo_oracle_is_pycolmap_on_the_same_matches():
 def _rows_tagged(result, ex, seed, tag):
     """The result rows of the cases tagged `tag` (rows carry their case's key; display names may repeat:
     the K-known and the photo rows are both "largest rotation error after Sim(3) alignment")."""
-    return [r for r in result.cases if r.key in _keys_tagged(ex.id, seed, tag)]
+    keys = {key for key, tags in _case_tags(ex.id, seed) if tag in tags}
+    return [r for r in result.cases if r.key in keys]
+
+
+# The tests that read 4.14's photo rows share the draw above: one worker of a parallel run (--dist loadgroup).
+PHOTO_ROWS = pytest.mark.xdist_group("ch04_photo_rows")
 
 
 @functools.lru_cache(maxsize=None)
-def _keys_tagged(exercise_id, seed, tag) -> frozenset[str]:
-    # drawing 4.14's cases builds every scene and its expected values: once per (seed, tag), not once per test
-    return frozenset(c.key for c in EXERCISES[exercise_id].cases(np.random.default_rng(seed)) if tag in c.tags)
+def _case_tags(exercise_id, seed) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    # Drawing 4.14's cases builds every scene and its expected values (~1 min on a loaded machine): once per seed
+    # for this module, not once per test and tag.
+    return tuple((c.key, tuple(c.tags)) for c in EXERCISES[exercise_id].cases(np.random.default_rng(seed)))
 
 
 def _n_photo_rows():
@@ -221,6 +227,7 @@ def _n_photo_rows():
     return 4 * datasets.available("sacre_coeur") + 5 * datasets.available("sceaux_castle")
 
 
+@PHOTO_ROWS
 def test_real_photo_rows_pass_for_reference_and_stand_in():
     _need_sacre_coeur()
     ex = EXERCISES["4.14"]
@@ -254,6 +261,7 @@ def test_sceaux_oracle_agrees_with_the_known_K():
 SELF_CONSISTENT = [m for m in MUTANTS if m[0] == "4.14" and m[3] == "self-consistent but wrong"]
 
 
+@PHOTO_ROWS
 @pytest.mark.parametrize("name, mutant", [m[1:3] for m in SELF_CONSISTENT], ids=[m[1] for m in SELF_CONSISTENT])
 def test_self_consistent_but_wrong_models_fail_the_photos(name, mutant):
     # A model can reproject well and be wrong: these mutants keep a low reprojection error on the photos, and the
@@ -268,6 +276,7 @@ def test_self_consistent_but_wrong_models_fail_the_photos(name, mutant):
     assert any("self-consistent but wrong" in r.hint for r in failed), checks.show(result)
 
 
+@PHOTO_ROWS
 def test_focal_never_refined_fails_the_real_photos():
     _need_sacre_coeur()
     from mutants.ch04_sfm import sfm_focal_never_refined
