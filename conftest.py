@@ -42,19 +42,43 @@ def pytest_collection_modifyitems(config, items):
     items.sort(key=lambda item: rank[id(item)])
 
 
+# Tests that share an expensive module-scoped fixture (a student release, a pipeline's fault table, a drive
+# run, one draw of 4.14's photo cases) run on one worker, which builds it once: file -> test names (None: all).
+ONE_WORKER = {
+    "tests/grading/test_release.py": None,
+    "tests/chapters/test_ch11_capstone_demo.py": None,
+    "tests/chapters/test_ch11_capstone_pipeline.py": None,
+    "tests/chapters/test_ch04_sfm.py": ("test_real_photo_rows_pass_for_reference_and_stand_in",
+                                        "test_self_consistent_but_wrong_models_fail_the_photos",
+                                        "test_focal_never_refined_fails_the_real_photos"),
+}
+
+
+def worker_group(nodeid: str) -> str:
+    """The unit pytest-xdist schedules: a notebook (its cells run in order in one kernel), a ONE_WORKER group,
+    else the test itself."""
+    path, _, name = nodeid.partition("::")
+    if path.endswith(".ipynb"):
+        return path
+    if path in ONE_WORKER:
+        names = ONE_WORKER[path]
+        if names is None or name.split("[")[0] in names:
+            return path
+    return nodeid
+
+
 def pytest_xdist_make_scheduler(config, log):
-    """Under pytest-xdist each notebook's cells run in order in one kernel, so a notebook goes whole to one
-    worker; every other test is scheduled on its own. (xdist's `--dist loadgroup` would do this from marks,
-    but pytest 9 derives node ids from `Node._id`, so xdist 3.8's renaming of `_nodeid` has no effect.)
-    Larger groups are sent first (xdist's default reordering), so the notebooks start early."""
+    """Under pytest-xdist (make test: 2 workers) each `worker_group` goes whole to one worker. (xdist's own
+    `--dist loadgroup` reads `xdist_group` marks by renaming `Node._nodeid`, which pytest 9 no longer reads,
+    so its groups are silently ignored.) Larger groups are sent first (xdist's default), so the notebooks
+    start early."""
     from xdist.scheduler import LoadScopeScheduling
 
-    class NotebookScheduling(LoadScopeScheduling):
+    class GroupScheduling(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
-            path = nodeid.split("::")[0]
-            return path if path.endswith(".ipynb") else nodeid
+            return worker_group(nodeid)
 
-    return NotebookScheduling(config, log)
+    return GroupScheduling(config, log)
 
 
 def pytest_runtest_logreport(report):

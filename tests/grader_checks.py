@@ -1,19 +1,32 @@
 """What every chapter's grader tests assert, written once.
 
-A chapter's `tests/test_chNN_graders.py` parametrises these over its exercises, seeds and mutant
-catalogue; the assertions (and their failure messages, which print the grade table and the seed)
-live here so that all chapters hold their graders to the same bar.
+`tests/chapters/test_contract.py` parametrises these over every ready chapter's exercises, seeds, library-backed
+answers and mutant catalogue (the data in `tests/mutants/chNN_<stem>_contract.py`); the assertions (and their
+failure messages, which print the grade table and the seed) live here so that all chapters hold their graders
+to the same bar.
 """
 from __future__ import annotations
 
 import re
 from types import ModuleType
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
 from graders import grade
 from graders.core.engine import Exercise
+
+
+class Library(NamedTuple):
+    """An implementation backed by a library (or another published algorithm) that must pass `exercise_id`.
+
+    cannot: the cases it cannot answer -> why. With `cannot_must_fail` they are named by case key (stable across
+    seeds) and must fail, documenting the limit; without, by display name, and they may pass or fail."""
+    exercise_id: str
+    name: str
+    fn: Callable
+    cannot: Mapping[str, str] = {}
+    cannot_must_fail: bool = False
 
 
 def show(result) -> str:
@@ -37,13 +50,25 @@ def assert_library_passes(ex: Exercise, fn: Callable, seed: int, cannot: dict[st
                           cannot_must_fail: bool = False) -> None:
     """A library-backed implementation passes every case except those in `cannot` (case name ->
     why the library cannot answer it); with `cannot_must_fail` those must fail, documenting the limit."""
+    assert_passes_but(grade(ex, fn, seed=seed), cannot, cannot_must_fail)
+
+
+def assert_passes_but(result, cannot: Mapping[str, str] | None = None, cannot_must_fail: bool = False) -> None:
+    """Every row of the grade `result` passes except those in `cannot` (see assert_library_passes)."""
     cannot = cannot or {}
-    result = grade(ex, fn, seed=seed)
     for row in result.cases:
         if row.name not in cannot:
             assert row.passed, show(result)
         elif cannot_must_fail:
             assert not row.passed, f"expected the library to fail '{row.name}' ({cannot[row.name]})"
+
+
+def cannot_by_name(ex: Exercise, seed: int, cannot_keys: Mapping[str, str]) -> dict[str, str]:
+    """`cannot_keys` (case key -> why) as the grade reports them (display name -> why) for this seed's cases;
+    every key must name a case."""
+    cannot = {c.name: cannot_keys[c.key] for c in ex.cases(np.random.default_rng(seed)) if c.key in cannot_keys}
+    assert len(cannot) == len(cannot_keys), f"no case with key(s) {set(cannot_keys)} in {ex.id}"
+    return cannot
 
 
 def assert_fallback_passes(ex: Exercise, seed: int = 3) -> None:

@@ -1,0 +1,70 @@
+"""Hostile learner code against the shell grader, chapter by chapter: an endless loop in every stub
+(each also starting a child process that would sleep for ever and leaving a temp file) must grade to
+0 points with a valid Gradescope JSON, within the grade's time-out budget, and leave no process and no
+temporary file behind."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import os
+import time
+import uuid
+from pathlib import Path
+
+import nbformat
+import pytest
+
+from graders.core.chapters import READY
+from notebook_stubs import ROOT, replace_stubs as _replace_stubs
+
+MARKER = f"cv3d-hostile-{uuid.uuid4().hex[:8]}"
+
+
+def _looping(name: str) -> str:
+    return (f"def {name}(*args, **kwargs):\n"
+            f"    import subprocess, tempfile\n"
+            f"    subprocess.Popen(['sleep', '600', '{MARKER}'], start_new_session=False)\n"
+            f"    open(tempfile.mkstemp(prefix='{MARKER}-')[1], 'w').write('left behind')\n"
+            f"    while True:\n"
+            f"        pass\n")
+
+
+def _stub_function_names(path: Path) -> set[str]:
+    import ast
+    names = set()
+    for cell in nbformat.read(path, as_version=4).cells:
+        if "stub" in cell.get("metadata", {}).get("tags", []):
+            names |= {n.name for n in ast.parse(cell.source).body if isinstance(n, ast.FunctionDef)}
+    return names
+
+
+def _alive(marker: str) -> list[str]:
+    out = subprocess.run(["pgrep", "-af", marker], capture_output=True, text=True).stdout
+    return [line for line in out.splitlines() if "pgrep" not in line]
+
+
+@pytest.mark.parametrize("ch", READY, ids=lambda c: c.prefix)
+def test_loop_in_every_stub_grades_quickly_and_cleanly(ch, tmp_path):
+    path = ROOT / ch.notebook
+    functions = _stub_function_names(path)
+    nb = _replace_stubs(path, lambda name: _looping(name) if name in functions else None)
+    nbformat.write(nb, tmp_path / path.name)
+    scratch = tmp_path / "tmp"      # the grade's own temp directory: whatever it leaves is its own
+    scratch.mkdir()
+    start = time.monotonic()
+    proc = subprocess.run([sys.executable, "-m", "graders", "check", str(tmp_path / path.name),
+                           "--json", str(tmp_path / "r.json")], capture_output=True, text=True, timeout=600, cwd=ROOT,
+                          env=dict(os.environ, TMPDIR=str(scratch)))
+    seconds = time.monotonic() - start
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert doc["score"] == 0 and doc["max_score"] > 0
+    assert len(doc["tests"]) == len([e for e in __import__("graders").engine.chapter(ch.key)])
+    outputs = "\n".join(t["output"] for t in doc["tests"])
+    assert "time limit" in outputs and "not run" in outputs, outputs[:3000]
+    # The time-out budget (3 exercises) bounds the grade: 3 time limits, loading, and the questions.
+    print(f"{ch.prefix}: loop in every stub graded in {seconds:.0f} s")
+    assert seconds < 240, f"{seconds:.0f} s"
+    assert not _alive(MARKER), _alive(MARKER)
+    assert not list(scratch.iterdir()), list(scratch.iterdir())

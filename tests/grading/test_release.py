@@ -1,0 +1,154 @@
+"""Graded coursework: the student edition (no solutions, every notebook runs from a fresh venv), the
+Gradescope autograder (run as Gradescope runs it, valid results.json in every failure mode) and the
+batch grader (every row present, resumable)."""
+from __future__ import annotations
+
+import ast
+import csv
+import json
+import os
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import nbformat
+import pytest
+
+from graders.core.chapters import READY
+from graders.grading.release import gradescope_bundle, student_release
+from notebook_stubs import ROOT, solved as _solved
+
+# Tests that use the student release (a module-scoped fixture) run on one worker of a parallel run, so it is built once
+# (conftest.py, ONE_WORKER).
+
+SITE = next(p for p in sys.path if p.endswith("site-packages") and Path(p, "numpy").exists())
+
+
+def _bodies(source: str) -> dict[str, str]:
+    """Every function body of `source` (docstring dropped, AST-normalised) with >= 3 statements: body -> name."""
+    try:
+        tree = ast.parse(source)
+    except SyntaxError:
+        return {}
+    out = {}
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            body = node.body[1:] if ast.get_docstring(node) else node.body
+            if len(body) >= 3:
+                out["\n".join(ast.unparse(stmt) for stmt in body)] = node.name
+    return out
+
+
+def _code_of(path: Path) -> str:
+    if path.suffix == ".ipynb":
+        cells = nbformat.read(path, as_version=4).cells
+        return "\n".join(c.source for c in cells if c.cell_type == "code" and not c.source.lstrip().startswith(("%", "!")))
+    return path.read_text(errors="ignore")
+
+
+@pytest.fixture(scope="module")
+def release(tmp_path_factory):
+    return student_release(tmp_path_factory.mktemp("rel") / "course")
+
+
+def test_release_has_no_reference_code(release):
+    assert not (release / "solutions").exists()
+    texts = {p: p.read_text(errors="ignore") for p in release.rglob("*") if p.is_file() and p.suffix in (".py", ".ipynb", ".md", ".toml")}
+    mentions = [str(p) for p, t in texts.items() if "import solutions" in t or "from solutions" in t]
+    assert not mentions, mentions
+    reference = {}
+    for path in (ROOT / "solutions").rglob("*.py"):
+        reference |= _bodies(path.read_text())
+    assert len(reference) > 100     # the check has something to find
+    leaked = [f"{p.relative_to(release)}: {name} (reference {reference[body]})"
+              for p in texts if p.suffix in (".py", ".ipynb")
+              for body, name in _bodies(_code_of(p)).items() if body in reference]
+    assert not leaked, leaked
+    for ch in READY:
+        assert (release / ch.notebook).exists() and (release / "graders" / ch.prefix).is_dir()
+
+
+def test_release_installs_in_a_fresh_venv_and_every_notebook_runs(release, tmp_path):
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)  # pip and setuptools come with the pinned packages
+    pth = next((venv / "lib").glob("python3.*/site-packages"))
+    (pth / "_course_dependencies.pth").write_text(SITE + "\n")   # the pinned packages, not this checkout
+    py = str(venv / "bin" / "python")
+    subprocess.run([py, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation", "--no-index", "-e", str(release)],
+                   check=True, timeout=300, cwd=tmp_path)
+    probe = subprocess.run([py, "-c", "import graders, graders.core.chapters as c; print(graders.__file__, len(c.READY));"
+                            "import solutions"], capture_output=True, text=True, cwd=tmp_path)
+    assert "ModuleNotFoundError: No module named 'solutions'" in probe.stderr, probe.stderr + probe.stdout
+    assert probe.stdout.startswith(str(release / "graders")), probe.stdout   # the release, not this checkout
+    runner = ("import sys, nbformat\nfrom nbclient import NotebookClient\n"
+              "for path in sys.argv[1:]:\n"
+              "    nb = nbformat.read(path, as_version=4)\n"
+              "    NotebookClient(nb, timeout=120, kernel_name='python3', resources={'metadata': {'path': '.'}}).execute()\n"
+              "    print('ran', path)\n")
+    env = dict(os.environ, MPLBACKEND="Agg", COURSE_STATIC_PLOTS="1")
+    out = subprocess.run([py, "-c", runner, *[str(release / c.notebook) for c in READY]], capture_output=True,
+                         text=True, timeout=900, cwd=tmp_path, env=env)
+    assert out.returncode == 0, out.stderr[-4000:]
+    assert out.stdout.count("ran ") == len(READY)
+
+
+def _autograder(tmp_path: Path, submission: dict[str, str | bytes], secret: bytes | None, budget: float | None = None):
+    root = tmp_path / "autograder"
+    for d in ("source", "submission", "results"):
+        (root / d).mkdir(parents=True)
+    with zipfile.ZipFile(gradescope_bundle(tmp_path / "autograder.zip", 1, secret, budget)) as z:
+        z.extractall(root / "source")
+    run = root / "source" / "run_autograder"
+    run.chmod(0o755)
+    for name, content in submission.items():
+        (root / "submission" / name).write_bytes(content if isinstance(content, bytes) else content.encode())
+    env = dict(os.environ, AUTOGRADER_ROOT=str(root), AUTOGRADER_PYTHON=sys.executable)
+    proc = subprocess.run([str(run)], env=env, capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0 and proc.stdout == "", proc.stdout[-2000:] + proc.stderr[-2000:]
+    return json.loads((root / "results" / "results.json").read_text())
+
+
+def test_gradescope_autograder_grades_a_solved_notebook_with_hidden_cases(tmp_path):
+    nb = nbformat.writes(_solved(ROOT / "notebooks" / "01_camera_models.ipynb")).encode()
+    doc = _autograder(tmp_path, {"01_camera_models.ipynb": nb}, b"course-secret")
+    assert doc["score"] == doc["max_score"] > 0
+    assert doc["visibility"] == "after_due_date"          # no total before the due date
+    graded = [t for t in doc["tests"] if t["max_score"] > 0]
+    assert graded and all(t["visibility"] == "after_due_date" for t in graded)
+    assert any("feedback" in t["name"] and t["visibility"] == "visible" for t in doc["tests"])
+
+
+@pytest.mark.parametrize("submission, phrase", [
+    ({}, "No notebook"),
+    ({"01_camera_models.ipynb": "{ not a notebook"}, "could not read"),
+    ({"01_camera_models.py": "def project_points(*a):\n    while True:\n        pass\n"
+                             "def undistort_points(*a):\n    while True:\n        pass\n"
+                             "def fisheye_project(*a):\n    while True:\n        pass\n"}, "time limit"),
+], ids=["empty", "unparsable", "loops"])
+def test_gradescope_autograder_writes_valid_json_in_every_failure_mode(tmp_path, submission, phrase):
+    doc = _autograder(tmp_path, submission, b"s", budget=60)
+    assert doc["score"] == 0
+    text = doc.get("output", "") + " ".join(t["output"] for t in doc["tests"])
+    assert phrase in text, text[:2000]
+
+
+def test_batch_grades_every_submission_and_resumes(tmp_path):
+    subs, out = tmp_path / "subs", tmp_path / "grades"
+    (subs / "dora").mkdir(parents=True)
+    nbformat.write(_solved(ROOT / "notebooks" / "01_camera_models.ipynb"), subs / "alice.ipynb")
+    (subs / "bob.py").write_text("import os\nos._exit(3)\ndef project_points(*a):\n    os._exit(3)\n")
+    (subs / "carol.ipynb").write_text("not json")
+    cmd = [sys.executable, "-m", "graders", "batch", str(subs), "--out", str(out), "--chapter", "1"]
+    first = subprocess.run(cmd, capture_output=True, text=True, timeout=900, cwd=ROOT)
+    assert first.returncode == 0, first.stderr[-3000:]
+    rows = {r["submission"]: r for r in csv.DictReader((out / "gradebook.csv").open())}
+    assert set(rows) == {"alice", "bob", "carol", "dora"}
+    assert float(rows["alice"]["total"]) == float(rows["alice"]["max"]) > 0
+    assert all(float(rows[s]["total"]) == 0 for s in ("bob", "carol", "dora"))
+    assert rows["dora"]["status"] == "error" and "no notebook" in rows["dora"]["error"]
+    assert "1.5" in rows["alice"]
+    for sid in rows:
+        assert json.loads((out / sid / "results.json").read_text())["extra_data"]["complete"]
+    again = subprocess.run(cmd, capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert "4 already graded, 0 to grade" in again.stdout, again.stdout

@@ -1,0 +1,48 @@
+"""Chapter 9's contract data (tests/chapters/test_contract.py): the whole chapter's mutant catalogue (part A's in
+mutants/ch09_flow.py, part B's in mutants/ch09_flow_tracking.py) and the implementations backed by OpenCV, scipy
+and torch that must pass every case."""
+from __future__ import annotations
+
+import numpy as np
+from scipy.ndimage import map_coordinates
+
+from grader_checks import Library
+from graders import ch09_flow as ch9
+from mutants.ch09_flow import MUTANTS as _PART_A
+from mutants.ch09_flow_tracking import MUTANTS as _PART_B
+
+SEEDS = [0, 1, 2]
+MUTANTS = _PART_A + _PART_B
+
+
+def scipy_occlusion_mask(w_f, w_b, alpha=0.01, beta=0.5):
+    """9.14 with scipy's bilinear interpolation (map_coordinates, order 1) in place of the course's."""
+    H, W = w_f.shape[:2]
+    y, x = np.mgrid[0:H, 0:W].astype(float)
+    gx, gy = x + w_f[..., 0], y + w_f[..., 1]
+    wb = np.stack([map_coordinates(w_b[..., c], [gy, gx], order=1, mode="nearest") for c in (0, 1)], -1)
+    bad = np.sum((w_f + wb) ** 2, -1) >= alpha * (np.sum(w_f ** 2, -1) + np.sum(wb ** 2, -1)) + beta
+    return bad | (gx < 0) | (gx > W - 1) | (gy < 0) | (gy > H - 1)
+
+
+def scipy_scene_flow(D1, D2, flow, K):
+    H, W = D1.shape
+    y, x = np.mgrid[0:H, 0:W].astype(float)
+    xs, ys = x + flow[..., 0], y + flow[..., 1]
+    Z2 = map_coordinates(D2, [ys, xs], order=1, mode="nearest")
+    Kinv = np.linalg.inv(K)
+    P = lambda u, v, Z: Z[..., None] * (np.stack([u, v, np.ones_like(u)], -1) @ Kinv.T)
+    return P(xs, ys, Z2) - P(x, y, D1)
+
+
+def torch_grid_sample_lookup(corr, coords, radius):
+    return ch9.gt_corr_lookup(corr, coords, radius)
+
+
+LIBRARY = [Library("9.9", "cv_flow_tools", ch9.cv_flow_tools),
+           Library("9.10", "cv_lucas_kanade", ch9.cv_lucas_kanade),
+           Library("9.11", "cv_pyramidal_lk", ch9.cv_pyramidal_lk),
+           Library("9.13", "cv_dense_flow", ch9.cv_dense_flow),
+           Library("9.14", "scipy map_coordinates", scipy_occlusion_mask),
+           Library("9.16", "scipy map_coordinates", scipy_scene_flow),
+           Library("9.24", "torch grid_sample", torch_grid_sample_lookup)]
