@@ -5,8 +5,10 @@ A graph is a dict: "T" (N, d+1, d+1) poses (the start), "edges" (M, 2) indices, 
 measured T_i^-1 T_j, "info" (M, k, k) information in the residual's order (SE(2): (x, y, theta); SE(3):
 (omega, v), GTSAM's). The objective is chi2 = sum_e r_e^T info_e r_e with r_e = Log(Z_e^-1 T_i^-1 T_j),
 which is exactly 2 x GTSAM's NonlinearFactorGraph.error for BetweenFactorPose2/3 (GTSAM's error is
-0.5 r^T info r per factor). g2o's own chi2 differs for SE(3) (its error is (t, q_xyz) of the same
-delta, and its files store information for that vector): `g2o_chi2` evaluates it for the benchmark.
+0.5 r^T info r per factor). g2o's own chi2 differs for SE(3): its error is (t, q_xyz) of the same delta
+(g2o edge_se3.cpp, toVectorMQT), whose rotation part sin(theta/2) a is about half GTSAM's, and GTSAM's
+reader only reorders the file's information blocks (dataset.cpp), so rotation terms weigh ~1/4 in g2o's
+chi2: `g2o_chi2` evaluates it for the benchmark.
 """
 from __future__ import annotations
 

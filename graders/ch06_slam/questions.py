@@ -244,7 +244,8 @@ register(
                3: "(d) 0.5 s without features: the IMU integrates through the gap."},
         explanation="Monocular: cheapest, scale unobservable (fine when only shape matters or size is known). Stereo: "
                     "metric depth from the baseline (depth error grows as z^2 / (f b): 12 cm baseline, f = 700 px, "
-                    "0.2 px disparity noise -> 0.24 m at 10 m), no scale drift, but no help in blur or darkness. "
+                    "0.2 px disparity noise -> 0.24 m at 10 m), scale observed at every frame (no scale drift; position "
+                    "and heading still drift), but no help in blur or darkness. "
                     "VIO: the IMU observes scale and gravity and bridges short visual outages (gyro drift ~0.01 deg/s "
                     "for MEMS over a second is negligible), at the cost of time synchronisation and an initialisation "
                     "that needs motion."),

@@ -49,7 +49,7 @@ register(
                   1.5 * SYNC["hardware trigger"] * 1e3],
         tol=0.02, unit="rel.", shape=(4,), metric=relative,
         explanation="Position error = speed × desync: software 5 ms → 7.5 mm, NTP 1 ms → 1.5 mm, PTP 100 µs → 0.15 mm, "
-            "hardware trigger 1 µs → 1.5 µm (0.0015 mm). The lesson's 5 ms at 1 m/s = 5 mm scales linearly.",
+            "hardware trigger 1 µs → 1.5 µm (0.0015 mm). The often-quoted 5 ms at 1 m/s = 5 mm scales linearly.",
         hints=[value_hint([5, 1, 0.1, 0.001], "that is at 1 m/s; this robot moves at 1.5 m/s."),
                value_hint([7.5e-3, 1.5e-3, 1.5e-4, 1.5e-6], "the answer is in millimetres.")]),
     choice_question(

@@ -123,8 +123,10 @@ register(
         f"H = K_2 (R − t nᵀ/d) K_1⁻¹ — same homography, opposite convention. Here t = −R C_2 = (−0.2, 0, 0): "
         f"pixel (400, 240) on the plane Z = 4 m maps to ({SWEEP[0]:.0f}, {SWEEP[1]:.0f}), a disparity of "
         f"fB/Z = 500 × 0.2 / 4 = 25 px. Fusion: reproject the reference depth into each neighbour and compare with "
-        f"its depth map; within 1 %: 4.01 and 4.02 agree, 3.2 and 5.5 do not — {SWEEP[2]:.0f} consistent views, "
-        "enough for COLMAP's default of at least 2 (fusion needs min_num_pixels consistent observations).",
+        f"its depth map; within 1 %: 4.01 and 4.02 agree, 3.2 and 5.5 do not — {SWEEP[2]:.0f} consistent views. "
+        "COLMAP's fusion keeps a point only when at least min_num_pixels pixels fuse into it, and that default is 5 "
+        "(StereoFusionOptions, src/colmap/mvs/fusion.h): the reference pixel and 2 consistent neighbours make 3, "
+        "so this point is dropped by default — it needs 4 agreeing neighbours, or min_num_pixels lowered to 3.",
         hints=[value_hint(_sweep_sign_slip(), "the point moved the wrong way: with nᵀX = d the homography is "
                                               "K (R + t nᵀ/d) K⁻¹ (H&Z's minus sign is for nᵀX + d = 0); a camera "
                                               "moved right sees the point further left.")]),
@@ -133,10 +135,14 @@ register(
         [s[1] for s in METHOD_SCENARIOS], METHOD_OPTIONS,
         "Stereo SGM needs only a calibrated rig and no training: OpenCV's SGBM runs at ~10 FPS on a 741×500 pair "
         "on one CPU core and embedded SGM (FPGA, GPU, NEON) at 30+ Hz — the choice for live depth and moving "
-        "scenes. MVS (COLMAP's PatchMatch) needs posed images (≥ 3, from SfM), no training, runs on a CPU and "
-        "gives metric depth maps fused into a mesh: the survey tool. 3DGS trains in ~10-30 min on a GPU and "
+        "scenes. MVS needs posed images (two suffice; more give fewer holes and outliers), no training, and gives metric "
+        "depth maps fused into a mesh: the survey tool. COLMAP's PatchMatch stereo needs a GPU (CUDA, or HIP in recent "
+        "versions; otherwise it stops with 'Dense stereo reconstruction requires CUDA'); on a CPU server run a "
+        "CPU MVS such as OpenMVS's "
+        "DensifyPointCloud or a plane sweep. 3DGS trains in ~10-30 min on a GPU and "
         "renders in real time (100+ FPS), but a 1M-Gaussian scene is ~240 MB; NeRF is the compact one (an MLP of "
-        "a few MB) but trains for hours and renders in seconds per frame. Neither radiance field is a depth "
+        "a few MB) but the original trains for 1-2 days on a V100 (100-300 k iterations, Mildenhall et al. 2020; "
+        "minutes with hash grids) and renders in seconds per frame. Neither radiance field is a depth "
         "sensor for a moving scene.",
         hints={0: "(a) 33 ms per frame, no GPU, live: a stereo matcher (SGM), not a per-scene optimisation.",
                3: "(d) 10 MB rules out 3DGS (~240 bytes per Gaussian); a NeRF's MLP fits."}),

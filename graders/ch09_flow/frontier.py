@@ -1,11 +1,12 @@
-"""9.24 — FRONTIER: RAFT's correlation lookup, and a tiny RAFT-style model trained on CPU in seconds.
+"""9.24 — FRONTIER: RAFT's correlation lookup, iterated with a hand-made update (nothing is trained).
 
 RAFT (Teed & Deng 2020) correlates every feature of frame 1 with every feature of frame 2 once, then
 refines the flow iteratively: each update reads the correlations in a (2r + 1)² window around where the
 current flow points, and a recurrent unit turns them into a flow step. The learner writes that lookup
-(graded: values against grid_sample, and its gradient, which training needs); `tiny_raft_experiment`
-trains a small model around it on synthetic warps (smooth random flows of random textures) and
-compares the EPE after 1, 2, 4 and 8 iterations with OpenCV's Farneback on held-out pairs.
+(graded: values against grid_sample, and its gradient, which training would need); the notebook's
+experiment (`lookup_experiment` in tiny_raft.py) iterates it with a hand-made update (a step to the
+window's soft-argmax) on synthetic warps and compares the EPE with OpenCV's Farneback. No learned update
+is trained: that is RAFT's GRU, trained on FlyingChairs and FlyingThings3D (Teed & Deng 2020, §4).
 """
 from __future__ import annotations
 
@@ -139,6 +140,6 @@ LOOKUP_HINTS = [
 ]
 
 register(Exercise(
-    id="9.24", title="RAFT's correlation lookup (and a tiny RAFT on CPU)", name="corr_lookup", kind="frontier",
+    id="9.24", title="RAFT's correlation lookup, iterated with a hand-made update", name="corr_lookup", kind="frontier",
     points=2, cases=_cases, hints=LOOKUP_HINTS, fallback=gt_corr_lookup, timeout=20.0,
     arg_names=("corr", "coords", "radius")))

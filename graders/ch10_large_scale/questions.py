@@ -89,7 +89,7 @@ register(
             "3D-3D pairs of shared landmarks — ≥ 3 non-collinear points, robustly (RANSAC) because some shared "
             "'landmarks' are wrong matches, then global BA over both clusters. (a) 200 shared points spread over the "
             "overlap: safe. (b) 8 shared points: solvable, but a wrong match or two and the noise of so few points "
-            "tilt and scale one cluster against the other, and BA cannot undo a wrong merge (fragile; the lesson's "
+            "tilt and scale one cluster against the other, and BA cannot undo a wrong merge (fragile; the often-quoted "
             "< 10 rule of thumb). (c) 2 points: rotation about the line through them is free. (d) 60 points along one "
             "kerb line: collinear, the same free rotation — more points do not help, their spread does.",
         hints={1: "8 points do determine a Sim(3), but with no margin against one wrong match.",
@@ -100,10 +100,11 @@ register(
         id="10.14", title="The scaling table, recomputed", name="scaling_hours", kind="design",
         expected=SCALE_HOURS, tol=0.01, unit="rel.", shape=(5,), metric=relative,
         explanation="Pairs: 100 → 4,950 (exhaustive); 1 K → 499,500 (exhaustive); 10 K top-50 → 500 K; 100 K top-30 → "
-            "3 M; 1 M top-20 → 20 M. At 30 ms a pair on one GPU: 0.04 h, 4.2 h, 4.2 h, 25 h, 167 h. So the lesson's "
+            "3 M; 1 M top-20 → 20 M. At 30 ms a pair on one GPU: 0.04 h, 4.2 h, 4.2 h, 25 h, 167 h. So the often-quoted "
             "'1 K exhaustive, ~2 hours' is already over budget for matching alone — retrieval (top-50: 50 K pairs, "
-            "25 min) is the choice from about 1,000 images; and '1 M, ~1 week on a cluster' is 7 GPU-days of "
-            "matching alone, so the cluster needs ≥ 8 GPUs to leave room for verification, SfM and merging. Pairs "
+            "25 min) is the choice from about 1,000 images; and '1 M, ~1 week on a cluster' is 167 GPU-hours "
+            "= 7 GPU-days of matching alone: one GPU for a week, so a cluster of a few GPUs leaves room for verification, SfM and "
+            "merging within the week (10.15). Pairs "
             "grow as N² exhaustively, as N·k with retrieval: the strategy changes the exponent, not the constant.",
         hints=[value_hint([4950 * 0.03, 499500 * 0.03, 5e5 * 0.03, 3e6 * 0.03, 2e7 * 0.03], "those are seconds; "
                           "give hours (÷ 3600)."),
@@ -115,7 +116,7 @@ register(
         expected=[EXTRACT_H, MATCH_H, GPUS_DAY, GPUS_WEEK], tol=0.01, unit="rel.", shape=(4,), metric=relative,
         explanation="Extraction: 10⁶ images / 100 per GPU-second = 10⁴ s = 2.8 GPU-hours. Matching top-50: N·k = 50 M "
             "pairs × 30 ms = 1.5 M s = 417 GPU-hours — matching dominates by 150×. Together 419 GPU-hours: 18 GPUs "
-            "for the lesson's '~24 h on a cluster', 3 GPUs for a week. Geometric verification (RANSAC on each "
+            "for the often-quoted '~24 h on a cluster', 3 GPUs for a week. Geometric verification (RANSAC on each "
             "pair, a few ms on a CPU core) and the per-cluster SfM add CPU time that scales the same way; "
             "deduplicating pairs retrieved from both sides saves up to half the matching.",
         hints=[value_hint([EXTRACT_H, MATCH_H, GPUS_DAY * 7, GPUS_WEEK], "a week is 168 hours: GPUs = GPU-hours / hours "
@@ -133,9 +134,10 @@ register(
         explanation="518/14 = 37 patches a side, 1,369 patch tokens + 5 (camera, registers) = 1,374 tokens a view. "
             "Global attention over N views compares all N·T tokens with each other: (N·T)² scores per head. At fp16 "
             "and 16 heads: N = 8 → 3.9 GB, N = 30 → 54 GB for one layer's scores, and an 80 GB GPU holds N ≤ 36. "
-            "That is the quadratic wall the lesson mentions — but it belongs to the naive implementation: "
+            "That is the quadratic wall often cited — but it belongs to the naive implementation: "
             "memory-efficient (Flash) attention never stores the matrix, so memory grows as N·T and only the compute "
-            "stays quadratic. Chunking into overlapping subsets aligned afterwards (10.13) is the other way out.",
+            "stays quadratic (VGGT's README, H100: 21 GB at 100 frames, 41 GB at 200). Chunking into overlapping "
+            "subsets aligned afterwards (10.13) is the other way out.",
         hints=[value_hint([TOKENS, (8 * TOKENS) ** 2 * BYTES / 1e9,
                            (30 * TOKENS) ** 2 * BYTES / 1e9, np.floor(np.sqrt(80e9 / BYTES) / TOKENS)],
                           "each of the 16 heads has its own score matrix."),

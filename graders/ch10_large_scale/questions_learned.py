@@ -22,7 +22,8 @@ DECISIONS = [
     ("6 wide-baseline photos of white walls where SIFT finds 30 matches", "learned"),
     ("300 turntable images, metric accuracy, some views too textureless for features", "hybrid"),
     ("embedded CPU, no GPU, live pose at 30 Hz", "classical"),
-    ("a street at dusk: sky and glass, the network's median confidence far below its indoor value", "classical"),
+    ("a street at dusk: sky and glass, unlike the network's training scenes; its confidence looks normal, and SIFT "
+     "finds hundreds of geometrically verified matches per pair", "classical"),
 ]
 
 register(
@@ -56,10 +57,13 @@ register(
             "models are not sub-pixel and do not scale to 2,000 views in one pass. (c) Few, wide-baseline, textureless "
             "views break features and RANSAC; pointmaps still work. (d) Metric accuracy AND views without features: "
             "learned matches or pointmaps to start, geometric BA to finish (MASt3R-SfM, VGGT + BA). (e) No GPU, 30 Hz: "
-            "classical (ORB / KLT + PnP). (f) The confidence says the model is out of its domain: fall back to the "
-            "classical path (10.12). Rule of thumb: learned for robustness and speed to a first result, classical "
+            "classical (ORB / KLT + PnP). (f) Out of its training distribution a network can stay confident — "
+            "DUSt3R's confidence is learned by its confidence-weighted regression loss (C·ℓ − α log C, dust3r/losses.py), "
+            "not as an out-of-domain detector — so a normal confidence proves nothing there; the classical path's "
+            "geometric verification does (10.12). Rule of thumb: learned for robustness and speed to a first result, classical "
             "for precision and scale, and measure on your own data.",
         hints={1: "sub-pixel accuracy over thousands of images is still classical SfM + bundle adjustment.",
                3: "both needs at once: a learned front end for the hard views, geometric BA for the accuracy.",
-               5: "a confidence far below the model's usual value is the model saying it is out of its domain."}),
+               5: "a normal-looking confidence is no evidence outside the network's training data; hundreds of "
+                  "verified matches are."}),
 )

@@ -93,7 +93,7 @@ register(
             f"N p³ = 1, p = N^(-1/3) = 1/{SHIFT_FRAMES ** (1 / 3):.0f}, z = {MONITOR_DESIGN[1]:.2f} — the line can sit "
             f"twice as close to the baseline for the same quiet pager. (c) 0.040 + {MONITOR_DESIGN[1]:.2f} × 0.0048 "
             f"= {MONITOR_DESIGN[2]:.4f} px. (d) A pitch θ moves every right row by f·θ: {MONITOR_DESIGN[2]:.4f} / 288 "
-            f"rad = {MONITOR_DESIGN[3]:.4f}° — thirty times finer than the lesson's absolute 1.5 px "
+            f"rad = {MONITOR_DESIGN[3]:.4f}° — thirty times finer than the often-quoted absolute 1.5 px "
             f"({np.degrees(LESSON_REPROJ_PX / RIG_F_PX):.2f}°), which is a fine line for a factory reprojection "
             f"check but blind to drift on a rig whose clean rows agree to 0.04 px. It even catches the 5 ms sync "
             f"offset of the fault table (rows 0.11 px). (e) The same line with no hysteresis: N p = N^(2/3) = "
@@ -110,7 +110,7 @@ register(
                value_hint(MONITOR_DESIGN[:3] + [MONITOR_DESIGN[2] / RIG_F_PX] + MONITOR_DESIGN[4:],
                           "(d) give the pitch in degrees, not radians."),
                value_hint(MONITOR_DESIGN[:3] + [float(np.degrees(LESSON_REPROJ_PX / RIG_F_PX))] + MONITOR_DESIGN[4:],
-                          "(d) is the pitch at your threshold of (c), not at the lesson's 1.5 px.")]),
+                          "(d) is the pitch at your threshold of (c), not at the often-quoted 1.5 px.")]),
     choice_question(
         id="11.16", title="What each alert does", name="alert_actions", kind="design",
         answers=ACTION_ANSWERS, options=ACTION_OPTIONS,

@@ -90,7 +90,7 @@ register(
         explanation=f"Before: a correct match passes with P(|N(0, 0.7²)| ≤ 1.5) = {W_BEFORE / CORRECT:.3f}, so "
             f"w = 0.7 · {W_BEFORE / CORRECT:.3f} = {W_BEFORE:.3f}. After the 1 px shift: P(-2.5 ≤ N(1, 0.7²) ≤ 0.5) "
             f"= {W_AFTER / CORRECT:.3f}, w = {W_AFTER:.3f} — {100 * (1 - W_AFTER / W_BEFORE):.0f} % of the inliers "
-            f"lost (the lesson's 20-30 %). RANSAC's N = log(0.01) / log(1 - w⁸) goes from {CASCADE[2]} to "
+            f"lost (the often-quoted 20-30 %). RANSAC's N = log(0.01) / log(1 - w⁸) goes from {CASCADE[2]} to "
             f"{CASCADE[3]}: ×{CASCADE[3] / CASCADE[2]:.1f}, because N ≈ 4.6 / w⁸ and (w₀/w₁)⁸ = "
             f"{(W_BEFORE / W_AFTER) ** 8:.1f}. One pixel upstream, 7× the work (or a capped RANSAC that returns a "
             "wrong pose) downstream: each stage multiplies the damage it receives.",
@@ -118,7 +118,7 @@ register(
         id="11.3", title="The 6-camera rig's data flow, recomputed", name="data_flow",
         kind="concept", expected=DATA_FLOW, tol=0.002, unit="rel.", shape=(5,), metric=relative,
         explanation="1280 × 960 = 1,228,800 pixels. 3-channel 8-bit: 3.6864 MB a frame, × 6 cameras × 30 fps = "
-            "663.6 MB/s (632.8 MiB/s). The lesson's 666 MB/s rounds 3.6864 up to 3.7 before multiplying: right to "
+            "663.6 MB/s (632.8 MiB/s). The often-quoted 666 MB/s rounds 3.6864 up to 3.7 before multiplying: right to "
             "0.4 %, and only for debayered RGB. The sensors themselves deliver 1 byte a pixel (mono or Bayer raw, "
             "8-bit): 221.2 MB/s — a third, and the number to size the cables and disks with (332 MB/s at 12 bits). "
             "Pairs: C(6, 2) = 15; 15 × 200 = 3,000 correspondences a frame, as 6 × 500 = 3,000 keypoints.",

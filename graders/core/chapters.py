@@ -83,18 +83,20 @@ CHAPTERS: tuple[Chapter, ...] = (
     Chapter(9, "flow", "Optical flow and tracking",
             "flow tools (.flo, warping, EPE/Fl), vectorised Lucas-Kanade with the eigenvalue test, pyramidal LK "
             "(against OpenCV), Horn-Schunck, a coarse-to-fine dense flow graded on FlyingChairs against Farneback, "
-            "occlusion by forward-backward consistency, joint point tracking, scene flow, a tiny RAFT-style model"),
+            "occlusion by forward-backward consistency, joint point tracking, scene flow, RAFT's correlation lookup "
+            "(iterated by a hand-made update)"),
     Chapter(10, "large_scale", "Large-scale and learned 3D",
             "a vocabulary tree with tf-idf and an inverted file (against brute-force matching), Sim(3) RANSAC (beside "
             "pycolmap), merging sub-reconstructions, DUSt3R-style global alignment of pointmaps, a Dask map/reduce "
             "matching pipeline with retries and atomic results, disconnected components, the domain gap, "
             "out-of-memory chunking, the focal length a pointmap knows"),
     Chapter(11, "capstone", "Capstone: cascading pipeline failures",
-            "one stereo + IMU pipeline built from the course's own stages on a rendered corridor, with injectable "
-            "faults; the error-propagation rule checked on its triangulation; a health monitor with hysteresis, a "
-            "graceful-degradation state machine, upstream-first root-cause isolation and a hybrid classical/direct "
-            "switch; the five cascade rows (shifted mount, loose sync, dirty lens, saturated sky, exposure change) "
-            "diagnosed, fixed and proved by the pipeline's metrics; a learned model of normal"),
+            "one stereo pipeline (the IMU appears only as a health reading) built from the course's own stages on a "
+            "rendered corridor, with injectable faults; the error-propagation rule checked on its triangulation; a "
+            "health monitor with hysteresis, a graceful-degradation state machine, upstream-first root-cause "
+            "isolation and a hybrid classical/direct switch; the five cascade rows (shifted mount, loose sync, dirty "
+            "lens, saturated sky, exposure change) diagnosed, fixed and proved by the pipeline's metrics; a learned "
+            "model of normal"),
 )
 
 def _released() -> set[int] | None:

@@ -87,24 +87,36 @@ def plot_progress(ax=None, events: list[dict] | None = None, totals: dict | None
     return ax
 
 
+def learner_note(note: str) -> str:
+    """A reference card's note as the learner reads it: the cards record what their transcribed source printed
+    ("the lesson prints …"); the learner never saw that source, so it is named as the figure often quoted."""
+    return note.replace("the lesson prints", "often quoted as").replace("the lesson's", "the quoted") \
+        .replace("the lesson says", "the quoted figure is")
+
+
 def reference_markdown(key: str) -> str:
-    """One of the lesson's tables, readable, with its source lines (and, for RANSAC, the formula's values)."""
+    """One of the reference tables, readable. Cells the chapters refute are shown corrected, with a note of the
+    figure often quoted instead; the RANSAC counts and times are the formula's own values (the learner never sees
+    the transcribed source, so it is not cited to them)."""
     from graders.study.reference import TABLES, corrected_row, ransac_iterations
     t = TABLES[key]
     header, rows, notes = list(t.header), [], []
-    for i in range(len(t.rows)):     # cells the chapters refute are shown corrected, the lesson's cell in a note
+    for i in range(len(t.rows)):     # cells the chapters refute are shown corrected, the quoted cell in a note
         row, fixes = corrected_row(key, i)
         rows.append(list(row))
         for j, note in fixes.items():
-            notes.append(note)
+            notes.append(learner_note(note))
             rows[-1][j] += f" [{len(notes)}]"
+    title = f"**{t.title}**"
     if key == "ransac":
-        header += ["5-point by the formula", "8-point by the formula"]
+        header = ["Inlier ratio w", "5-point (s=5)", "8-point (s=8)", "8-point time @ 1 ms/iter"]
         for r in rows:
             w = float(r[0].rstrip("%")) / 100
-            r += [f"{ransac_iterations(w, 5):,}", f"{ransac_iterations(w, 8):,}"]
-    out = [f"**{t.title}** (seed lesson, lines {t.line}-{t.line + len(t.rows) - 1})", "",
-           "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+            k5, k8 = ransac_iterations(w, 5), ransac_iterations(w, 8)
+            r[1:] = [f"{k5:,}", f"{k8:,}", f"{k8 * 1e-3:.3g} s"]
+        title += (" — k = ⌈log(1 − p) / log(1 − wˢ)⌉ with p = 0.99 (Fischler & Bolles, CACM 1981; Hartley & "
+                  "Zisserman, 2nd ed., §4.7.1). Tables quoted in many tutorials differ from these values.")
+    out = [title, "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     out += ["| " + " | ".join(c.replace("|", "\\|") for c in r) + " |" for r in rows]
     if notes:
         out += [""] + [f"[{k}] Corrected: {note}." for k, note in enumerate(notes, 1)]

@@ -210,8 +210,19 @@ def choose_any_view_registered(case):
     return ["classical" if np.isfinite(s["classical"]["Rs"]).any() else "learned" for s in case["scenes"]]
 
 
+def choose_by_confidence(case):
+    """The old model answer: trust the network's confidence as an out-of-domain detector (classical when the
+    median confidence is below half the model's indoor value and classical registered every view)."""
+    out = []
+    for s in case["scenes"]:
+        ratio = float(np.median(s["learned"]["confidence"])) / float(case["indoor_confidence"])
+        out.append("classical" if ratio < 0.5 and np.isfinite(s["classical"]["Rs"]).all() else "learned")
+    return out
+
+
 MUTANTS += [
     ("10.12", "always learned", choose_always_learned, "out of its training domain"),
+    ("10.12", "confidence as an out-of-domain detector", choose_by_confidence, "stays confident"),
     ("10.12", "always classical", choose_always_classical, "left views unregistered"),
     ("10.12", "any view registered", choose_any_view_registered, "left views unregistered"),   # caught on 60 of 60 seeds
 ]

@@ -367,10 +367,11 @@ def test_home_notebook_helpers_show_progress_and_the_tables():
     assert chapters[0] == "1" and kinds.index("code") == 1
     assert grid[0][1] == pytest.approx(5 / 20) and grid[1][1] == 0 and np.isnan(grid[0][0])
     ransac = home.reference_markdown("ransac")
-    assert "lines 59-62" in ransac and "| 448 |" in ransac and "| 7,025 |" in ransac   # the formula's columns
+    assert "| 448 |" in ransac and "| 7,025 |" in ransac and "§4.7.1" in ransac   # the formula's values, cited
+    assert "lesson" not in ransac and "seed" not in ransac    # the learner never saw the transcribed source
     shelving = home.reference_markdown("symptoms_3")    # a refuted cell is shown corrected, the lesson's in a note
     assert "Tighten ratio test to 0.6" not in shelving.split("[1] Corrected")[0]
-    assert "Corrected: the lesson prints “Tighten ratio test to 0.6" in shelving
+    assert "Corrected: often quoted as “Tighten ratio test to 0.6" in shelving and "lesson" not in shelving
     from graders.core.chapters import CHAPTERS
     assert all(c.title in home.course_map() for c in CHAPTERS)
 
