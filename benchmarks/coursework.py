@@ -8,7 +8,7 @@ wrong implementation: that exercise loses points, every other keeps full marks) 
 (endless loops, fork bombs, 30 GB allocations, os._exit, output floods, writes outside the working
 folder, reading the secret or `expected`, patching numpy or the grader: zero on what they attack,
 and nothing left running or written). Prints the expected-vs-got table per category, throughput
-(submissions per minute), and the batch's peak memory. `tests/test_coursework.py` runs a small one.
+(submissions per minute), and the batch's peak memory. `tests/grading/test_coursework.py` runs a small one.
 """
 from __future__ import annotations
 

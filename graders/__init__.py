@@ -8,7 +8,7 @@ In a notebook:
 
 From the shell:  python -m graders check notebooks/01_camera_models.ipynb [--json results.json]
 
-This package never imports `solutions` (tests/test_isolation.py enforces it): oracles are OpenCV,
+This package never imports `solutions` (tests/core/test_isolation.py enforces it): oracles are OpenCV,
 pycolmap, kornia, or synthetic ground truth generated here.
 """
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """Notebook housekeeping: `python -m tools.notebook_tools strip NOTEBOOK...` removes outputs and
-execution counts in place, so notebooks are stored clean (tests/test_notebooks.py checks it)."""
+execution counts in place, so notebooks are stored clean (tests/chapters/test_notebooks.py checks it)."""
 from __future__ import annotations
 
 import sys

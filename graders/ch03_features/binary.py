@@ -65,7 +65,7 @@ def cv_hamming(D1: np.ndarray, D2: np.ndarray) -> np.ndarray:
     """All Hamming distances between packed descriptors by a 256-entry popcount table: (N, M) int64.
 
     (cv2.batchDistance's Python binding insists on K-nearest output in OpenCV 5; this table is the
-    textbook definition and tests/test_ch03_features.py checks it against cv2.norm(NORM_HAMMING).)
+    textbook definition and tests/chapters/test_ch03_features.py checks it against cv2.norm(NORM_HAMMING).)
     """
     D1, D2 = np.asarray(D1, np.uint8), np.asarray(D2, np.uint8)
     out = np.empty((len(D1), len(D2)), np.int64)

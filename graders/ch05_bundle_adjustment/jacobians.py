@@ -190,7 +190,7 @@ def cases_jacobians(rng: np.random.Generator) -> list[Case]:
         args = distorted_args(rng, make_problem(rng, **kw))
         m = len(args[2])
         # torch autograd is exact to rounding (~1e-14 relative); finite differences agree to ~1e-8
-        # (tests/test_ch05_graders.py checks both). 1e-6 per column: any wrong term is > 1e-3.
+        # (tests/chapters/test_ch05_bundle_adjustment.py checks both). 1e-6 per column: any wrong term is > 1e-3.
         out.append(Case(name, args, Lazy(lambda a=args: torch_jacobians(*a)), _metric_jac, 1e-6, "rel.",
                         convert=lambda o, c, m=m: tuple_of_arrays(o, [(m, 2, 9), (m, 2, 3)], ["J_cam", "J_pt"])))
     return out

@@ -56,7 +56,7 @@ register(
 
 # ---------------------------------------------------------------- 11.15 what to monitor, at which thresholds
 # The clean pipeline's per-frame baselines (run_pipeline on fault_sequence(seed, None), seeds 0-2, frames 1-15,
-# 45 frames; see tests/test_ch11_capstone_pipeline.py::test_monitor_baselines_are_the_pipeline_s): the stereo
+# 45 frames; see tests/chapters/test_ch11_capstone_pipeline.py::test_monitor_baselines_are_the_pipeline_s): the stereo
 # row error 0.040 px with a frame-to-frame sigma of 0.0048 px. The rig: f = 288 px (corridor.rig_sequence).
 ROW_MEAN_PX, ROW_SIGMA_PX, RIG_F_PX = 0.040, 0.0048, 288.0
 SHIFT_S, ALERT_K, LESSON_REPROJ_PX = 8 * 3600, 3, 1.5    # an 8-hour shift at FPS; k frames in a row; the lesson's 1.5

@@ -124,7 +124,7 @@ def by_number(number: str | int) -> Chapter:
 
 
 def readme_table() -> str:
-    """The README's chapter list, generated from the table (tests/test_readme.py keeps them equal)."""
+    """The README's chapter list, generated from the table (tests/chapters/test_chapters.py keeps them equal)."""
     rows = ["| # | notebook | status |", "|---|---|---|"]
     for c in CHAPTERS:
         name = f"[{c.title}]({c.notebook})" if c.ready else c.title

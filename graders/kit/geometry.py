@@ -5,7 +5,7 @@ coordinates; K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]]; Brown-Conrady `dist` = (
 Kannala-Brandt `D` = (k1, k2, k3, k4). Every function is vectorised over the leading N.
 
 These are oracles' building blocks: each is written once here, checked against OpenCV / scipy in
-tests/test_geometry.py, and imported by name (`from graders.kit.geometry import hartley`).
+tests/kit/test_geometry.py, and imported by name (`from graders.kit.geometry import hartley`).
 """
 from __future__ import annotations
 

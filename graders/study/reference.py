@@ -1,7 +1,7 @@
 """The lesson's cross-chapter tables, transcribed row by row, and the reference cards built from them.
 
 Each `Table` records where it sits in the seed lesson (`line`: the line of its first row, rows follow
-one per line), so every card cites its source and `tests/test_drills.py` checks the transcription
+one per line), so every card cites its source and `tests/study/test_drills.py` checks the transcription
 against the lesson itself and every card's answer against its row (recomputed where a formula
 exists: RANSAC iterations, pairs, bytes per second). Where the lesson's number is wrong, the card's
 answer is the right one and its `note` says what the lesson printed and why that is wrong.
