@@ -76,25 +76,65 @@ def debug_jumps(rng: np.random.Generator, dim: int | None = None) -> tuple[dict,
     raise RuntimeError("no draw with visible jumps in 20 tries")
 
 
+def _loop_information(rng: np.random.Generator, g: dict, dim: int) -> dict:
+    """`g` with every loop closure's covariance scaled by its own factor (information 1-10x the base loop
+    closure's, log-uniform: some closures rest on more matched points than others) and its measurement redrawn
+    with that covariance, so that a large information matrix is what a good loop closure has too."""
+    k = 3 if dim == 2 else 6
+    n_odo = len(g["T"]) - 1
+    loops = np.arange(n_odo, len(g["edges"]))
+    gain = 10 ** rng.uniform(0, 1, len(loops))                       # information x gain, sigma / sqrt(gain)
+    sig = 1 / np.sqrt(np.einsum("mii->mi", g["info"][loops]) * gain[:, None])
+    rel = np.linalg.inv(g["truth"][g["edges"][loops, 0]]) @ g["truth"][g["edges"][loops, 1]]
+    Z, info = g["Z"].copy(), g["info"].copy()
+    Z[loops] = rel @ _exp(rng.normal(0, 1, (len(loops), k)) * sig)
+    info[loops] = info[loops] * gain[:, None, None]
+    return dict(g, Z=Z, info=info)
+
+
+def _conflicting_pairs(rng: np.random.Generator, g: dict, n_bad: int, dim: int) -> np.ndarray:
+    """`n_bad` new pose pairs drawn as make_graph draws its loop closures (poses within 1.5 m of each other, more
+    than 15 apart in time), none of them an existing edge: a repeated structure at a revisited place, not a
+    second copy of a good constraint."""
+    n = len(g["T"])
+    P = g["truth"][:, :dim, dim]
+    D = np.linalg.norm(P[:, None] - P[None], axis=-1)
+    ii, jj = np.nonzero((D < 1.5) & (np.arange(n)[None] - np.arange(n)[:, None] > 15))
+    have = {tuple(e) for e in g["edges"].tolist()}
+    free = np.array([m for m, e in enumerate(zip(ii.tolist(), jj.tolist())) if e not in have])
+    pick = rng.choice(free, n_bad, replace=False)
+    return np.c_[ii[pick], jj[pick]].astype(int)
+
+
 def debug_inconsistent(rng: np.random.Generator, dim: int | None = None) -> tuple[dict, dict]:
     """6.21 — the map is inconsistent after loop closure: three (SE(3): four) loop constraints conflict with the
     rest (a repeated structure matched with a consistent but wrong relative pose, 2-4 m and ~12 deg off, many
-    inliers and an overconfident covariance, 10x the information), and the back end is plain least squares."""
+    inliers), and the back end is plain least squares. The conflicting edges look like the good ones: new pose
+    pairs (no duplicate of a good edge), information drawn from the same 1-10x range as every loop closure,
+    inliers from the same range; only their residuals against the rest of the graph tell them apart."""
     dim = dim or int(rng.choice([2, 3]))
     k = 3 if dim == 2 else 6
     tr, ro = (slice(0, 2), slice(2, 3)) if dim == 2 else (slice(3, 6), slice(0, 3))
     for attempt in range(40):
-        g = make_graph(rng, **GRAPH[dim])
+        g = _loop_information(rng, make_graph(rng, **GRAPH[dim]), dim)
         n_odo, n_bad = len(g["T"]) - 1, 3 if dim == 2 else 4
-        dup = rng.choice(np.arange(n_odo, len(g["edges"])), n_bad, replace=False)
+        pairs = _conflicting_pairs(rng, g, n_bad, dim)
         off = np.zeros((n_bad, k))
         off[:, tr] = rng.normal(0, 1, (n_bad, tr.stop - tr.start))
+        # a draw where they hardly matter is redrawn with a larger conflict
         off[:, tr] *= rng.uniform(2.0, 3.0, (n_bad, 1)) * (1.0 if dim == 2 else 1.3) \
-            * (1 + 0.05 * attempt)          # a draw where they hardly matter is redrawn with a larger conflict / np.linalg.norm(off[:, tr], axis=1, keepdims=True)
+            * (1 + 0.05 * attempt) / np.linalg.norm(off[:, tr], axis=1, keepdims=True)
         off[:, ro] = rng.normal(0, np.radians(12), (n_bad, ro.stop - ro.start))
-        g2 = dict(g, edges=np.r_[g["edges"], g["edges"][dup]], Z=np.r_[g["Z"], g["Z"][dup] @ _exp(off)],
-                  info=np.r_[g["info"], 10 * g["info"][dup]])
-        bad = np.r_[np.zeros(len(g["edges"]), bool), np.ones(n_bad, bool)]
+        rel = np.linalg.inv(g["truth"][pairs[:, 0]]) @ g["truth"][pairs[:, 1]]
+        loop_info = g["info"][n_odo:]
+        info_bad = loop_info[rng.choice(len(loop_info), n_bad, replace=False)]
+        # shuffled among the loop closures: their place in the edge list says nothing either
+        order = np.r_[np.arange(n_odo), n_odo + rng.permutation(len(g["edges"]) - n_odo + n_bad)]
+        edges = np.r_[g["edges"], pairs][order]
+        Z = np.r_[g["Z"], rel @ _exp(off)][order]
+        info = np.r_[g["info"], info_bad][order]
+        bad = np.r_[np.zeros(len(g["edges"]), bool), np.ones(n_bad, bool)][order]
+        g2 = dict(g, edges=edges, Z=Z, info=info)
         kind = _kinds(g2)
         inliers = np.where(kind, rng.integers(40, 200, len(kind)), -1)
         case = _case_from_graph(g2, kind, inliers, {"loop_closure": True, "geometric_verification": True,
@@ -102,8 +142,14 @@ def debug_inconsistent(rng: np.random.Generator, dim: int | None = None) -> tupl
         broken = gtsam_optimize(g2["T"], g2["edges"], g2["Z"], g2["info"])
         truth = _truth(g2, ~bad, "conflicting constraints, no robust kernel", broken)
         truth["broken"] = broken
-        if truth["ate_broken"] >= BROKEN_FACTOR * truth["tol"] and \
-                ate_rmse(g["T"], g["truth"]) >= BROKEN_FACTOR * truth["tol"]:
+        if truth["ate_broken"] < BROKEN_FACTOR * truth["tol"] or \
+                ate_rmse(g["T"], g["truth"]) < BROKEN_FACTOR * truth["tol"]:
+            continue
+        # Cauchy is not convex: from the odometry start it can settle with a conflicting edge accepted (measured:
+        # 1.5 % of draws, up to 3.4x the clean optimum's ATE). Keep only draws that GTSAM's Cauchy (c = 3)
+        # solves to within 1.2x the clean optimum's ATE, so the bar (1.5x) is one a robust kernel reaches.
+        robust = gtsam_optimize(g2["T"], g2["edges"], g2["Z"], g2["info"], robust=("cauchy", 3.0))
+        if ate_rmse(robust, g["truth"]) <= 1.2 * truth["ate_fixed"]:
             return case, truth
     raise RuntimeError("no inconsistent draw in 40 tries")
 
@@ -139,16 +185,19 @@ def _metric_fix(T, truth) -> float:
     return ate_rmse(T, truth["truth"])
 
 
-def _cases(generator, label: str):
+def _cases(generator, label: str, cause_weight: float = 1.0):
+    """Per group: the cause (weight `cause_weight`) and the repair (weight 2 - `cause_weight`)."""
     def cases(rng: np.random.Generator):
         for i, dim in enumerate((2, 3)):
             case, truth = generator(rng, dim)
             run = shared_run(lambda fn, c=case: fn(c))
             yield Case(f"SE({dim}) {label}: the cause", (case,), truth, _metric_cause, 0, "wrong",
-                       convert=_convert_cause, call=run, key=f"se{dim}-cause", tags=("cause",))
+                       convert=_convert_cause, call=run, key=f"se{dim}-cause", tags=("cause",),
+                       weight=cause_weight)
             # tol: 1.5x the ATE GTSAM reaches with the right graph on this draw (at least 5 cm).
             yield Case(f"SE({dim}) {label}: ATE of the repaired trajectory", (case,), truth, _metric_fix,
-                       truth["tol"], "m RMS", convert=_convert_fix, call=run, key=f"se{dim}-fix", tags=("fix",))
+                       truth["tol"], "m RMS", convert=_convert_fix, call=run, key=f"se{dim}-fix", tags=("fix",),
+                       weight=2.0 - cause_weight)
     return cases
 
 
@@ -179,8 +228,11 @@ JUMP_HINTS = [
 ]
 
 INCONSISTENT_HINTS = [
-    Hint("your map is still the plain least-squares one: two loop constraints contradict the rest, and every loop "
-         "has plenty of inliers, so only the back end can tell. Use a robust kernel (Cauchy, c ~ 3 in whitened "
+    Hint("the trajectory is the odometry chain you were given: nothing was optimised, or only the odometry edges "
+         "were (every loop closure dropped); either way it drifts like the odometry alone.", _unchanged),
+    Hint("your map is still the plain least-squares one: a few loop constraints contradict the rest, and they look "
+         "like the good ones (many inliers, information in the same range, no duplicated pose pair), so only the "
+         "back end can tell. Use a robust kernel (Cauchy, c ~ 3 in whitened "
          "units) and re-optimise.", lambda c, T: _near(c, T, "broken")),
     Hint("your trajectory drifts like the odometry alone: removing every loop closure throws the good ones away too.",
          lambda c, T: "fix" in c.tags and ate_rmse(T, c.expected["truth"]) >= 0.7 * c.expected.get("ate_odometry", 1e9)),
@@ -243,7 +295,10 @@ def debug_truth(exercise_id: str, seed: int = 0) -> dict:
 
 register(
     Exercise(id="6.18", title="The trajectory drifts", name="fix_drift", kind="debug", points=2,
-             cases=_cases(GENERATORS["6.18"], "drifting trajectory"), hints=DRIFT_HINTS, fallback=gtsam_fix_drift,
+             # The settings hand the cause over (loop_closure=False): naming it is worth a quarter, the repair
+             # three quarters.
+             cases=_cases(GENERATORS["6.18"], "drifting trajectory", cause_weight=0.5), hints=DRIFT_HINTS,
+             fallback=gtsam_fix_drift,
              timeout=60.0),
     Exercise(id="6.19", title="Sudden jumps in the trajectory", name="fix_jumps", kind="debug", points=2,
              cases=_cases(GENERATORS["6.19"], "jumping trajectory"), hints=JUMP_HINTS, fallback=gtsam_fix_jumps,

@@ -266,6 +266,18 @@ def _jr_identity(case):
     return r, -Ad, np.tile(np.eye(r.shape[1]), (len(r), 1, 1))
 
 
+def _jl_inverse(case):
+    """The residual Jacobians with J_l^-1(r) where J_r^-1(r) belongs: J_l(r) = Ad(Exp(r)) J_r(r), so
+    J_l^-1(r) = J_r^-1(r) Ad(Exp(-r)), on both blocks."""
+    from .posegraphs import gtsam_pose
+    T, edges, Z = case.args
+    r, Ji, Jj = case.expected
+    Ad = np.array([gtsam_pose(P).AdjointMap() for P in gt_exp(-r)])
+    Ad_ji = np.array([gtsam_pose(np.linalg.inv(T[j]) @ T[i]).AdjointMap() for i, j in edges])
+    Jl_inv = Jj @ Ad
+    return r, -Jl_inv @ Ad_ji, Jl_inv
+
+
 def _residual_hints():
     from graders.core.engine import Hint
     return [
@@ -275,6 +287,10 @@ def _residual_hints():
         Hint("J_i and J_j look like the small-residual approximation J_r^-1(r) ~ I: fine near the optimum, but "
              "these residuals are large. Use J_j = J_r^-1(r), J_i = -J_r^-1(r) Ad(T_j^-1 T_i).",
              lambda c, out: "jacobian" in c.tags and c.metric(out, _jr_identity(c)) <= 1e-6),
+        Hint("your Jacobians use the left Jacobian's inverse J_l^-1(r) where the right one belongs: with right "
+             "perturbations, Log(Exp(r) Exp(d)) ~ r + J_r^-1(r) d, and J_l^-1(r) = J_r^-1(-r) is the same matrix only "
+             "for r = 0. Use J_j = J_r^-1(r), J_i = -J_r^-1(r) Ad(T_j^-1 T_i).",
+             lambda c, out: "jacobian" in c.tags and c.metric(out, _jl_inverse(c)) <= 1e-6),
         Hint("your J_i has the sign of J_j's structure: perturbing T_i moves the residual the opposite way, "
              "J_i = -J_r^-1(r) Ad(T_j^-1 T_i).",
              lambda c, out: "jacobian-i" in c.tags and max_abs(-out[1], c.expected[1]) <= 1e-6),

@@ -1,4 +1,4 @@
-"""Chapter 6, DEBUG 6.20: "tracking lost (fast motion, no motion prior)".
+"""Chapter 6, DEBUG 6.20: "tracking lost at a fast turn" (the cause, no motion prior, is the learner's to find).
 
 The broken artefact: a frame-to-map tracker that predicts each frame's pose as the previous frame's pose,
 projects the map with that prediction and searches a 15 px window round each projection for the keypoint
@@ -259,7 +259,7 @@ def fixed_tracker(case: dict):
 register(
     Exercise(
         id="6.20",
-        title="Tracking lost (fast motion, no motion prior)",
+        title="Tracking lost at a fast turn",
         name="fix_tracking",
         kind="debug",
         points=2,

@@ -126,11 +126,15 @@ def _associate(stamps_a, stamps_b, max_diff):
     return (i_s, i_l) if a_short else (i_l, i_s)
 
 
-def _errors(P, Q, delta, rms=True, world_rpe=False):
+def _errors(P, Q, delta, rms=True, world_rpe=False, all_pairs=False):
     """[ATE, RPE_t, RPE_r] of aligned estimate P against Q, both (N, 4, 4)."""
     e = np.linalg.norm(P[:, :3, 3] - Q[:, :3, 3], axis=1)
-    i = np.arange(0, len(P), delta)
-    a, b = i[:-1], i[1:]
+    if all_pairs:  # every overlapping pair (i, i + delta): evo's all_pairs=True, not its default
+        a = np.arange(len(P) - delta)
+        b = a + delta
+    else:
+        i = np.arange(0, len(P), delta)
+        a, b = i[:-1], i[1:]
     inv = np.linalg.inv
     if world_rpe:  # relative motions compared as world-frame displacements
         dt = (P[b, :3, 3] - P[a, :3, 3]) - (Q[b, :3, 3] - Q[a, :3, 3])
@@ -144,7 +148,7 @@ def _errors(P, Q, delta, rms=True, world_rpe=False):
     return [agg(e), agg(et), agg(er)]
 
 
-def _model(case, by_index=False, align=True, with_scale=None, rms=True, world_rpe=False):
+def _model(case, by_index=False, align=True, with_scale=None, rms=True, world_rpe=False, all_pairs=False):
     st_e, T_e, st_g, T_g = case.args
     ws = case.kwargs.get("with_scale", False) if with_scale is None else with_scale
     delta = case.kwargs.get("delta", 1)
@@ -159,7 +163,7 @@ def _model(case, by_index=False, align=True, with_scale=None, rms=True, world_rp
         s, R, t = umeyama(P[:, :3, 3], Q[:, :3, 3], with_scale=ws)
         P[:, :3, :3] = R @ P[:, :3, :3]
         P[:, :3, 3] = s * P[:, :3, 3] @ R.T + t
-    return np.array(_errors(P, Q, delta, rms, world_rpe) + [s])
+    return np.array(_errors(P, Q, delta, rms, world_rpe, all_pairs) + [s])
 
 
 # ----------------------------------------------------------------- exercise
@@ -190,12 +194,13 @@ def cases_trajectory_errors(rng: np.random.Generator):
     if datasets.available("trajectories"):
         pair = load_tum_pair()
         args = (pair["stamps_est"], pair["T_est"], pair["stamps_gt"], pair["T_gt"])
-        for ws in (False, True):
+        # delta 1 and 10: with delta 1 every reading of "pairs (i, i + delta)" agrees, so one case is not.
+        for ws, delta in ((False, 1), (True, 10)):
             yield Case(f"TUM freiburg1_xyz RGBD-SLAM vs ground truth, {'Sim(3)' if ws else 'SE(3)'} alignment, "
-                       "delta 1 frame", args, np.array(_tum_expected(ws, 1)), _metric, TOL, "rel.",
-                       kwargs={"with_scale": ws, "delta": 1}, convert=_convert, key=f"tum-{'sim3' if ws else 'se3'}",
-                       tags=("tum",))
-    for i, (ws, delta) in enumerate([(True, 1), (False, 5), (True, 10)]):
+                       f"delta {delta} frame{'s' if delta > 1 else ''}", args, np.array(_tum_expected(ws, delta)),
+                       _metric, TOL, "rel.", kwargs={"with_scale": ws, "delta": delta}, convert=_convert,
+                       key=f"tum-{'sim3' if ws else 'se3'}", tags=("tum",))
+    for i, (ws, delta) in enumerate([(True, 2), (False, 5), (True, 10)]):
         pair = synthetic_pair(rng)
         args = (pair["stamps_est"], pair["T_est"], pair["stamps_gt"], pair["T_gt"])
         exp = evo_trajectory_errors(*args, with_scale=ws, delta=delta)
@@ -222,6 +227,9 @@ HINTS = [
          "your translational RPE compares world-frame displacements p_j − p_i: the relative motion is "
          "E = (Q_i⁻¹ Q_j)⁻¹ (P_i⁻¹ P_j), and its translation lives in frame i — a rotation error at i "
          "must not count as a translation error."),
+    like(lambda c: _model(c, all_pairs=True),
+         "your RPE averages over every pair (i, i + delta), overlapping: evo's default (all_pairs=False), which "
+         "the exercise asks for, takes i = 0, delta, 2 delta, ... — consecutive, non-overlapping segments."),
 ]
 
 

@@ -141,9 +141,9 @@ def _cases(rng: np.random.Generator):
     for i in range(2):
         case, truth = debug_holes(rng)
         call = shared_run(lambda fn, c=case: fn(copy.deepcopy(c)))
-        if i == 0:
+        if i == 0:   # half the points: as much as the repair rows together (2 fills x 1 + 2 guards x 0.5)
             yield Case("the cause you named", (case,), truth, lambda o, t: float(o["cause"] != t["cause"]), 0,
-                       "wrong", convert=_convert, call=call, key="cause", tags=("cause",))
+                       "wrong", convert=_convert, call=call, key="cause", tags=("cause",), weight=3.0)
         # The bar: 80 % of the blank centre within 3 %, or 15 % below what the grader's own plane fill reaches
         # on this draw when the rim itself is poor (a poster next to weakly textured background). Filling from
         # the frame (1/Z is affine across a plane) reaches 85-100 % on most draws; leaving the holes or
@@ -151,10 +151,14 @@ def _cases(rng: np.random.Generator):
         yield Case(f"fresh case {i + 1}: blank centre within 3 % of the true depth, short of the bar", (case,), truth,
                    lambda o, t: max(0.0, t["bar"] - _share(o["depth"], t["Z_gt"], t["blank"])), 0.0, "",
                    convert=_convert, call=call, key=f"blank-{i + 1}", tags=("fix",))
-        # 0.02: the repair must not damage the textured pixels the colleague's run got right.
-        yield Case(f"fresh case {i + 1}: textured pixels within 3 %, vs the colleague's run", (case,), truth,
-                   lambda o, t: max(0.0, t["broken_textured"] - _share(o["depth"], t["Z_gt"], t["region"] & ~t["blank"])),
-                   0.02, "", convert=_convert, call=call, key=f"textured-{i + 1}", tags=("fix",))
+        # 0.02: the repair must not damage the textured pixels the colleague's run got right. A guard, not a
+        # repair: the colleague's map meets it untouched, so it counts only where the holes are filled (else the
+        # unrepaired map kept 1.2/2, more than the cause's share); weight 0.5 (two guards weigh one fill).
+        yield Case(f"fresh case {i + 1}: textured pixels within 3 %, vs the colleague's run, with the holes filled",
+                   (case,), truth,
+                   lambda o, t: (max(0.0, t["broken_textured"] - _share(o["depth"], t["Z_gt"], t["region"] & ~t["blank"]))
+                                 if _share(o["depth"], t["Z_gt"], t["blank"]) >= t["bar"] else 1.0),
+                   0.02, "", convert=_convert, call=call, key=f"textured-{i + 1}", tags=("fix",), weight=0.5)
 
 
 HOLE_HINTS = [
@@ -169,7 +173,10 @@ HOLE_HINTS = [
          "the background; use the surface around the hole (the poster's textured frame) and interpolate 1/Z, not Z.",
          lambda c, o: c.key.startswith("blank") and np.isnan(o["depth"][c.expected["blank"]]).mean() <= 0.5),
     Hint("the repair damaged the pixels the colleague's run got right: keep its valid depths and fill only the holes.",
-         lambda c, o: c.key.startswith("textured")),
+         lambda c, o: c.key.startswith("textured") and
+         _share(o["depth"], c.expected["Z_gt"], c.expected["blank"]) >= c.expected["bar"]),
+    Hint("the textured pixels are as good as the colleague's, but this guard counts only once the holes are filled "
+         "(the colleague's own map meets it).", lambda c, o: c.key.startswith("textured")),
 ]
 
 register(Exercise(

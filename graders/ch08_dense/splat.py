@@ -30,6 +30,11 @@ def gaussian_scene(rng: np.random.Generator, N: int = 200, W: int = 64, H: int =
     n = N // 10
     Xc[:n, 2] = rng.uniform(-2, NEAR - 0.05, n)                                    # behind / too near
     Xc[n:2 * n, 0] = rng.choice([-1, 1], n) * rng.uniform(6, 10, n) * Xc[n:2 * n, 2] / 2   # off-screen
+    # In front of the camera but inside the near plane (0.03-0.17 m), in front of the image: a cull at z > 0
+    # keeps them (their circles cover the image), 3DGS's z > 0.2 drops them.
+    m = max(3, N // 20)
+    Xc[2 * n:2 * n + m, 2] = rng.uniform(0.03, NEAR - 0.03, m)
+    Xc[2 * n:2 * n + m, :2] = rng.uniform(-0.3, 0.3, (m, 2)) * Xc[2 * n:2 * n + m, 2:]
     mu = (Xc - t) @ R                                                             # world points
     q = rng.normal(0, 1, (N, 4)) * rng.uniform(0.5, 2.0, (N, 1))
     s = np.exp(rng.uniform(np.log(0.01), np.log(0.3), (N, 3)))
@@ -136,7 +141,7 @@ def _cov_like(c, out, f) -> bool:
     return c.key == "cov2d" and _rel(out[1][v], f(c)[v]) < 1e-3
 
 
-def _variant_cov(c, *, dilation=DILATION, scale_power=2, use_W=True, affine=False, normalise=True):
+def _variant_cov(c, *, dilation=DILATION, scale_power=2, use_W: bool | str = True, affine=False, normalise=True):
     sc = c.info["scene"]
     q = sc["q"] / (np.linalg.norm(sc["q"], axis=1, keepdims=True) if normalise else 1.0)
     w, x, y, z = q.T
@@ -152,7 +157,7 @@ def _variant_cov(c, *, dilation=DILATION, scale_power=2, use_W=True, affine=Fals
         J[:, 0, 0], J[:, 1, 1] = fx / Xc[:, 2], fy / Xc[:, 2]
         if not affine:
             J[:, 0, 2], J[:, 1, 2] = -fx * Xc[:, 0] / Xc[:, 2] ** 2, -fy * Xc[:, 1] / Xc[:, 2] ** 2
-        JW = J @ sc["R"] if use_W else J
+        JW = (J @ sc["R"].T if use_W == "transposed" else J @ sc["R"]) if use_W else J
         return JW @ Sigma @ JW.transpose(0, 2, 1) + dilation * np.eye(2)
 
 
@@ -163,6 +168,9 @@ PROJ_HINTS = [
          "scale s).", lambda c, out: _cov_like(c, out, lambda c: _variant_cov(c, scale_power=1))),
     Hint("the world-to-camera rotation is missing: Σ' = J W Σ Wᵀ Jᵀ with W = R (the camera's rotation), Σ is in world "
          "coordinates.", lambda c, out: _cov_like(c, out, lambda c: _variant_cov(c, use_W=False))),
+    Hint("your Σ' uses W = Rᵀ, the camera-to-world rotation: Σ is in world coordinates, and the world-to-camera "
+         "rotation R (X_c = R X_w + t) brings it into the camera frame, Σ' = J R Σ Rᵀ Jᵀ.",
+         lambda c, out: _cov_like(c, out, lambda c: _variant_cov(c, use_W="transposed"))),
     Hint("the Jacobian lacks its third column: the perspective map's J = [[fx/z, 0, −fx x/z²], [0, fy/z, −fy y/z²]] "
          "(dropping it is the affine camera; it is wrong off the optical axis).",
          lambda c, out: _cov_like(c, out, lambda c: _variant_cov(c, affine=True))),
@@ -170,6 +178,9 @@ PROJ_HINTS = [
          lambda c, out: _cov_like(c, out, lambda c: _variant_cov(c, normalise=False))),
     Hint("the radius is ceil(3 √λ_max) of Σ' (the larger eigenvalue: 3 standard deviations along the long axis).",
          lambda c, out: c.key == "radius" and np.mean(out[3][c.info["visible"]] < c.info["radius"][c.info["visible"]]) > 0.3),
+    Hint("Gaussians between the camera and its near plane (0 < z ≤ 0.2 m) are kept: 3DGS culls z ≤ 0.2 m, not only "
+         "z ≤ 0 (so close to the camera a Gaussian's footprint and its Jacobian blow up).",
+         lambda c, out: c.key == "visible" and bool(np.any(out[5] & (c.info["depth"] > 0) & (c.info["depth"] <= NEAR)))),
     Hint("some Gaussians behind the camera (z ≤ 0.2 m, the near plane) or whose 3σ circle misses the image are kept, "
          "or ones that overlap it are culled: keep z > 0.2 and the circle (mean ± radius) overlapping [0, W] × [0, H].",
          lambda c, out: c.key == "visible"),

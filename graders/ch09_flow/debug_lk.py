@@ -40,9 +40,10 @@ def _cause(out, causes):
     return cause
 
 
-def _cause_case(case, truth, convert, call):
+def _cause_case(case, truth, convert, call, weight: float):
+    """The cause, weighing as much as the repair rows together (`weight`): half the points, as the notebook says."""
     return Case("the cause you named", (case,), truth, lambda o, t: float(o["cause"] != t["cause"]), 0, "wrong",
-                convert=convert, call=call, key="cause", tags=("cause",), weight=2.0)
+                convert=convert, call=call, key="cause", tags=("cause",), weight=weight)
 
 
 # ----------------------------------------------------------------- 9.17 drift
@@ -162,7 +163,7 @@ def _convert_drift(out, case):
 def _drift_cases(rng: np.random.Generator):
     case, truth = debug_drift(rng)
     call = shared_run(lambda fn, c=case: fn(copy.deepcopy(c)))
-    yield _cause_case(case, truth, _convert_drift, call)
+    yield _cause_case(case, truth, _convert_drift, call, weight=2.0)
     yield Case(f"end error (last {LAST} frames, median over points) <= {truth['bar_end']:.2f} px "
                f"(the colleague's: {truth['broken_end']:.2f})", (case,), truth,
                lambda o, t: max(0.0, _end_error(o["tracks"], t["gt"]) - t["bar_end"]), 0.0, "px over",
@@ -258,7 +259,7 @@ def _convert_motion(out, case):
 def _motion_cases(rng: np.random.Generator):
     case, truth = debug_large_motion(rng)
     call = shared_run(lambda fn, c=case: fn(copy.deepcopy(c)))
-    yield _cause_case(case, truth, _convert_motion, call)
+    yield _cause_case(case, truth, _convert_motion, call, weight=1.0)
     yield Case(f"positions: 90th percentile <= {truth['bar']:.2f} px on {int(truth['good'].sum())} trackable points "
                f"(the colleague's: {truth['broken_p90']:.1f} px)", (case,), truth,
                lambda o, t: max(0.0, _p90(o["pts2"], t) - t["bar"]), 0.0, "px over", convert=_convert_motion,

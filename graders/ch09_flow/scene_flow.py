@@ -160,7 +160,12 @@ def _variant(**kw):
         Kinv = np.linalg.inv(K) if not kw.get("no_c") else np.diag([1 / K[0, 0], 1 / K[1, 1], 1.0])
         sgn = -1.0 if kw.get("minus") else 1.0
         xs, ys = x + sgn * flow[..., 0], y + sgn * flow[..., 1]
-        Z2 = D2 if kw.get("at_x") else sample(D2[..., None], xs, ys)[..., 0]
+        if kw.get("at_x"):
+            Z2 = D2
+        elif kw.get("nearest"):
+            Z2 = D2[np.clip(np.floor(ys + 0.5).astype(int), 0, H - 1), np.clip(np.floor(xs + 0.5).astype(int), 0, W - 1)]
+        else:
+            Z2 = sample(D2[..., None], xs, ys)[..., 0]
         r1 = np.stack([x, y, np.ones_like(x)], -1) @ Kinv.T
         r2 = np.stack([xs, ys, np.ones_like(x)], -1) @ Kinv.T
         if kw.get("range"):
@@ -172,6 +177,9 @@ def _variant(**kw):
 SCENE_HINTS = [
     like(_variant(at_x=True), "D2 is read at x, not at x + w(x): in frame 2 the point has moved, and x now shows "
                               "another part of the surface (or another surface)."),
+    like(_variant(nearest=True), "D2 is read at the nearest pixel of x + w(x): interpolate it bilinearly between "
+                                 "the four pixels around x + w(x) (on a tilted plane the nearest pixel's depth is "
+                                 "0.5-3 mm off)."),
     like(_variant(range=True), "D is depth (Z), not range |P|: P = D K⁻¹[x, y, 1]ᵀ, with no normalisation of "
                                "the ray."),
     like(_variant(no_c=True), "the principal point is missing: K⁻¹[x, y, 1]ᵀ = [(x − cx)/fx, (y − cy)/fy, 1]."),

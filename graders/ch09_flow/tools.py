@@ -211,6 +211,9 @@ FLOW_TOOLS_HINTS = [
          _when("warp", lambda c: gt_warp(c.info["I"], np.round(c.info["warp_flow"] + 0.0)))),
     Hint("that is the mean squared error: EPE is the Euclidean length |flow − flow_gt| per pixel, then averaged.",
          _when("epe", lambda c: float(np.mean(np.sum(_e(c) ** 2, -1))))),
+    Hint("that is the root of the mean squared error (RMS): EPE is the mean of the per-pixel Euclidean lengths "
+         "|flow − flow_gt|, not the square root of the mean of their squares.",
+         _when("epe", lambda c: float(np.sqrt(np.mean(np.sum(_e(c) ** 2, -1)))))),
     Hint("that is the L1 distance |du| + |dv|: EPE is the Euclidean length.",
          _when("epe", lambda c: float(np.mean(np.abs(_e(c)).sum(-1))))),
     Hint("Fl counts a pixel only if its EPE is > 3 px AND > 5 % of |flow_gt| (KITTI): OR counts too many.",

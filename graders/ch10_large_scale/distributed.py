@@ -66,6 +66,8 @@ class PipelineStages:
     # -- failure injection and scrambled latencies
     def _task(self, kind: str, *inputs) -> None:
         key = task_key(kind, *inputs)
+        if self.scratch is not None:
+            _record_where(self.scratch, kind)
         if self.latency_s:
             time.sleep(self.latency_s * (zlib.crc32(key.encode()) % 97) / 96)
         if key not in self.flaky or self.scratch is None:
@@ -122,18 +124,43 @@ def task_key(kind: str, *inputs) -> str:
     return f"{kind}-{crc:08x}"
 
 
-def _lose_this_worker() -> None:
-    """If this task runs on a Dask worker and another worker of this process is still running, close this
-    one (the scheduler then reruns its tasks elsewhere). The last worker is never closed: the run would
-    wait forever for a worker, which is a test of patience, not of retries."""
+def _scheduler_of(worker) -> str | None:
+    return getattr(getattr(worker, "scheduler", None), "address", None)
+
+
+def _workers_here():
+    """(this task's Dask worker or None, running workers of this process on its scheduler, running workers of
+    this process on other schedulers — a cluster an earlier run left open)."""
     try:
         from distributed import Worker, get_worker
         from distributed.core import Status
         worker = get_worker()
         running = [w for w in list(Worker._instances) if w.status == Status.running]
-    except Exception:        # not on a Dask worker (serial fallback, threads scheduler): just fail
-        return
-    if len(running) >= 2:
+    except Exception:        # not on a Dask worker (serial loop, threads scheduler)
+        return None, [], []
+    ours = [w for w in running if _scheduler_of(w) == _scheduler_of(worker)]
+    return worker, ours, [w for w in running if _scheduler_of(w) != _scheduler_of(worker)]
+
+
+def _record_where(scratch: str, kind: str) -> None:
+    """One marker file per task run: on a Dask worker or not, and how many workers of other schedulers (a
+    cluster left open by an earlier run) were running in the process."""
+    worker, _, others = _workers_here()
+    name = f".ran-{kind}-{'worker' if worker is not None else 'local'}-{len(others)}-{os.getpid()}-{time.time_ns()}"
+    try:
+        os.close(os.open(os.path.join(scratch, name), os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+    except OSError:
+        pass
+
+
+def _lose_this_worker() -> None:
+    """If this task runs on a Dask worker and another worker of the same scheduler is still running, close
+    this one (the scheduler then reruns its tasks elsewhere). The last worker of a scheduler is never closed:
+    the run would wait forever for a worker, which is a test of patience, not of retries. Workers of another
+    scheduler (a cluster an earlier run left open) do not count: with them counted, the run's own last worker
+    was closed and the check hung until its time limit."""
+    worker, ours, _ = _workers_here()
+    if worker is not None and len(ours) >= 2:
         worker.loop.add_callback(worker.close, timeout=2)
 
 
@@ -164,20 +191,31 @@ def gt_serial_pipeline(images, pairs, stages: PipelineStages) -> np.ndarray:
 
 
 def gt_run_pipeline(images, pairs, stages, out_path, address=None, n_workers=2, retries=3) -> np.ndarray:
-    """Stand-in: the serial pipeline with a retry loop per task, the result replaced atomically."""
-    def attempt(fn, *args):
-        for k in range(retries + 1):
-            try:
-                return fn(*args)
-            except TransientTaskError:
-                if k == retries:
-                    raise
-    feats = [attempt(stages.extract, img) for img in images]
-    rows = []
-    for i, j in sorted({(min(i, j), max(i, j)) for i, j in pairs if i != j}):
-        m = attempt(stages.match, feats[i], feats[j])
-        rows.append((i, j, attempt(stages.verify, feats[i], feats[j], m)))
-    rows = np.array(rows, int).reshape(-1, 3)
+    """Stand-in: the tasks on an in-process LocalCluster (or the scheduler at `address`), futures as the
+    graph's edges, retries=, gathered in submission order, the cluster closed; the result replaced atomically."""
+    import logging
+    import uuid
+
+    from distributed import Client, LocalCluster
+    todo = sorted({(min(i, j), max(i, j)) for i, j in pairs if i != j})
+    cluster = None if address else LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=False,
+                                                 dashboard_address=None, silence_logs=logging.CRITICAL)
+    client = Client(address or cluster)
+    run = uuid.uuid4().hex[:8]             # keys unique per run: two runs on one scheduler never share results
+    try:
+        feats = client.map(stages.extract, images, key=[f"extract-{run}-{k}" for k in range(len(images))],
+                           retries=retries)
+        verified = []
+        for i, j in todo:
+            m = client.submit(stages.match, feats[i], feats[j], key=f"match-{run}-{i}-{j}", retries=retries)
+            verified.append(client.submit(stages.verify, feats[i], feats[j], m, key=f"verify-{run}-{i}-{j}",
+                                          retries=retries))
+        counts = client.gather(verified)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    rows = np.array([(i, j, int(n)) for (i, j), n in zip(todo, counts)], int).reshape(-1, 3)
     folder = os.path.dirname(os.path.abspath(out_path))
     fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
     with os.fdopen(fd, "w") as f:
@@ -225,10 +263,13 @@ def _run_and_inspect(fn, images, pairs, flaky_kinds: tuple[str, ...]) -> dict:
                 written = json.load(f)
         except (OSError, ValueError) as exc:
             written = f"unreadable ({type(exc).__name__}: {exc})"
-        leftovers = sorted(n for n in os.listdir(folder) if n != "matches.json" and not n.startswith(".failed-"))
+        names = os.listdir(folder)
+        leftovers = sorted(n for n in names if n != "matches.json" and not n.startswith((".failed-", ".ran-")))
+        ran = [n.split("-")[1:4] for n in names if n.startswith(".ran-")]
         return {"rows": rows, "written": written, "old_intact": old_text == json.dumps(STALE),
                 "replaced": os.stat(out_path).st_ino != inode if os.path.exists(out_path) else False,
-                "leftovers": leftovers}
+                "leftovers": leftovers, "tasks": len(ran), "local": sum(w == "local" for _, w, _ in ran),
+                "stale_workers": max([int(n) for _, _, n in ran] or [0])}
     finally:
         shutil.rmtree(folder, ignore_errors=True)
 
@@ -261,6 +302,12 @@ def _file_problems(out, expected: np.ndarray) -> float:
     return float((not ok_content) + (not out["old_intact"]) + (not out["replaced"]) + bool(out["leftovers"]))
 
 
+def _not_on_dask(out, expected) -> float:
+    """Task runs that were not on a Dask worker, + 1 if workers of a cluster an earlier run left open were still
+    running in the process (+ 1 if no task ran at all)."""
+    return float(out["local"] + (out["stale_workers"] > 0) + (out["tasks"] == 0))
+
+
 def _convert_file(out, case: Case) -> dict:
     if not isinstance(out, dict) or "written" not in out:
         raise OutputError("the pipeline returned nothing to inspect")
@@ -289,6 +336,15 @@ def _file_text(case: Case, out: dict) -> str:
     return "; ".join(why) or "the file's rows are not the returned rows"
 
 
+def _dask_text(case: Case, out: dict) -> str:
+    if out["stale_workers"]:
+        return (f"{out['stale_workers']} Dask workers of an earlier run were still running beside this run's: close "
+                "the client and the cluster you started (try/finally), every run.")
+    return (f"{out['local']} of {out['tasks']} tasks ran outside a Dask worker: this is the distributed part of "
+            "the pipeline — submit the tasks to a Client (client.map / client.submit on a LocalCluster you start, "
+            "or Client(address)); run serially only when no cluster can be started.")
+
+
 PIPELINE_HINTS = [
     raised("TransientTaskError", "a task failed once and the run gave up: pass retries= to client.submit/map "
            "(and retry in your serial fallback too); transient failures are normal on a cluster."),
@@ -296,7 +352,8 @@ PIPELINE_HINTS = [
          "in completion order (as_completed).", _same_rows_other_order),
     Hint("duplicated pairs: retrieval returns (i, j) and (j, i) and repeats; match each unordered pair i < j once "
          "(and never an image with itself).", _duplicates),
-    Hint(_file_text, lambda c, out: isinstance(out, dict) and "written" in out and _file_problems(out, c.expected) > 0),
+    Hint(_file_text, lambda c, out: "atomic" in c.tags and _file_problems(out, c.expected) > 0),
+    Hint(_dask_text, lambda c, out: "dask" in c.tags and _not_on_dask(out, c.expected) > 0),
 ]
 
 
@@ -312,7 +369,12 @@ def _cases(rng: np.random.Generator):
     yield Case(f"{label}, an extraction and a verification fail once (worker lost)", (), expected, _rows_differ, 0,
                "rows differ", convert=_convert_rows, call=runs[("extract", "verify")], key="transient")
     yield Case(f"{label}: result file replaced atomically", (), expected, _file_problems, 0, "problems",
-               convert=_convert_file, call=runs[()], key="atomic")
+               convert=_convert_file, call=runs[()], key="atomic", tags=("atomic",))
+    # The second run (after the first): every task on a Dask worker, and no worker of the first run left running.
+    # Weight 2: the distributed part is what the exercise is about (a serial loop keeps 3/5 of the points).
+    yield Case(f"{label}: every task ran on a Dask worker, no cluster left open", (), expected, _not_on_dask, 0,
+               "problems", convert=_convert_file, call=runs[("extract", "verify")], key="dask", tags=("dask",),
+               weight=2.0)
 
 
 register(Exercise(

@@ -27,8 +27,10 @@ def sim3_problem(rng: np.random.Generator, n: int = 200, outliers: float = 0.3, 
                  sigma: float = 0.02, n_held: int = 80) -> dict:
     """3D-3D pairs Y_i = s R X_i + t + noise, a fraction `outliers` of them replaced by random points.
 
-    X: landmarks of cluster B, a 10 m scene (planar=True: a façade, z within ~1 mm); s log-uniform in [0.3, 0.7] or [1.5, 4] (never near 1, so a scale upside down shows); noise `sigma` x s per axis on
-    Y. threshold: 3.5 noise sigmas (a 3D residual exceeds it with probability < 1e-3).
+    X: landmarks of cluster B, a 10 m scene (planar=True: a façade, z within ~1 mm); s log-uniform in [0.3, 0.7] or
+    [1.5, 4] (never near 1, so a scale upside down shows); noise `sigma` x s per axis on Y; 60 % of the outliers
+    uniform in Y's bounding box, 40 % near misses (1.5-2.5 thresholds off, one direction).
+    threshold: 3.5 noise sigmas (a 3D residual exceeds it with probability < 1e-3).
     Returns X, Y: (n, 3), threshold, is_outlier: (n,), truth (s, R, t), held-out inliers Xh, Yh: (n_held, 3)."""
     s = float(np.exp(rng.uniform(np.log(0.3), np.log(0.7)))) if rng.random() < 0.5 else \
         float(np.exp(rng.uniform(np.log(1.5), np.log(4.0))))
@@ -47,6 +49,13 @@ def sim3_problem(rng: np.random.Generator, n: int = 200, outliers: float = 0.3, 
     bad = rng.permutation(n)[: int(round(outliers * n))]
     lo, hi = Y.min(0), Y.max(0)
     Y[bad] = rng.uniform(lo, hi, (len(bad), 3))
+    # 40 % of the outliers are near misses: a repeated structure matched one bay over, each moved 1.5-2.5
+    # thresholds along one direction. A sound RANSAC rejects them (their residual is 5-9 noise sigmas); a
+    # threshold read as r² < threshold (1.9-7x too large here) takes them in and drags the fit.
+    near = bad[: int(round(0.4 * len(bad)))]
+    u = rng.normal(size=3)
+    Y[near] = s * X[near] @ R.T + t + E[near] + np.outer(rng.uniform(1.5, 2.5, len(near)) * 3.5 * noise,
+                                                        u / np.linalg.norm(u))
     is_out = np.zeros(n, bool)
     is_out[bad] = True
     return {"X": X, "Y": Y, "threshold": 3.5 * noise, "is_outlier": is_out, "s": s, "R": R, "t": t,
@@ -156,6 +165,21 @@ def _all_pairs(c, out) -> bool:
     return rotation_angle_deg(out[1], R) < 0.05 and abs(out[0] / s - 1) < 1e-3
 
 
+def _threshold_squared(c, out) -> bool:
+    """out is Umeyama refit on the pairs with r² < threshold (a squared residual against an unsquared bar)."""
+    if "held" not in c.tags:
+        return False
+    P = c.expected
+    s, R, t = out
+    r2 = np.sum((s * P["X"] @ R.T + t - P["Y"]) ** 2, 1)
+    thr = c.args[2]
+    wide, right = r2 < thr, r2 < thr ** 2
+    if (wide & ~right).sum() < 3:
+        return False
+    s2, R2, _ = umeyama(P["X"][wide], P["Y"][wide])
+    return rotation_angle_deg(R, R2) < 0.05 and abs(s / s2 - 1) < 1e-3
+
+
 SIM3_HINTS = [
     raised(r"det −1|reflection", "Umeyama's reflection fix: with planar landmarks the cross-covariance has rank 2 and "
            "U Vᵀ can be a reflection; use R = U diag(1, 1, det(U Vᵀ)) Vᵀ (and the same D in the scale)."),
@@ -165,6 +189,9 @@ SIM3_HINTS = [
          lambda c, out: abs(out[0] * c.expected["s"] - 1) < 0.05 and rotation_angle_deg(out[1], c.expected["R"]) < 2),
     Hint("that is the least-squares fit of every pair, outliers included: sample 3 pairs, count the pairs within "
          "the threshold, keep the best, then refit on its inliers.", _all_pairs),
+    Hint("your inliers look like those with r² < threshold: the threshold is a distance, so compare r² with "
+         "threshold² (or r with threshold). Here that bar is 2-7x too wide and takes in the near misses.",
+         _threshold_squared),
     Hint(lambda c, out: f"right transform, but the held-out residual is {held_rms(out, c.expected):.3g} where the "
          f"truth leaves {held_rms((c.expected['s'], c.expected['R'], c.expected['t']), c.expected):.3g}: refit "
          "Umeyama on all the inliers of the best sample (the 3-point fit alone carries its noise).",

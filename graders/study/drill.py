@@ -92,11 +92,28 @@ def _display_only(node: ast.Import | ast.ImportFrom) -> bool:
     return module == "graders" and all(a.name in ("check", "use", "answer_key") for a in node.names)
 
 
+def _hands_nothing(imports: list[str], stub: str) -> list[str]:
+    """The imports minus the course's own (`graders`, `solutions`) unless the stub itself names what they bind
+    (4.14 says "until then ch4.bundle_adjust(...)"): a notebook imports helpers for its demos (10.7's imports
+    graders.kit.geometry.umeyama, the very function the drill asks for), a drill must not hand them over."""
+    kept = []
+    for text in imports:
+        node = ast.parse(text).body[0]
+        module = node.module if isinstance(node, ast.ImportFrom) else node.names[0].name
+        if (module or "").split(".")[0] in ("graders", "solutions"):
+            bound = [a.asname or a.name.split(".")[0] for a in node.names]
+            if not any(re.search(rf"\b{re.escape(b)}\b", stub) for b in bound):
+                continue
+        kept.append(text)
+    return kept
+
+
 def stub_text(ex: Exercise) -> str:
     """The drill's file: a header (what, how long, how to check), the imports, the stub."""
     imports, stub = _notebook_parts(ex)
     if ex.stub:
         stub = ex.stub
+    imports = _hands_nothing(imports, stub)
     if not stub:
         args = ", ".join(ex.arg_names) if ex.arg_names else "*args"
         stub = f'def {ex.name}({args}):\n    """Exercise {ex.id}: {ex.title}."""\n    raise NotImplementedError\n'

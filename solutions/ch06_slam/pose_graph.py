@@ -242,7 +242,7 @@ def optimize_pose_graph(T, edges, Z, info, max_iter: int = 100, rel_tol: float =
     return _optimize(T, np.asarray(edges), Z, np.asarray(info, float), None, 1.0, max_iter, rel_tol)
 
 
-def robust_pose_graph(T, edges, Z, info, kernel: str = "cauchy", c: float = 1.0, max_iter: int = 100,
+def robust_pose_graph(T, edges, Z, info, kernel: str = "cauchy", c: float = 3.0, max_iter: int = 100,
                       rel_tol: float = 1e-10) -> np.ndarray:
     """Exercise 6.11: the same optimiser on sum_e rho(r_e^T info_e r_e) (Cauchy or Huber of scale c), by IRLS:
     the weights rho'(s_e) are recomputed from the current residuals at every iteration."""

@@ -378,7 +378,8 @@ MUTANTS += [
 # ----------------------------------------------------------------- 8.14 Gaussian projection
 # A numpy projector written here (closed-form J, eigvalsh radius), one mistake each.
 
-def _proj(mu, q, s, R, t, K, W, H, *, dil=0.3, sq=True, use_W=True, affine=False, norm=True, lam="max", cull="ok"):
+def _proj(mu, q, s, R, t, K, W, H, *, dil=0.3, sq=True, use_W=True, affine=False, norm=True, lam="max", cull="ok",
+          near=0.2):
     mu, q, s = (np.asarray(a, float) for a in (mu, q, s))
     if norm:
         q = q / np.linalg.norm(q, axis=1, keepdims=True)
@@ -389,18 +390,18 @@ def _proj(mu, q, s, R, t, K, W, H, *, dil=0.3, sq=True, use_W=True, affine=False
     D = s ** 2 if sq else s
     Sigma = np.einsum("nij,nj,nkj->nik", Rq, D, Rq)
     Xc = mu @ R.T + t
-    zc = np.where(Xc[:, 2] > 0.2, Xc[:, 2], 1.0)
+    zc = np.where(Xc[:, 2] > near, Xc[:, 2], 1.0)
     J = np.zeros((len(mu), 2, 3))
     J[:, 0, 0], J[:, 1, 1] = K[0, 0] / zc, K[1, 1] / zc
     if not affine:
         J[:, 0, 2], J[:, 1, 2] = -K[0, 0] * Xc[:, 0] / zc ** 2, -K[1, 1] * Xc[:, 1] / zc ** 2
-    JW = J @ R if use_W else J
+    JW = (J @ R.T if use_W == "transposed" else J @ R) if use_W else J
     cov = JW @ Sigma @ JW.transpose(0, 2, 1) + dil * np.eye(2)
     mean = np.stack([K[0, 0] * Xc[:, 0] / zc + K[0, 2], K[1, 1] * Xc[:, 1] / zc + K[1, 2]], 1)
     conic = np.stack([cov[:, 1, 1], -cov[:, 0, 1], cov[:, 0, 0]], 1) / np.linalg.det(cov)[:, None]
     ev = np.linalg.eigvalsh(cov)
     radius = np.ceil(3 * np.sqrt(ev[:, 1] if lam == "max" else ev[:, 0]))
-    vis = Xc[:, 2] > 0.2
+    vis = Xc[:, 2] > near
     if cull == "ok":
         vis &= (mean[:, 0] + radius > 0) & (mean[:, 0] - radius < W) & (mean[:, 1] + radius > 0) & (mean[:, 1] - radius < H)
     elif cull == "centre":
@@ -418,6 +419,16 @@ def pg_scale_not_squared(*a):
 
 def pg_no_view_rotation(*a):
     return _proj(*a, use_W=False)
+
+
+def pg_view_rotation_transposed(*a):
+    # W = Rᵀ (the camera-to-world rotation) in J W Σ Wᵀ Jᵀ
+    return _proj(*a, use_W="transposed")
+
+
+def pg_near_plane_zero(*a):
+    # "in front of the camera" as z > 0, not 3DGS's near plane z > 0.2
+    return _proj(*a, near=1e-9)
 
 
 def pg_affine_jacobian(*a):
@@ -444,6 +455,8 @@ MUTANTS += [
     ("8.14", "no 0.3 px dilation", pg_no_dilation, "0.3 px² low-pass"),
     ("8.14", "R S Rᵀ", pg_scale_not_squared, "scales enter squared"),
     ("8.14", "no W", pg_no_view_rotation, "world-to-camera rotation is missing"),
+    ("8.14", "W transposed", pg_view_rotation_transposed, "W = Rᵀ"),
+    ("8.14", "near plane at z = 0", pg_near_plane_zero, "near plane"),
     ("8.14", "affine Jacobian", pg_affine_jacobian, "third column"),
     ("8.14", "quaternion not normalised", pg_unnormalised_q, "normalise the quaternion"),
     ("8.14", "radius from the smaller eigenvalue", pg_radius_min_eig, "larger eigenvalue"),

@@ -63,6 +63,10 @@ def _epe_squared(flo, flow, I, flow_gt):
     return float(np.mean(np.sum((np.asarray(flow) - flow_gt) ** 2, -1)))
 
 
+def _epe_rms(flo, flow, I, flow_gt):
+    return float(np.sqrt(np.mean(np.sum((np.asarray(flow) - flow_gt) ** 2, -1))))
+
+
 def _fl_or(flo, flow, I, flow_gt):
     e = ref_tools.epe_map(flow, flow_gt)
     return float(np.mean((e > 3) | (e > 0.05 * np.linalg.norm(flow_gt, axis=-1))))
@@ -80,6 +84,7 @@ MUTANTS = [
     ("9.9", "warp with (v, u)", _tools(warp=_warp_axes_swapped), "(v, u)"),
     ("9.9", "nearest-pixel warp", _tools(warp=_warp_nearest), "nearest pixel"),
     ("9.9", "EPE squared", _tools(epe=_epe_squared), "mean squared error"),
+    ("9.9", "EPE as RMS", _tools(epe=_epe_rms), "(RMS)"),
     ("9.9", "Fl with OR", _tools(fl=_fl_or), "OR counts too many"),
     ("9.9", "Fl in percent", _tools(fl=_fl_percent), "not a percentage"),
 ]

@@ -224,7 +224,7 @@ MUTANTS = [
     ("9.16", "depth as range", sf_range, "not range"),
     ("9.16", "no principal point", sf_no_principal_point, "principal point"),
     ("9.16", "x - flow", sf_flow_subtracted, "frame 1 to frame 2"),
-    ("9.16", "nearest-pixel depth", sf_nearest_depth, None),
+    ("9.16", "nearest-pixel depth", sf_nearest_depth, "nearest pixel of x + w(x)"),
     ("9.19", "wrong cause", lost_wrong_cause, "independent tracking"),
     ("9.19", "stricter threshold", lost_stricter_threshold, None),
     ("9.19", "unchanged", lost_unchanged, "matcher's positions"),

@@ -103,13 +103,13 @@ def _umeyama_variant(A, B, reflection_fix=True, var_of="A"):
     return s, R, mb - s * R @ ma
 
 
-def _ransac(X, Y, threshold, fit, iters=1000, seed=0, refit=True):
+def _ransac(X, Y, threshold, fit, iters=1000, seed=0, refit=True, squared_bar=False):
     rng = np.random.default_rng(seed)
     best, best_n, best_model = None, -1, None
     for _ in range(iters):
         idx = rng.choice(len(X), 3, replace=False)
         s, R, t = fit(X[idx], Y[idx])
-        inl = np.sum((s * X @ R.T + t - Y) ** 2, 1) < threshold ** 2
+        inl = np.sum((s * X @ R.T + t - Y) ** 2, 1) < (threshold if squared_bar else threshold ** 2)
         if inl.sum() > best_n:
             best, best_n, best_model = inl, int(inl.sum()), (s, R, t)
     return fit(X[best], Y[best]) if refit else best_model
@@ -135,6 +135,11 @@ def sim3_inverse(X, Y, threshold, iters=1000, seed=0):
     return 1 / s, R.T, -R.T @ t / s
 
 
+def sim3_threshold_squared(X, Y, threshold, iters=1000, seed=0):
+    # r**2 < threshold: the squared residual against the unsquared bar.
+    return _ransac(X, Y, threshold, umeyama, iters, seed, squared_bar=True)
+
+
 def sim3_no_ransac(X, Y, threshold, iters=1000, seed=0):
     return umeyama(X, Y)
 
@@ -145,6 +150,7 @@ MUTANTS += [
     ("10.7", "best minimal sample, no refit", sim3_no_refit, "refit Umeyama"),
     ("10.7", "the inverse similarity", sim3_inverse, "inverse similarity"),
     ("10.7", "least squares on every pair (no RANSAC)", sim3_no_ransac, "every pair"),
+    ("10.7", "inlier test r**2 < threshold", sim3_threshold_squared, "r² < threshold"),
 ]
 
 # ----------------------------------------------------------------- 10.8 merge_reconstructions

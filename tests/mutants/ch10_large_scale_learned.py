@@ -184,7 +184,43 @@ def pipeline_writes_in_place(images, pairs, stages, out_path, address=None, n_wo
     return rows
 
 
+def pipeline_serial_loop(images, pairs, stages, out_path, address=None, n_workers=2, retries=3):
+    """No Dask at all: a serial loop with its own retries, the right rows, the file replaced atomically."""
+    import json
+    import os
+    import tempfile
+
+    def attempt(fn, *args):
+        for k in range(retries + 1):
+            try:
+                return fn(*args)
+            except Exception:
+                if k == retries:
+                    raise
+    todo = sorted({(min(i, j), max(i, j)) for i, j in pairs if i != j})
+    feats = [attempt(stages.extract, img) for img in images]
+    rows = np.array([(i, j, attempt(stages.verify, feats[i], feats[j], attempt(stages.match, feats[i], feats[j])))
+                     for i, j in todo], int).reshape(-1, 3)
+    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(os.path.abspath(out_path)))
+    with os.fdopen(fd, "w") as f:
+        json.dump({"pairs": rows.tolist()}, f)
+    os.replace(tmp, out_path)
+    return rows
+
+
+def pipeline_cluster_left_open(images, pairs, stages, out_path, address=None, n_workers=2, retries=3):
+    """Right in every other way, but the client and the LocalCluster are never closed."""
+    todo = ref_dist.unique_pairs(pairs)
+    client, cluster, verified = _cluster_map(images, todo, stages, retries)
+    counts = client.gather(verified)
+    rows = np.array([(i, j, n) for (i, j), n in zip(todo, counts)], int).reshape(-1, 3)
+    ref_dist.write_atomically(out_path, {"pairs": rows.tolist()})
+    return rows
+
+
 MUTANTS += [
+    ("10.10", "a serial loop, no Dask", pipeline_serial_loop, "ran outside a Dask worker"),
+    ("10.10", "LocalCluster left open", pipeline_cluster_left_open, "still running"),
     ("10.10", "no retries", pipeline_no_retries, "pass retries="),
     ("10.10", "completion order", pipeline_completion_order, "in another order"),
     ("10.10", "duplicated pairs", pipeline_duplicate_pairs, "duplicated pairs"),

@@ -49,6 +49,20 @@ def test_every_code_exercise_gets_a_stub_with_its_signature_and_docstring():
         assert drill.target_minutes(ex) > 0 and drill.difficulty(ex) in (1, 2, 3)
 
 
+def test_a_drill_stub_imports_no_course_helper_it_does_not_name():
+    # 10.7's notebook imports graders.kit.geometry.umeyama for its demos; the drill asks for Umeyama inside RANSAC.
+    text = drill.stub_text(next(ex for ex in drill.code_exercises() if ex.id == "10.7"))
+    imports = [ln for ln in text.splitlines() if ln.startswith(("import ", "from "))]
+    assert imports and not any("graders" in ln or "umeyama" in ln for ln in imports), imports
+    for ex in drill.code_exercises():
+        tree = ast.parse(drill.stub_text(ex))
+        stub = "\n".join(ast.unparse(n) for n in tree.body if not isinstance(n, (ast.Import, ast.ImportFrom)))
+        for node in tree.body:
+            if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] in ("graders", "solutions"):
+                assert any(re.search(rf"\b{a.asname or a.name}\b", stub) for a in node.names), \
+                    f"{ex.id}: the drill imports {ast.unparse(node)} and its stub never names it"
+
+
 def test_stub_and_timing_come_from_exercise_data_when_given():
     cases = lambda rng: [Case("one", (np.ones(2),), np.full(2, 2.0), max_abs, 1e-9)]   # noqa: E731
     plain = Exercise(id="99.1", title="double it", name="double", kind="code", points=5, cases=cases,

@@ -116,14 +116,14 @@ def read_quaternion_w_first(path):
 # 6.9 between_residuals
 
 
-def _between(T, edges, Z, jr_identity=False, ji_sign=-1.0, swapped=False, left=False):
+def _between(T, edges, Z, jr_identity=False, ji_sign=-1.0, swapped=False, left=False, jl=False):
     T = _np.asarray(T, float)
     i, j = _np.asarray(edges).T
     if swapped:
         i, j = j, i
     Tij = _lie.inverse(T[i]) @ T[j]
     r = _lie.log(_lie.inverse(_np.asarray(Z, float)) @ Tij)
-    Jinv = _np.tile(_np.eye(r.shape[1]), (len(r), 1, 1)) if jr_identity else _lie.right_jacobian_inv(r)
+    Jinv = _np.tile(_np.eye(r.shape[1]), (len(r), 1, 1)) if jr_identity else _lie.right_jacobian_inv(-r if jl else r)
     Ji, Jj = ji_sign * Jinv @ _lie.adjoint(_lie.inverse(Tij)), Jinv
     if left:
         Ji, Jj = Ji @ _lie.adjoint(_lie.inverse(T[i])), Jj @ _lie.adjoint(_lie.inverse(T[j]))
@@ -144,6 +144,11 @@ def between_swapped(T, edges, Z):
 
 def between_left_perturbation(T, edges, Z):
     return _between(T, edges, Z, left=True)
+
+
+def between_jl_inverse(T, edges, Z):
+    # J_l^-1(r) = J_r^-1(-r) where J_r^-1(r) belongs (the two tables sit side by side in Barfoot's book).
+    return _between(T, edges, Z, jl=True)
 
 
 # 6.10 optimize_pose_graph and 6.11 robust_pose_graph: one LM with one mistake switched on
@@ -248,6 +253,7 @@ MUTANTS += [
     ("6.9", "J_i with the wrong sign", between_ji_sign, "opposite way"),
     ("6.9", "residual of T_j^-1 T_i", between_swapped, "T_j^-1 T_i"),
     ("6.9", "left-perturbation Jacobians", between_left_perturbation, "left perturbations"),
+    ("6.9", "J_l^-1 for J_r^-1", between_jl_inverse, "left Jacobian's inverse"),
     ("6.10", "information matrices ignored", optimize_identity_information, "unweighted problem"),
     ("6.10", "J_i with the wrong sign", optimize_ji_sign, "wrong Jacobian"),
     ("6.10", "gauge not fixed", optimize_gauge_free, "first pose moved"),
@@ -291,6 +297,32 @@ def inconsistent_drop_all_loops(case):
             _pg.optimize_pose_graph(case["T"], case["edges"][keep], case["Z"][keep], case["info"][keep]))
 
 
+def inconsistent_drop_most_trusted(case):
+    """Drops the loop closures whose information is far above the others' (the 'overconfident covariance' of
+    the symptom), then plain least squares: no robust kernel."""
+    info = _np.asarray(case["info"], float)
+    tr = _np.trace(info, axis1=1, axis2=2)
+    loop = _np.asarray(case["is_loop"])
+    keep = ~loop | (tr < 5 * _np.median(tr[loop]))
+    return ("conflicting constraints, no robust kernel",
+            _pg.optimize_pose_graph(case["T"], case["edges"][keep], case["Z"][keep], case["info"][keep]))
+
+
+def inconsistent_drop_duplicate_pairs(case):
+    """Keeps one edge per pose pair (a 'duplicated constraint' seen as the bug), then plain least squares."""
+    seen, keep = set(), []
+    for e in _np.asarray(case["edges"]).tolist():
+        keep.append(tuple(e) not in seen)
+        seen.add(tuple(e))
+    keep = _np.array(keep)
+    return ("conflicting constraints, no robust kernel",
+            _pg.optimize_pose_graph(case["T"], case["edges"][keep], case["Z"][keep], case["info"][keep]))
+
+
+def inconsistent_unrepaired(case):
+    return "conflicting constraints, no robust kernel", _np.array(case["T"], float)
+
+
 MUTANTS += [
     ("6.18", "diagnosed, not repaired", drift_unchanged, "never used"),
     ("6.18", "blames biased odometry", drift_blames_bias, "zero-mean"),
@@ -298,6 +330,9 @@ MUTANTS += [
     ("6.19", "every loop closure dropped", jumps_drop_all_loops, "drifts like the odometry"),
     ("6.21", "plain least squares", inconsistent_plain_l2, "robust kernel"),
     ("6.21", "every loop closure dropped", inconsistent_drop_all_loops, "drifts like the odometry"),
+    ("6.21", "the most trusted loop closures dropped, no kernel", inconsistent_drop_most_trusted, None),
+    ("6.21", "duplicated pose pairs dropped, no kernel", inconsistent_drop_duplicate_pairs, "robust kernel"),
+    ("6.21", "right cause, the colleague's output returned", inconsistent_unrepaired, "odometry chain you were given"),
 ]
 
 

@@ -18,7 +18,8 @@ def _fe_umeyama(A, B, with_scale):
 
 
 def _fe_trajectory_errors(stamps_est, T_est, stamps_gt, T_gt, with_scale=False, delta=1, *, by_index=False,
-                          align=True, force_se3=False, mean=False, world_rpe=False, var_of_target=False):
+                          align=True, force_se3=False, mean=False, world_rpe=False, var_of_target=False,
+                          all_pairs=False):
     if by_index:
         n = min(len(T_est), len(T_gt))
         ie = ig = np.arange(n)
@@ -39,8 +40,12 @@ def _fe_trajectory_errors(stamps_est, T_est, stamps_gt, T_gt, with_scale=False, 
         P[:, :3, 3] = s * P[:, :3, 3] @ R.T + t
     agg = np.mean if mean else (lambda x: np.sqrt(np.mean(x ** 2)))
     ate = agg(np.linalg.norm(P[:, :3, 3] - Q[:, :3, 3], axis=1))
-    i = np.arange(0, len(P), delta)
-    a, b = i[:-1], i[1:]
+    if all_pairs:   # every pair (i, i + delta), overlapping, where evo's default takes i = 0, delta, 2 delta, ...
+        a = np.arange(len(P) - delta)
+        b = a + delta
+    else:
+        i = np.arange(0, len(P), delta)
+        a, b = i[:-1], i[1:]
     rel_Q = np.linalg.inv(Q[a]) @ Q[b]
     rel_P = np.linalg.inv(P[a]) @ P[b]
     E = np.linalg.inv(rel_Q) @ rel_P
@@ -73,6 +78,10 @@ def rpe_world_displacements(*a, **k):
 
 def sim3_scale_from_target_variance(*a, **k):
     return _fe_trajectory_errors(*a, **k, var_of_target=True)
+
+
+def rpe_all_pairs(*a, **k):
+    return _fe_trajectory_errors(*a, **k, all_pairs=True)
 
 
 def _fe_exp(w):
@@ -144,6 +153,7 @@ MUTANTS += [  # front-end entries
     ("6.12", "mean instead of RMSE", ate_mean_not_rms, "root-mean-square"),
     ("6.12", "RPE as world-frame displacement differences", rpe_world_displacements, "world-frame displacements"),
     ("6.12", "Sim(3) scale normalised by the ground truth's variance", sim3_scale_from_target_variance, None),
+    ("6.12", "RPE over all overlapping pairs (i, i + delta)", rpe_all_pairs, "every pair (i, i + delta)"),
     ("6.17", "gravity removed inside the pre-integration", imu_gravity_removed_inside, "gravity taken out"),
     ("6.17", "biases not subtracted", imu_biases_ignored, "raw measurements"),
     ("6.17", "position updated with the new velocity", imu_position_with_new_velocity, "velocity after"),
