@@ -15,8 +15,8 @@ from graders.core.convert import OutputError
 from graders.core.engine import Case, Exercise, Hint, debug_practice, register, shared_run
 
 from .scene_flow import _convert as _convert_sf, gt_scene_flow, scene_flow_scene
-from .tracking import (TAU, convert_tracks, independent_tracker, judged_cases, occluded_error, tapvid_metrics,
-                       tracking_sequence)
+from .tracking import (TAU, convert_tracks, gt_joint_tracker, independent_tracker, judged_cases, occluded_error,
+                       tapvid_metrics, tracking_sequence)
 
 LOST_CAUSES = {
     "independent": "each point is tracked on its own: while hidden, it follows a confident false match",
@@ -32,9 +32,24 @@ NOISE_CAUSES = {
 }
 
 
+def _repairable(seq: dict, margin: float = 0.02) -> bool:
+    """A fair draw for 9.19: the grader's own repair (9.15's joint tracker) clears every TAP-Vid bar with a
+    margin. On some sequences a good joint tracker misses the occlusion-accuracy bar (the reference did on 2
+    of 580 draws, by 0.006 and 0.066): such a draw asks for more than the repair can give, so it is redrawn."""
+    tracks, visible = gt_joint_tracker(seq["query"], seq["obs"], seq["score"], seq["group"])
+    m = tapvid_metrics(tracks, visible, seq["tracks"], seq["visible"])
+    hidden = occluded_error(tracks, seq["tracks"], seq["visible"])
+    return bool(m["aj"] >= 0.80 + margin and m["delta_avg"] >= 0.88 + margin and m["oa"] >= 0.90 + margin
+                and hidden <= 3.0 - 10 * margin)
+
+
 def debug_lost(rng: np.random.Generator) -> tuple[dict, dict]:
-    """The colleague's tracker on a 9.15 sequence: the per-frame matcher's output taken as is."""
-    seq = tracking_sequence(rng)
+    """The colleague's tracker on a 9.15 sequence: the per-frame matcher's output taken as is. The sequence is
+    redrawn until the grader's own repair clears every bar with a margin (`_repairable`)."""
+    for _ in range(20):
+        seq = tracking_sequence(rng)
+        if _repairable(seq):
+            break
     tracks, visible = independent_tracker(seq["query"], seq["obs"], seq["score"])
     m = tapvid_metrics(tracks, visible, seq["tracks"], seq["visible"])
     jumps = np.linalg.norm(np.diff(tracks, axis=0), axis=-1)
