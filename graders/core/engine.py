@@ -57,6 +57,9 @@ class Case:
     call: Callable[[Callable], Any] | None = None
     key: str = ""                  # stable identifier for hints and tests; defaults to a slug of `name`
     tags: tuple[str, ...] = ()     # properties hints select on ("noise", "planar", ...), never display text
+    # Why graded mode cannot judge this row ('' if it can): what it measures is only visible in the learner's
+    # own process (10.10: which Dask worker ran a stage). In graded mode the row is shown, not run, and weighs 0.
+    local_only: str = ""
 
     def __post_init__(self):
         if not self.key:
@@ -323,6 +326,11 @@ def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None, hidden: bool 
             return result
         if case is None:
             break
+        if case.local_only and isinstance(fn, RemoteAttempt):
+            result.cases.append(CaseResult(name=case.name, tol=case.tol, unit=case.unit, key=case.key,
+                                           message=f"not judged in graded mode: {case.local_only}"))
+            weights.append(0.0)
+            continue
         judged = _judge_case(ex, fn, case)
         if judged is None:  # NotImplementedError on a case: the whole exercise is not attempted
             result.status, result.cases = "not_attempted", []
@@ -339,8 +347,9 @@ def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None, hidden: bool 
     for row, weight in zip(result.cases, weights):
         row.max_points = ex.points * weight / sum(weights)
         row.points = row.max_points if row.passed else 0.0
+    judged = [row for row, weight in zip(result.cases, weights) if weight > 0]
     result.score = round(sum(r.points for r in result.cases), 6)
-    result.status = ("passed" if all(r.passed for r in result.cases)
+    result.status = ("passed" if all(r.passed for r in judged)
                      else "failed" if result.score == 0 else "partial")
     if ex.explanation:
         result.explanation = ex.explanation

@@ -328,3 +328,28 @@ def test_the_time_limit_counts_cpu_time_and_the_wall_clock_stops_waiting():
     assert out.kind == "timeout" and "waiting" in out.error
     assert 0.9 * WALL_FACTOR * 0.2 <= _time.perf_counter() - t1 < 30
     assert t1 - t0 < 10
+
+
+def test_a_local_only_row_is_shown_not_judged_in_graded_mode():
+    # A row graded mode cannot observe (10.10's Dask placement) weighs 0 there, says why, and is judged in
+    # self-study; the other rows share the points.
+    from graders.core.attempt import CaseReport
+
+    class Remote:               # the engine's view of a graded-mode function (graders.core.attempt.RemoteAttempt)
+        def __call__(self, x):
+            return x
+
+        def begin_case(self, timeout):
+            pass
+
+        def end_case(self, exercise):
+            return CaseReport()
+
+    ex = Exercise(id="0.98", title="t", name="f", kind="code", points=3,
+                  cases=lambda rng: [Case("seen", (1.0,), 1.0, lambda o, e: abs(o - e), 0.0),
+                                     Case("only here", (1.0,), 2.0, lambda o, e: abs(o - e), 0.0,
+                                          local_only="not visible from the judge")])
+    local, remote = grade(ex, lambda x: x, seed=0), grade(ex, Remote(), seed=0)
+    assert local.score == 1.5 and not local.cases[1].passed
+    assert remote.score == 3 and remote.status == "passed"
+    assert remote.cases[1].max_points == 0 and "not judged in graded mode: not visible" in remote.cases[1].message
