@@ -18,6 +18,7 @@ import io
 import json
 import os
 import sys
+import tempfile
 import threading
 import time
 import traceback
@@ -25,9 +26,9 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 from .chapters import by_number
-from .cli import MAX_TIMEOUTS, MEMORY_GB, TIME_BUDGET, check_file, read_secret
+from .cli import MAX_TIMEOUTS, MEMORY_GB, TIME_BUDGET, check_file, clean_stale_grade_folders, read_secret
 from .engine import chapter
-from .report import ExerciseResult, gradescope, write_gradescope
+from .report import ExerciseResult, gradescope, one_line, write_gradescope
 
 SUFFIXES = (".ipynb", ".py")
 
@@ -96,13 +97,22 @@ def row_of(sid: str, doc: dict) -> dict:
     return row
 
 
+def csv_cell(value):
+    """A gradebook cell a spreadsheet shows as text: a string that could start a formula (=, +, -, @, tab,
+    carriage return; OWASP's list) gets a leading apostrophe, and control characters go. Numbers stay numbers."""
+    if not isinstance(value, str):
+        return value
+    value = one_line(value, 300)
+    return "'" + value if value[:1] in ("=", "+", "-", "@", "\t", "\r") else value
+
+
 def write_gradebook(path: Path, rows: list[dict], exercise_ids: list[str]) -> None:
     columns = ["submission", "total", "max", "status", "error", "seconds"] + exercise_ids
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=columns, extrasaction="ignore")
     writer.writeheader()
     for row in sorted(rows, key=lambda r: r["submission"]):
-        writer.writerow({c: row.get(c, 0 if c in exercise_ids else "") for c in columns})
+        writer.writerow({c: csv_cell(row.get(c, 0 if c in exercise_ids else "")) for c in columns})
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text(buffer.getvalue())
     os.replace(tmp, path)
@@ -129,6 +139,9 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    stale = clean_stale_grade_folders()
+    if stale:
+        print(f"removed {len(stale)} grade folder(s) a killed batch left in {tempfile.gettempdir()}", flush=True)
     subs = submissions(Path(args.submissions))
     secret = read_secret(args.secret_file)
     only = [ex.id for ex in chapter(by_number(args.chapter).key)] if args.chapter else None
