@@ -65,6 +65,38 @@ def _pyproject() -> str:
     return text.replace('testpaths = ["tests", "notebooks"]', 'testpaths = ["notebooks"]')
 
 
+STUDENT_SECTIONS = ("Two commands", "Chapters", "Checking your work", "Real data")   # the rest is the instructor's
+
+
+def student_readme(numbers: list[int]) -> str:
+    """The release's README: the course README's learner sections only (no teaching, contributing,
+    solutions/, benchmarks or tests/), its chapter table cut to the chapters shipped, `make test` described
+    as what it runs here (every notebook)."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    head, *sections = text.split("\n## ")
+    keep = [head.rstrip() + "\n"]
+    shipped = {str(n) for n in numbers}
+    for section in sections:
+        title, _, body = section.partition("\n")
+        if title.strip() not in STUDENT_SECTIONS:
+            continue
+        lines = []
+        for line in body.splitlines():
+            cells = [c.strip() for c in line.split("|")]
+            if line.startswith("| ") and len(cells) > 2 and cells[1].isdigit() and cells[1] not in shipped:
+                continue                      # a chapter row of a chapter not in this edition
+            if line.startswith("<!--"):
+                continue                      # the instructor repo's generator marker
+            lines.append(line.replace("run the whole test suite (pytest + every notebook via nbval)",
+                                      "run every notebook of this edition top to bottom (nbval)"))
+        keep.append(f"## {title}\n" + "\n".join(lines).rstrip() + "\n")
+    chapters = ", ".join(str(n) for n in sorted(numbers))
+    keep.insert(1, f"This edition holds chapter{'s' if len(numbers) > 1 else ''} {chapters}: the notebooks, the "
+                   "checks (`graders/`) and the data manifest. Frames, poses and pixels follow "
+                   "[docs/CONVENTIONS.md](docs/CONVENTIONS.md).\n")
+    return "\n".join(keep)
+
+
 def student_release(out: str | Path, numbers: list[int] | None = None) -> Path:
     """Write the student edition of `numbers` (default: every ready chapter) into `out` (must not exist)."""
     out = Path(out)
@@ -79,8 +111,9 @@ def student_release(out: str | Path, numbers: list[int] | None = None) -> Path:
         shutil.copy2(nb, out / "notebooks" / nb.name)
     if (ROOT / HOME_NOTEBOOK).exists():     # the course home: map, progress, reference tables
         shutil.copy2(ROOT / HOME_NOTEBOOK, out / HOME_NOTEBOOK)
-    for name in ("README.md", "environment.txt", "Makefile", "conftest.py", ".gitignore"):
+    for name in ("environment.txt", "Makefile", "conftest.py", ".gitignore"):
         shutil.copy2(ROOT / name, out / name)
+    (out / "README.md").write_text(student_readme(numbers), encoding="utf-8")
     shutil.copytree(ROOT / "data", out / "data", ignore=_ignore)
     shutil.copytree(ROOT / "docs", out / "docs", ignore=_ignore)
     (out / "pyproject.toml").write_text(_pyproject())

@@ -182,3 +182,17 @@ def test_gradescope_without_its_data_shows_a_failed_test(tmp_path, monkeypatch):
     failed = [t for t in doc["tests"] if "chessboard" in t["name"]]
     assert failed and failed[0]["status"] == "failed" and failed[0]["visibility"] == "visible"
     assert "not run" in failed[0]["output"] and "No notebook" in doc.get("output", "")
+
+
+def test_release_readme_lists_only_what_the_release_holds(tmp_path):
+    import re
+    rel = student_release(tmp_path / "course", [1, 3])
+    text = (rel / "README.md").read_text()
+    for instructor_only in ("solutions", "make bench", "tests/", "benchmarks", "Teaching with it", "For contributors",
+                            "python -m graders batch", "--secret-file"):
+        assert instructor_only not in text, instructor_only
+    links = re.findall(r"\]\(([^)#]+)\)", text)
+    assert "notebooks/01_camera_models.ipynb" in links and "notebooks/03_features.ipynb" in links
+    missing = [link for link in links if not link.startswith("http") and not (rel / link).exists()]
+    assert not missing, missing                      # no link to a chapter (or file) this edition lacks
+    assert "notebooks/02_epipolar.ipynb" not in text
