@@ -359,7 +359,11 @@ def _ransac_repeat(fn, s, seeds):
     return errs
 
 
-TOL_REFINED = 0.15   # px. Measured over 260 draws: see the comment in cases_pnp_ransac
+# px. Measured on 260 draws of the case below (seeds 100-159, 1000-1199): the reference 0, pycolmap <= 0.038,
+# OpenCV's solvePnPRansac + solvePnPRefineLM <= 0.061, a plain RANSAC refined once on its best sample's inliers
+# <= 0.137; the best P3P sample unrefined >= 0.297 (median 1.05), EPnP / DLT refits on the inliers 0.022-0.93
+# (median 0.14) / 0.027-0.42 (0.08): a linear refit is often as close as a refinement, and is caught only sometimes.
+TOL_REFINED = 0.2
 
 
 def cases_pnp_ransac(rng) -> list[Case]:
@@ -390,8 +394,9 @@ def cases_pnp_ransac(rng) -> list[Case]:
                     call=lambda fn, s2=s2: _ransac_repeat(fn, s2, range(5)),
                     convert=lambda o, c: np.asarray(o, float), key="87-percent-wrong", tags=("adaptive",)))
     # Refined, as the exercise asks: on an easy draw (0.5 px noise, 10 % wrong matches at >= 20 px) the best
-    # sample's inliers are the true ones, so a pose refined on them is the least-squares pose of the returned
-    # inliers. Bar: a converged refinement there moves it by at most TOL_REFINED px (held-out RMS).
+    # sample's inliers are almost always the pose's final inliers, so a pose refined on them is the least-squares
+    # pose of the returned inliers. Bar: a converged refinement there moves it by at most TOL_REFINED px
+    # (held-out RMS); an unrefined pose moves by 0.3-2.6 px.
     s3 = pnp_scene(rng, 120, noise=0.5, outliers=0.1)
     exp3 = dict(K=s3["K"], held_out=s3["held_out"], is_outlier=s3["is_outlier"], X=s3["X"], x=s3["x"])
     out.append(Case("120 matches, 10 % wrong, 0.5 px: how far a refinement on your inliers still moves your pose",
