@@ -122,7 +122,7 @@ def _progress(done: int, total: int, started: float, sid: str, row: dict) -> str
     rate = done / max(time.monotonic() - started, 1e-9) * 60
     left = (total - done) / max(rate / 60, 1e-9)
     bar = "#" * int(30 * done / total) + "." * (30 - int(30 * done / total))
-    return (f"[{bar}] {done}/{total}  {sid}: {row['total']:g}/{row['max']:g} {row['status']}  "
+    return (f"[{bar}] {done}/{total}  {one_line(sid, 80)}: {row['total']:g}/{row['max']:g} {row['status']}  "
             f"({rate:.1f}/min, ~{left / 60:.0f} min left)")
 
 
