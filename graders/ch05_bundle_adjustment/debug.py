@@ -5,13 +5,16 @@ produces (held_out_rms: fresh points triangulated in the returned cameras; for 5
 """
 from __future__ import annotations
 
+import copy
+from collections.abc import Iterable
+
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg
 from scipy.spatial.transform import Rotation
 
 from graders.kit import scene
-from graders.core.engine import Exercise, Hint, OutputError, debug_cases, debug_practice, raised, register
+from graders.core.engine import Case, Exercise, Hint, OutputError, debug_cases, debug_practice, raised, register, shared_run
 from graders.oracles.bundle_adjust import bal_cost
 from graders.oracles.bundle_adjust import bal_project as gt_project
 
@@ -129,6 +132,35 @@ def _metric_fix(out, truth):
     return held_out_rms(out[0], truth)
 
 
+# 5.17 also asks for the minimum, not only for a fast step: a fix stopped after three LM iterations is
+# within 0.5 px on held-out points (0.04-0.15 px) yet 0.3-10 % above the converged cost. Bar: 0.1 % above
+# pycolmap's cost with 1e-12 tolerances (Ceres, up to 200 iterations). Measured on seeds 0-2: the reference
+# (ftol 1e-8 or 1e-3) and pycolmap with stock tolerances reach 1e-15 to 2e-9; four LM iterations 1e-8 to 8e-5.
+TOO_SLOW_COST_TOL = 1e-3
+
+
+def _excess_cost(out, expected) -> float:
+    """(cost of the returned cameras and points on the problem's observations) / (converged cost) - 1."""
+    cams, pts = out
+    with np.errstate(all="ignore"):
+        cost = bal_cost(cams, pts, *expected["observations"])
+    return float(cost / expected["converged_cost"] - 1) if np.isfinite(cost) else 1e6
+
+
+def cases_too_slow(rng: np.random.Generator) -> Iterable[Case]:
+    """5.17: one problem, one run of the learner's fix, judged twice: held-out reprojection (as the other
+    DEBUG fixes) and the cost it reached against the converged cost (a fix that stops early is not a fix)."""
+    case, truth = debug_too_slow(rng)
+    run = shared_run(lambda fn, case=case: fn(copy.deepcopy(case)))
+    yield Case("hidden problem 1", (case,), truth, _metric_fix, 0.5, "px RMS", convert=_convert_fix, call=run,
+               key="hidden-problem-1")
+    cams, pts, ci, pi, obs = problem_args(case)
+    c0, p0, _ = colmap_bundle_adjust(cams, pts, ci, pi, obs, tight=True)
+    expected = {"observations": (ci, pi, obs), "converged_cost": bal_cost(c0, p0, ci, pi, obs)}
+    yield Case("hidden problem 1: your cost / the converged cost − 1", (case,), expected, _excess_cost,
+               TOO_SLOW_COST_TOL, "", convert=_convert_fix, call=run, key="converged", tags=("converged",))
+
+
 def _convert_fix_points(out, case):
     n_pts = len(case.args[0]["points"])
     if not isinstance(out, (tuple, list)) or len(out) != 3:
@@ -242,6 +274,10 @@ OUTLIER_HINTS = [
 
 SLOW_HINTS = [
     UNCHANGED_HINT,
+    Hint(lambda c, out: f"your cost is {100 * _excess_cost(out, c.expected):.2g} % above the converged cost: the "
+         "adjustment stopped before the minimum (too few iterations, or a stopping rule that fires early). Run LM "
+         "until an accepted step lowers the cost by less than ~1e-6 of it.",
+         lambda c, out: "converged" in c.tags and not _unchanged(c, out)),
     Hint("your reconstruction still misses its own observations by more than 1 px RMS (noise: 0.5 px): it stopped "
          "before converging. With the Schur complement an iteration takes a fraction of a second here, so run LM "
          "until the cost stops falling.", _not_converged_own),
@@ -388,7 +424,7 @@ register(
         name="fix_too_slow",
         kind="debug",
         points=2,
-        cases=cached(debug_cases(debug_too_slow, _metric_fix, 0.5, convert=_convert_fix, n=1)),
+        cases=cached(cases_too_slow),
         hints=SLOW_HINTS,
         fallback=colmap_fix_too_slow,
         timeout=60.0,

@@ -5,8 +5,27 @@ from __future__ import annotations
 import html
 import json
 import os
+import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+
+# Terminal escape sequences (CSI, OSC, two-character ESC codes), then any other control or layout
+# character: C0/C1 controls, zero-width and bidirectional overrides, line/paragraph separators.
+_ESCAPES = re.compile(r"\x1b\[[0-?]*[ -/]*[@-~]|\x1b\][^\x07\x1b]*(?:\x07|\x1b\\)?|\x1b[@-_]|\x9b[0-?]*[ -/]*[@-~]")
+_BREAKS = re.compile(r"\r\n|[\n\r\v\f\x85\u2028\u2029]")
+_INVISIBLE = re.compile(r"[\x00-\x1f\x7f-\x9f\u200b-\u200f\u202a-\u202e\u2060-\u2069\ufeff]")
+
+
+def one_line(text: str, limit: int = 400) -> str:
+    """Text that came from (or quotes) the learner's code, made safe to print in a grader's report: no
+    terminal escapes or control characters, every line break shown as ' ⏎ ' (so it cannot start a line
+    of its own that looks like the grader's, e.g. a forged '✔ passed' or 'total: 39/39'), at most
+    `limit` characters."""
+    text = _ESCAPES.sub("", str(text))
+    text = _BREAKS.sub(" ⏎ ", text).replace("\t", " ")
+    text = _INVISIBLE.sub("", text)
+    return text if len(text) <= limit else text[:limit - 1] + "…"
+
 
 STATUS_MARK = {"passed": "✔ passed", "partial": "◐ partial", "failed": "✘ failed",
                "not_attempted": "· not attempted", "error": "✘ error"}
@@ -69,7 +88,7 @@ class ExerciseResult:
     def __str__(self) -> str:
         lines = [self.headline()]
         if self.message:
-            lines.append(f"  {self.message}")
+            lines.append(f"  {one_line(self.message, 2000)}")
         if self.cases:
             w = max(len(c.name) for c in self.cases)
             lines.append(f"  {'case':<{w}}  {'result':<6}  {'error':>14}  {'tolerance':>14}  points")
@@ -104,7 +123,7 @@ class ExerciseResult:
         parts = [f"<div style='border-left:4px solid {colour};padding-left:8px'>",
                  f"<b style='color:{colour}'>{e(self.headline())}</b>"]
         if self.message:
-            parts.append(f"<div>{e(self.message)}</div>")
+            parts.append(f"<div>{e(one_line(self.message, 2000))}</div>")
         parts.append(table)
         if self.footer():
             parts.append(f"<div style='color:#57606a'>{e(self.footer())}</div>")
@@ -118,13 +137,14 @@ class ExerciseResult:
 
 
 def _case_notes(c: CaseResult) -> list[str]:
+    """The notes under a case row, one line each: messages and tracebacks carry the learner's text."""
     notes = []
     if c.message:
-        notes.append(c.message)
+        notes.append(one_line(c.message))
     if c.hint:
-        notes.append("hint: " + c.hint)
-    if c.traceback and not c.passed:
-        notes.append(c.traceback.splitlines()[-1])
+        notes.append("hint: " + one_line(c.hint, 1000))
+    if c.traceback.strip() and not c.passed:
+        notes.append("raised: " + one_line(c.traceback.strip().splitlines()[-1]))
     if c.stdout.strip():
         first = c.stdout.strip().splitlines()
         notes.append(f"printed {len(c.stdout)} characters, first line: {first[0][:80]!r}")

@@ -18,6 +18,7 @@ import io
 import json
 import os
 import sys
+import tempfile
 import threading
 import time
 import traceback
@@ -26,8 +27,9 @@ from pathlib import Path
 
 from graders.core.chapters import by_number
 from graders.grading.runner import HIDDEN_PATHS, MAX_TIMEOUTS, MEMORY_GB, TIME_BUDGET, check_file, read_secret
+from graders.grading.scratch import clean_stale_grade_folders
 from graders.core.engine import chapter
-from graders.core.report import ExerciseResult, gradescope, write_gradescope
+from graders.core.report import ExerciseResult, gradescope, one_line, write_gradescope
 
 SUFFIXES = (".ipynb", ".py")
 
@@ -96,13 +98,22 @@ def row_of(sid: str, doc: dict) -> dict:
     return row
 
 
+def csv_cell(value):
+    """A gradebook cell a spreadsheet shows as text: a string that could start a formula (=, +, -, @, tab,
+    carriage return; OWASP's list) gets a leading apostrophe, and control characters go. Numbers stay numbers."""
+    if not isinstance(value, str):
+        return value
+    value = one_line(value, 300)
+    return "'" + value if value[:1] in ("=", "+", "-", "@", "\t", "\r") else value
+
+
 def write_gradebook(path: Path, rows: list[dict], exercise_ids: list[str]) -> None:
     columns = ["submission", "total", "max", "status", "error", "seconds"] + exercise_ids
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=columns, extrasaction="ignore")
     writer.writeheader()
     for row in sorted(rows, key=lambda r: r["submission"]):
-        writer.writerow({c: row.get(c, 0 if c in exercise_ids else "") for c in columns})
+        writer.writerow({c: csv_cell(row.get(c, 0 if c in exercise_ids else "")) for c in columns})
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text(buffer.getvalue())
     os.replace(tmp, path)
@@ -112,7 +123,7 @@ def _progress(done: int, total: int, started: float, sid: str, row: dict) -> str
     rate = done / max(time.monotonic() - started, 1e-9) * 60
     left = (total - done) / max(rate / 60, 1e-9)
     bar = "#" * int(30 * done / total) + "." * (30 - int(30 * done / total))
-    return (f"[{bar}] {done}/{total}  {sid}: {row['total']:g}/{row['max']:g} {row['status']}  "
+    return (f"[{bar}] {done}/{total}  {one_line(sid, 80)}: {row['total']:g}/{row['max']:g} {row['status']}  "
             f"({rate:.1f}/min, ~{left / 60:.0f} min left)")
 
 
@@ -129,6 +140,9 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    stale = clean_stale_grade_folders()
+    if stale:
+        print(f"removed {len(stale)} grade folder(s) a killed batch left in {tempfile.gettempdir()}", flush=True)
     subs = submissions(Path(args.submissions))
     secret = read_secret(args.secret_file)
     HIDDEN_PATHS.extend(os.path.realpath(p) for p in (args.submissions, out))   # other learners' work

@@ -8,7 +8,10 @@ package with only those chapters, the data manifest, docs, README, environment a
 README commands work in it, and it has no `solutions/` (a test installs it in a fresh venv, runs every
 notebook and greps it for reference code).
 
-The autograder follows Gradescope's contract: `setup.sh` installs the pinned environment; 
+The autograder follows Gradescope's contract: `setup.sh` installs the pinned environment; the bundle
+carries the datasets its chapter grades on (`course_data/`, checked against data/manifest.json; the
+build stops if one is missing unless `--without-data`, and then every results.json shows a failed test
+naming it, never a silent drop of its real-data cases);
 `run_autograder` grades `/autograder/submission` in instructor mode (graded mode, secret seed, hidden
 cases) and writes `/autograder/results/results.json`, valid in every failure mode: written before
 grading starts, rewritten atomically after every exercise, and inside a time budget shorter than
@@ -57,6 +60,38 @@ def _pyproject() -> str:
     return text.replace('testpaths = ["tests", "notebooks"]', 'testpaths = ["notebooks"]')
 
 
+STUDENT_SECTIONS = ("Two commands", "Chapters", "Checking your work", "Real data")   # the rest is the instructor's
+
+
+def student_readme(numbers: list[int]) -> str:
+    """The release's README: the course README's learner sections only (no teaching, contributing,
+    solutions/, benchmarks or tests/), its chapter table cut to the chapters shipped, `make test` described
+    as what it runs here (every notebook)."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    head, *sections = text.split("\n## ")
+    keep = [head.rstrip() + "\n"]
+    shipped = {str(n) for n in numbers}
+    for section in sections:
+        title, _, body = section.partition("\n")
+        if title.strip() not in STUDENT_SECTIONS:
+            continue
+        lines = []
+        for line in body.splitlines():
+            cells = [c.strip() for c in line.split("|")]
+            if line.startswith("| ") and len(cells) > 2 and cells[1].isdigit() and cells[1] not in shipped:
+                continue                      # a chapter row of a chapter not in this edition
+            if line.startswith("<!--"):
+                continue                      # the instructor repo's generator marker
+            lines.append(line.replace("run the whole test suite (pytest + every notebook via nbval)",
+                                      "run every notebook of this edition top to bottom (nbval)"))
+        keep.append(f"## {title}\n" + "\n".join(lines).rstrip() + "\n")
+    chapters = ", ".join(str(n) for n in sorted(numbers))
+    keep.insert(1, f"This edition holds chapter{'s' if len(numbers) > 1 else ''} {chapters}: the notebooks, the "
+                   "checks (`graders/`) and the data manifest. Frames, poses and pixels follow "
+                   "[docs/CONVENTIONS.md](docs/CONVENTIONS.md).\n")
+    return "\n".join(keep)
+
+
 def student_release(out: str | Path, numbers: list[int] | None = None) -> Path:
     """Write the student edition of `numbers` (default: every ready chapter) into `out` (must not exist)."""
     out = Path(out)
@@ -71,8 +106,9 @@ def student_release(out: str | Path, numbers: list[int] | None = None) -> Path:
         shutil.copy2(nb, out / "notebooks" / nb.name)
     if (ROOT / HOME_NOTEBOOK).exists():     # the course home: map, progress, reference tables
         shutil.copy2(ROOT / HOME_NOTEBOOK, out / HOME_NOTEBOOK)
-    for name in ("README.md", "environment.txt", "Makefile", "conftest.py", ".gitignore"):
+    for name in ("environment.txt", "Makefile", "conftest.py", ".gitignore"):
         shutil.copy2(ROOT / name, out / name)
+    (out / "README.md").write_text(student_readme(numbers), encoding="utf-8")
     shutil.copytree(ROOT / "data", out / "data", ignore=_ignore)
     shutil.copytree(ROOT / "docs", out / "docs", ignore=_ignore)
     (out / "pyproject.toml").write_text(_pyproject())
@@ -102,9 +138,48 @@ exec "$PY" -m graders gradescope-run --root "$ROOT" >> "$ROOT/results/autograder
 """
 
 
+BUNDLE_DATA = "course_data"    # in the autograder's source folder: the datasets its chapter grades on
+
+
+def chapter_datasets(number: int) -> list[str]:
+    """The datasets a chapter's grader reads: each manifest name that its grader package spells as a
+    string literal (`datasets.available("chessboard")`, PHOTO_SETS' keys)."""
+    import ast
+    from graders.kit import datasets
+    known, found = set(datasets.names()), set()
+    for py in sorted((ROOT / "graders" / by_number(number).prefix).rglob("*.py")):
+        for node in ast.walk(ast.parse(py.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value in known:
+                found.add(node.value)
+    return sorted(found)
+
+
+def _copy_datasets(dest: Path, names: list[str], allow_missing: bool) -> list[str]:
+    """Copy each dataset's manifest files, checked against their sha256, into dest; returns the names
+    copied. A dataset that is missing or corrupt stops the build unless allow_missing (then the autograder
+    reports it as a failed test on every submission)."""
+    from graders.kit import datasets
+    copied = []
+    for name in names:
+        root = datasets.where(name)
+        problems = datasets.verify(name, root) if root is not None else [f"{name}: not in $COURSE_DATA or the cache"]
+        if problems:
+            if allow_missing:
+                continue
+            raise datasets.DatasetMissing(f"chapter's autograder grades on the dataset {name!r}, which is not usable "
+                                          f"here ({problems[0]}). Run `make fetch-data` or set COURSE_DATA, or "
+                                          f"build with --without-data (its real-data cases then fail visibly).")
+        for f in datasets.info(name)["files"]:
+            (dest / f["path"]).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(root / f["path"], dest / f["path"])
+        copied.append(name)
+    return copied
+
+
 def gradescope_bundle(out_zip: str | Path, number: int, secret: bytes | None = None,
-                      time_budget: float | None = None) -> Path:
-    """The autograder zip for one chapter: setup.sh, run_autograder, the graders, the pins, the secret."""
+                      time_budget: float | None = None, allow_missing_data: bool = False) -> Path:
+    """The autograder zip for one chapter: setup.sh, run_autograder, the graders, the pins, the secret,
+    and the datasets the chapter grades on (course_data/, the layout of $COURSE_DATA)."""
     import tempfile
     out_zip = Path(out_zip)
     with tempfile.TemporaryDirectory(prefix="cv3d-bundle-") as tmp:
@@ -114,7 +189,10 @@ def gradescope_bundle(out_zip: str | Path, number: int, secret: bytes | None = N
             shutil.copy2(ROOT / name, src / name)
         shutil.copytree(ROOT / "data", src / "data", ignore=_ignore)
         (src / "pyproject.toml").write_text(_pyproject())
-        config = {"chapter": number}
+        needed = chapter_datasets(number)
+        (src / BUNDLE_DATA).mkdir()
+        _copy_datasets(src / BUNDLE_DATA, needed, allow_missing_data)
+        config = {"chapter": number, "datasets": needed}
         if time_budget:
             config["time_budget"] = time_budget
         (src / "autograder.json").write_text(json.dumps(config))
@@ -141,16 +219,39 @@ def _submission_file(folder: Path, number: int) -> Path | None:
     return (named or notebooks or files or [None])[0]
 
 
+def _data_failures(source: Path, config: dict) -> list:
+    """A failed, visible, 0-point test for each dataset the chapter grades on that the bundle lacks (or holds
+    corrupt): its real-data cases cannot run, and the learner and the staff see that they did not."""
+    from graders.kit import datasets
+    from graders.core.report import CaseResult, ExerciseResult
+    failures = []
+    for name in config.get("datasets", []):
+        problems = datasets.verify(name, source / BUNDLE_DATA)
+        if problems:
+            msg = (f"the autograder lacks the dataset {name!r} ({problems[0]}): this chapter's real-data cases on it "
+                   f"were not run. This is the course staff's problem, not yours: please tell them.")
+            failures.append(ExerciseResult(id="data", title=f"real data: {name}", name=name, kind="data", max_score=0.0,
+                                           seed=0, status="failed", message=msg, replayable=False,
+                                           cases=[CaseResult(name=f"dataset {name}", message="missing")]))
+    return failures
+
+
 def gradescope_run(root: str | Path) -> int:
     """Grade /autograder/submission into /autograder/results/results.json (see the module docstring)."""
     from graders.grading.runner import TIME_BUDGET, check_file
-    from graders.core.report import write_gradescope
+    from graders.core.report import write_gradescope as _write
     root = Path(root)
     source = root / "source"
     results = root / "results" / "results.json"
     results.parent.mkdir(parents=True, exist_ok=True)
-    write_gradescope(results, [], "The autograder started but did not finish: please resubmit or tell staff.")
+    _write(results, [], "The autograder started but did not finish: please resubmit or tell staff.")
     config = json.loads((source / "autograder.json").read_text())
+    if (source / BUNDLE_DATA).is_dir():      # the bundle's datasets, for the grader and its worker processes
+        os.environ["COURSE_DATA"] = str(source / BUNDLE_DATA)
+    missing = _data_failures(source, config)
+
+    def write_gradescope(path, partial, message=""):
+        _write(path, list(partial) + missing, message)
     number = int(config["chapter"])
     secret_file = source / "secret"
     secret = secret_file.read_bytes().strip() if secret_file.exists() else None
@@ -193,9 +294,12 @@ def main(argv: list[str]) -> int:
         ap.add_argument("--out", required=True)
         ap.add_argument("--secret-file")
         ap.add_argument("--time-budget", type=float, help="seconds (default: the shell grader's 540)")
+        ap.add_argument("--without-data", action="store_true",
+                        help="build even if a dataset the chapter grades on is missing (its cases then fail visibly)")
         args = ap.parse_args(rest)
         secret = Path(args.secret_file).read_bytes().strip() if args.secret_file else None
-        print(f"autograder in {gradescope_bundle(args.out, args.chapter, secret, args.time_budget)}")
+        zip_path = gradescope_bundle(args.out, args.chapter, secret, args.time_budget, args.without_data)
+        print(f"autograder in {zip_path}")
     else:
         ap.add_argument("--root", default=os.environ.get("AUTOGRADER_ROOT", "/autograder"))
         return gradescope_run(ap.parse_args(rest).root)

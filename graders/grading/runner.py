@@ -41,6 +41,7 @@ from typing import Callable
 from graders.core.chapters import READY
 from graders.core.engine import chapter
 from graders.grading.extract import extract, read_cells
+from graders.grading.scratch import GRADE_PREFIX, mark_grade_folder
 from graders.core.report import ExerciseResult, result_from_dict
 
 HARD_LIMIT = 120.0    # seconds per exercise before its worker is killed; generous on a slow 2-core machine
@@ -212,7 +213,8 @@ def run_workers(source: str, exercises: list, seed: int, hard_limit: float = HAR
                 graded: bool = False, on_result: Callable[[list[ExerciseResult]], None] | None = None,
                 hidden: dict[str, int] | None = None) -> list[ExerciseResult]:
     grade = _Grade(exercises, seed, time_budget, max_timeouts, on_result)
-    with tempfile.TemporaryDirectory(prefix="cv3d-grade-") as tmp:
+    with tempfile.TemporaryDirectory(prefix=GRADE_PREFIX) as tmp:
+        mark_grade_folder(Path(tmp))
         src = Path(tmp, "learner.py")
         src.write_text(source, encoding="utf-8")
         scratch = Path(tmp, "scratch")

@@ -342,3 +342,13 @@ def test_pycolmap_log_is_quiet_unless_asked(how, loud):
     assert int(run.stdout.split()[-1]) >= 2                     # the mapper did run and register images
     lines = re.findall(_GLOG_LINE, run.stderr)
     assert (len(lines) > 10) if loud else not lines, run.stderr[:2000]
+
+
+def test_unrefined_ransac_pose_fails_the_refinement_row():
+    # Issue 29: RANSAC without the final refinement scored 0.168 <= 0.306 px on the held-out row. The refinement
+    # row catches it on every draw: a converged refinement moves an unrefined pose by >= 0.297 px (260 draws).
+    from mutants.ch04_sfm import ransac_no_refinement
+    result = grade(EXERCISES["4.10"], ransac_no_refinement, seed=0)
+    row = next(r for r in result.cases if r.key == "refined")
+    assert not row.passed and row.error > 0.2 and "not the minimum of the reprojection" in row.hint
+    assert next(r for r in grade(EXERCISES["4.10"], REF.pnp_ransac, seed=0).cases if r.key == "refined").error < 1e-6

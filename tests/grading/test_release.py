@@ -97,7 +97,8 @@ def _autograder(tmp_path: Path, submission: dict[str, str | bytes], secret: byte
     root = tmp_path / "autograder"
     for d in ("source", "submission", "results"):
         (root / d).mkdir(parents=True)
-    with zipfile.ZipFile(gradescope_bundle(tmp_path / "autograder.zip", 1, secret, budget)) as z:
+    with zipfile.ZipFile(gradescope_bundle(tmp_path / "autograder.zip", 1, secret, budget,
+                                           allow_missing_data=True)) as z:
         z.extractall(root / "source")
     run = root / "source" / "run_autograder"
     run.chmod(0o755)
@@ -152,3 +153,49 @@ def test_batch_grades_every_submission_and_resumes(tmp_path):
         assert json.loads((out / sid / "results.json").read_text())["extra_data"]["complete"]
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=300, cwd=ROOT)
     assert "4 already graded, 0 to grade" in again.stdout, again.stdout
+
+
+def test_gradescope_bundle_carries_the_data_its_chapter_grades_on(tmp_path):
+    from graders.kit import datasets
+    from graders.grading.release import BUNDLE_DATA, chapter_datasets
+    assert chapter_datasets(1) == ["chessboard"] and chapter_datasets(4) == ["sacre_coeur", "sceaux_castle"]
+    if not datasets.available("chessboard"):
+        pytest.skip("the chessboard views are not in $COURSE_DATA or the cache")
+    with zipfile.ZipFile(gradescope_bundle(tmp_path / "autograder.zip", 1)) as z:
+        names = set(z.namelist())
+        config = json.loads(z.read("autograder.json"))
+    assert config["datasets"] == ["chessboard"]
+    assert {f"{BUNDLE_DATA}/{f['path']}" for f in datasets.info("chessboard")["files"]} <= names
+
+
+def test_gradescope_without_its_data_shows_a_failed_test(tmp_path, monkeypatch):
+    """A bundle whose dataset is missing (built --without-data, or deleted) never drops real-data cases
+    silently: every results.json it writes carries a visible failed test naming the dataset."""
+    from graders.grading.release import BUNDLE_DATA, gradescope_run
+    monkeypatch.setenv("COURSE_DATA", str(tmp_path / "nowhere"))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "no-cache"))
+    root = tmp_path / "autograder"
+    for d in ("source", "submission", "results"):
+        (root / d).mkdir(parents=True)
+    with zipfile.ZipFile(gradescope_bundle(tmp_path / "autograder.zip", 1, None, None, allow_missing_data=True)) as z:
+        z.extractall(root / "source")
+    assert not list((root / "source").glob(f"{BUNDLE_DATA}/**/*.*"))
+    assert gradescope_run(root) == 0              # an empty submission: the quickest full run
+    doc = json.loads((root / "results" / "results.json").read_text())
+    failed = [t for t in doc["tests"] if "chessboard" in t["name"]]
+    assert failed and failed[0]["status"] == "failed" and failed[0]["visibility"] == "visible"
+    assert "not run" in failed[0]["output"] and "No notebook" in doc.get("output", "")
+
+
+def test_release_readme_lists_only_what_the_release_holds(tmp_path):
+    import re
+    rel = student_release(tmp_path / "course", [1, 3])
+    text = (rel / "README.md").read_text()
+    for instructor_only in ("solutions", "make bench", "tests/", "benchmarks", "Teaching with it", "For contributors",
+                            "python -m graders batch", "--secret-file"):
+        assert instructor_only not in text, instructor_only
+    links = re.findall(r"\]\(([^)#]+)\)", text)
+    assert "notebooks/01_camera_models.ipynb" in links and "notebooks/03_features.ipynb" in links
+    missing = [link for link in links if not link.startswith("http") and not (rel / link).exists()]
+    assert not missing, missing                      # no link to a chapter (or file) this edition lacks
+    assert "notebooks/02_epipolar.ipynb" not in text
