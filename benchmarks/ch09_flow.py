@@ -67,7 +67,7 @@ def chairs_like(rng, W: int = 512, H: int = 384) -> tuple[np.ndarray, np.ndarray
     homography (0.3-6 px) and 2-5 chair-like objects (textured, or flat with a shading ramp) moving 3-45 px
     under a small rotation and scaling, blurred edges, 1 grey level of noise. -> (I1, I2, exact flow of the
     frame-1 surface): FlyingChairs' own recipe (rendered chairs over photos) with polygons over skimage images."""
-    from graders.ch09_flow.pairs import _texture, plane_pair
+    from graders.ch09_flow.pairs import plane_pair, texture_patch
     bg = plane_pair(rng, W, H, shift=float(rng.uniform(0.3, 6.0)), warp=0.02)
     I1, I2, F = bg["I1"].copy(), bg["I2"].copy(), bg["flow"].copy()
     xs, ys = np.meshgrid(np.arange(W, dtype=float), np.arange(H, dtype=float))
@@ -75,7 +75,7 @@ def chairs_like(rng, W: int = 512, H: int = 384) -> tuple[np.ndarray, np.ndarray
         r, c = rng.uniform(20, 90), np.array([rng.uniform(0, W), rng.uniform(0, H)])
         m = _chair_mask(rng, W, H, c, r)
         if rng.uniform() < 0.5:
-            tex = _texture(rng, W, H, 1.0) * rng.uniform(0.3, 1.0) + rng.uniform(0, 120)
+            tex = texture_patch(rng, W, H, 1.0) * rng.uniform(0.3, 1.0) + rng.uniform(0, 120)
         else:
             g = rng.normal(size=2) * 0.2
             tex = rng.uniform(20, 230) + g[0] * (xs - c[0]) + g[1] * (ys - c[1])

@@ -70,7 +70,7 @@ def chairs_flo_bytes() -> bytes:
     return _chairs()[3]
 
 
-def _texture(rng: np.random.Generator,
+def texture_patch(rng: np.random.Generator,
              width: int, height: int, blur: float, names: tuple[str, ...] = TEXTURES) -> np.ndarray:
     """A grey texture (skimage.data, one of `names`) resampled to a random scale, cropped to (height, width),
     blurred by `blur` px so bilinear/cubic resampling is accurate (the exact flow then really is exact), in
@@ -117,7 +117,7 @@ def plane_pair(rng: np.random.Generator, width: int = 160, height: int = 120, sh
     whose source lies outside I1 are filled by reflection, and `valid` marks frame-1 pixels that land
     inside frame 2 (the others have no right answer)."""
     if I1 is None:
-        I1 = _texture(rng, width, height, blur)
+        I1 = texture_patch(rng, width, height, blur)
     height, width = I1.shape
     H = small_homography(rng, width, height, shift, warp)
     # I2(x) = I1(H⁻¹ x) by cubic B-spline interpolation at float coordinates (warpPerspective would round
@@ -163,7 +163,7 @@ def lk_scene(rng: np.random.Generator, width: int, height: int, shift: float, wa
     Returns {"I1", "I2", "flow", "valid", "flat": (F, 2), "edge": (E, 2)}: flat and edge centres are
     untrackable by construction (the structure tensor is ~0 or rank one there, whatever the window: the
     squares are larger than the window plus the motion)."""
-    I1 = _texture(rng, width, height, 1.5, textures)
+    I1 = texture_patch(rng, width, height, 1.5, textures)
     size = win + 2 * int(np.ceil(shift)) + 8
     n = max(1, (width // (size + 4)) * (height // (size + 4)) // 6)
     flat, edge = _paste_patches(rng, I1, n, n, size)
