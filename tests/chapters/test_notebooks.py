@@ -19,12 +19,12 @@ import nbformat
 import pytest
 from nbclient import NotebookClient
 
+from conftest import notebook_budget_s
 from graders.core.chapters import READY
 from notebook_stubs import CHAPTER_OF, OPENCV_STUBS_CH01, ROOT, replace_stubs as _replace_stubs, solved as _solved
 from notebook_stubs import tags as _tags
 
 NOTEBOOKS = [ROOT / c.notebook for c in READY]
-BUDGET_S = 60.0
 PLOT_CALL = re.compile(r"\b(plt|ax|axes|fig)\.\w*(plot|imshow|scatter|quiver|hist|bar|contour)\w*\(")
 
 
@@ -112,7 +112,8 @@ def test_every_registered_exercise_is_posed_in_the_notebook(path):
 def test_solved_notebook_passes_every_check_in_budget(path, tmp_path):
     nb = _solved(path)
     start = time.perf_counter()
-    _Client(nb, timeout=BUDGET_S, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}).execute()
+    budget = notebook_budget_s()     # 60 s on 2 cores of its own; more beside other test workers (conftest.py)
+    _Client(nb, timeout=budget, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}).execute()
     seconds = time.perf_counter() - start
     print(f"{path.name} with reference solutions: {seconds:.1f} s")
     verdicts = []
@@ -125,7 +126,7 @@ def test_solved_notebook_passes_every_check_in_budget(path, tmp_path):
     # the seed that replays it (a fresh-seed failure in CI is otherwise lost).
     failing = [f"{call}\n{text}" for call, text in verdicts if "✔ passed" not in text]
     assert not failing, "\n\n".join(failing)
-    assert seconds < BUDGET_S
+    assert seconds < budget, f"{seconds:.1f} s, budget {budget:.0f} s"
 
 
 def _grade(file: Path, out_json: Path, *extra: str) -> dict:
