@@ -28,6 +28,7 @@ misbehave).
 """
 from __future__ import annotations
 
+import importlib.util
 import io
 import json
 import os
@@ -327,12 +328,16 @@ class LearnerProcess:
         reference = os.environ.get("CV3D_GRADE_REFERENCE") == "1"
         keep = [os.path.realpath(p) for p in dict.fromkeys([sys.base_prefix, sys.prefix, *_site_packages(),
                                                              self.private])]
+        # `solutions` where this interpreter finds it (the checkout, or the editable install behind an
+        # autograder bundle, which has none of its own).
+        spec = importlib.util.find_spec("solutions") if reference else None
+        solutions_dir = os.path.dirname(spec.origin) if spec and spec.origin else os.path.join(CHECKOUT, "solutions")
         if reference:
-            keep += [p for p in (os.path.join(CHECKOUT, "solutions"), os.path.join(CHECKOUT, "tests", "mutants"))
-                     if os.path.isdir(p)]
+            keep += [p for p in (solutions_dir, os.path.join(CHECKOUT, "tests", "mutants")) if os.path.isdir(p)]
         return {"fds": [req_r, res_w], "home": self.home, "writable": self.private, "lockdown": self.level == "namespaces",
                 "refused": list(self.refused), "allow_solutions": reference, "site": _site_packages(),
-                "extra_path": [CHECKOUT] if reference else [], "hide": hide, "keep": keep,
+                "extra_path": list(dict.fromkeys([CHECKOUT, os.path.dirname(solutions_dir)])) if reference else [],
+                "hide": hide, "keep": keep,
                 "uid": self.uid, "gid": self.gid, "tmpfs_mb": 256}
 
     # -- life cycle

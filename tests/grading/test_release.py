@@ -104,7 +104,9 @@ def _autograder(tmp_path: Path, submission: dict[str, str | bytes], secret: byte
     run.chmod(0o755)
     for name, content in submission.items():
         (root / "submission" / name).write_bytes(content if isinstance(content, bytes) else content.encode())
-    env = dict(os.environ, AUTOGRADER_ROOT=str(root), AUTOGRADER_PYTHON=sys.executable)
+    # CV3D_GRADE_REFERENCE: the submissions here are the course's reference (`from solutions import ...`), which
+    # graded mode hides from learners; this switch, never set to grade students, lets exactly that in.
+    env = dict(os.environ, AUTOGRADER_ROOT=str(root), AUTOGRADER_PYTHON=sys.executable, CV3D_GRADE_REFERENCE="1")
     proc = subprocess.run([str(run)], env=env, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0 and proc.stdout == "", proc.stdout[-2000:] + proc.stderr[-2000:]
     return json.loads((root / "results" / "results.json").read_text())
@@ -141,7 +143,8 @@ def test_batch_grades_every_submission_and_resumes(tmp_path):
     (subs / "bob.py").write_text("import os\nos._exit(3)\ndef project_points(*a):\n    os._exit(3)\n")
     (subs / "carol.ipynb").write_text("not json")
     cmd = [sys.executable, "-m", "graders", "batch", str(subs), "--out", str(out), "--chapter", "1"]
-    first = subprocess.run(cmd, capture_output=True, text=True, timeout=900, cwd=ROOT)
+    reference = dict(os.environ, CV3D_GRADE_REFERENCE="1")     # alice is the reference: see _autograder
+    first = subprocess.run(cmd, capture_output=True, text=True, timeout=900, cwd=ROOT, env=reference)
     assert first.returncode == 0, first.stderr[-3000:]
     rows = {r["submission"]: r for r in csv.DictReader((out / "gradebook.csv").open())}
     assert set(rows) == {"alice", "bob", "carol", "dora"}
@@ -151,7 +154,7 @@ def test_batch_grades_every_submission_and_resumes(tmp_path):
     assert "1.5" in rows["alice"]
     for sid in rows:
         assert json.loads((out / sid / "results.json").read_text())["extra_data"]["complete"]
-    again = subprocess.run(cmd, capture_output=True, text=True, timeout=300, cwd=ROOT)
+    again = subprocess.run(cmd, capture_output=True, text=True, timeout=300, cwd=ROOT, env=reference)
     assert "4 already graded, 0 to grade" in again.stdout, again.stdout
 
 
