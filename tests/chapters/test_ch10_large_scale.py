@@ -75,13 +75,15 @@ def test_the_pose_model_refuses_more_views_than_it_holds():
     assert np.allclose(out["Rs"][0], np.eye(3)) and np.allclose(out["ts"][0], 0)   # the first view's frame
 
 
-def test_out_of_domain_scenes_show_low_confidence_and_textureless_ones_lose_views():
-    # The diagnosis 10.12 teaches rests on this: each failure is visible in the case, not only in the truth.
+def test_out_of_domain_scenes_stay_confident_and_textureless_ones_lose_views():
+    # What 10.12 teaches rests on this: a learned model out of its domain stays confident (DUSt3R's confidence
+    # comes from its confidence-weighted loss, not an out-of-domain detector), so the case cannot be diagnosed from
+    # the confidence; the classical route's failure (views left unregistered) is visible in the case.
     for seed in range(5):
         case = ch10.debug_case("10.12", seed=seed)
         ratios = [np.median(s["learned"]["confidence"]) / case["indoor_confidence"] for s in case["scenes"]]
         lost = [not np.isfinite(s["classical"]["Rs"]).all() for s in case["scenes"]]
-        assert min(ratios) < 0.3 and max(ratios) > 0.5 and any(lost)
+        assert min(ratios) > 0.5 and any(lost), (seed, ratios)     # the old "out of domain" signal was < 0.3
 
 
 def test_the_race_scores_both_routes_on_one_scene():
