@@ -5,7 +5,7 @@ tests, the grader tests, the benchmarks runner, the README's chapter list) reads
 Each chapter has one name stem, used everywhere:
 
     notebooks/NN_<stem>.ipynb      graders/chNN_<stem>/      solutions/chNN_<stem>/
-    tests/mutants/chNN_<stem>.py   tests/test_chNN_<stem>.py benchmarks/chNN_<stem>.py
+    tests/mutants/chNN_<stem>.py   tests/chapters/test_chNN_<stem>.py   benchmarks/chNN_<stem>.py
 
 A planned chapter has a row with `ready=False` so the README lists it; nothing imports it.
 """
