@@ -337,7 +337,7 @@ def test_a_learner_that_ends_its_process_costs_one_start_not_one_per_case(level)
 def test_hidden_seeds_reach_the_worker_through_a_pipe_not_its_environment_or_argv(tmp_path, monkeypatch):
     """A learner running as the grader's user could read /proc/<worker>/environ and every cmdline."""
     import subprocess
-    from graders import cli
+    from graders.grading import runner
     seen = {}
 
     class Recorder:
@@ -345,7 +345,7 @@ def test_hidden_seeds_reach_the_worker_through_a_pipe_not_its_environment_or_arg
             seen["cmd"], seen["env"] = cmd, env
             seen["seeds_fd"] = os.dup(int(cmd[cmd.index("--hidden-fd") + 1]))
     monkeypatch.setattr(subprocess, "Popen", Recorder)
-    proc, fd = cli._worker(tmp_path / "learner.py", ["1.5"], 7, tmp_path, 1.0, True, {"1.5": 987654321})
+    proc, fd = runner._worker(tmp_path / "learner.py", ["1.5"], 7, tmp_path, 1.0, True, {"1.5": 987654321})
     os.close(fd)
     with os.fdopen(seen["seeds_fd"], "rb") as f:
         assert f.read() == b'{"1.5": 987654321}'
