@@ -13,7 +13,8 @@ from graders.kit import datasets
 from graders.core.engine import Case, Exercise, Hint, OutputError, as_array, like, register
 from graders.oracles.bundle_adjust import bal_project as gt_project
 
-from .common import cached, max_dist, rel_max, tuple_of_arrays, val
+from graders.core.memo import cached, val
+from .common import max_dist, rel_max, tuple_of_arrays
 from .problems import distorted_args, make_problem
 
 

@@ -19,7 +19,7 @@ from graders.oracles.bundle_adjust import bal_cost
 from graders.oracles.bundle_adjust import bal_project as gt_project
 
 from .adjusters import colmap_bundle_adjust
-from .common import cached
+from graders.core.memo import cached
 from .jacobians import gt_sparse_jacobian, torch_jacobians
 from .problems import camera_centres, held_out_rms, make_problem, problem_args, transform_problem
 

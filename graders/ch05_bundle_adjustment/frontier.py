@@ -9,7 +9,8 @@ from graders.kit import scene
 from graders.core.engine import Case, Exercise, Hint, register
 from graders.oracles.bundle_adjust import bal_project as gt_project
 
-from .common import Lazy, array_key, cached, rel_max, tuple_of_arrays, val
+from graders.core.memo import Lazy, array_key, cached, val
+from .common import rel_max, tuple_of_arrays
 from .jacobians import torch_jacobians
 from .problems import make_problem, transform_problem
 

@@ -15,7 +15,8 @@ from graders.oracles.bundle_adjust import bal_project as gt_project
 
 from graders.kit.threads import torch_threads
 
-from .common import Lazy, cached, column_relative, rel_max, tuple_of_arrays, val
+from graders.core.memo import Lazy, cached, val
+from .common import column_relative, rel_max, tuple_of_arrays
 from .problems import distorted_args, make_problem, problem_args
 
 

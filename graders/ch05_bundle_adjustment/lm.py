@@ -10,7 +10,8 @@ from graders.oracles.bundle_adjust import bal_cost, gauge_mask, scipy_bundle_adj
 from graders.oracles.bundle_adjust import bal_project as gt_project
 
 from .adjusters import colmap_bundle_adjust, library_bundle_adjust
-from .common import Lazy, array_key, cached, tuple_of_arrays, val
+from graders.core.memo import Lazy, array_key, cached, val
+from .common import tuple_of_arrays
 from .jacobians import torch_jacobians
 from .normal_equations import gt_normal_equations
 from .problems import aligned_points_px, held_out_rms, make_problem, problem_args

@@ -6,7 +6,8 @@ import scipy.sparse as sp
 
 from graders.core.engine import Case, Exercise, Hint, register
 
-from .common import Lazy, cached, rel_max, tuple_of_arrays, val
+from graders.core.memo import Lazy, cached, val
+from .common import rel_max, tuple_of_arrays
 from .jacobians import gt_sparse_jacobian, jacobian_inputs
 
 

@@ -6,7 +6,7 @@ import numpy as np
 from graders.core.compare import max_abs
 from graders.core.engine import Case, Exercise, like, register
 
-from .common import cached
+from graders.core.memo import cached
 
 
 def gt_robust_weights(r, loss: str = "linear", scale: float = 1.0) -> np.ndarray:

@@ -10,7 +10,8 @@ import scipy.sparse.linalg
 
 from graders.core.engine import Case, Exercise, Hint, register
 
-from .common import Lazy, cached, tuple_of_arrays, val
+from graders.core.memo import Lazy, cached, val
+from .common import tuple_of_arrays
 from .normal_equations import gt_normal_equations, jacobian_inputs
 
 

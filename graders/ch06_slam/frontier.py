@@ -7,9 +7,12 @@ odometry, the loop back to the start and one chord, drawn fresh per seed.
 """
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 
 from graders.core.engine import Case, Exercise, Hint, OutputError, register, shared_run
+from graders.core.memo import Lazy, cached
 
 from .posegraphs import _exp
 
@@ -60,37 +63,59 @@ def _log2(T: np.ndarray) -> np.ndarray:
     return np.c_[(A * x + B * y) / det, (-B * x + A * y) / det, th]
 
 
-def _optimum(x0: np.ndarray, edges, z: np.ndarray, info) -> np.ndarray:
-    """The exact optimum (N, 3) of sum r^T info r, r = Log(Z^-1 T_i^-1 T_j), first pose held: MINPACK's LM
-    to machine precision on the grader's own residuals (no GTSAM in the loop)."""
+def _residuals(first: np.ndarray, edges, z: np.ndarray, info) -> Callable[[np.ndarray], np.ndarray]:
+    """r(free): (B, 3(N-1)) -> (B, 3M), the whitened residuals W Log(Z^-1 T_i^-1 T_j) of B candidate solutions
+    at once (W^T W = info), the first pose held at `first` (3,)."""
+    Zinv, W = np.linalg.inv(_mat(z)), np.linalg.cholesky(info).transpose(0, 2, 1)
+
+    def residuals(free: np.ndarray) -> np.ndarray:
+        B = len(free)
+        x = np.concatenate([np.broadcast_to(first, (B, 1, 3)), free.reshape(B, -1, 3)], axis=1)
+        T = _mat(x.reshape(-1, 3)).reshape(B, -1, 3, 3)
+        r = _log2((Zinv @ np.linalg.inv(T[:, edges[:, 0]]) @ T[:, edges[:, 1]]).reshape(-1, 3, 3))
+        return np.einsum("mij,bmj->bmi", W, r.reshape(B, len(edges), 3)).reshape(B, -1)
+    return residuals
+
+
+def _gauss_newton(residuals, x: np.ndarray, max_steps: int = 8) -> np.ndarray:
+    """Gauss-Newton from near the optimum on a central-difference Jacobian (error ~1e-10, all 2n columns in one
+    batched evaluation). It converges to the Jacobian's noise floor: steps fall to ~1e-11 in 4-5 iterations from
+    a graph perturbed by H_FD, then wander at ~1e-10 (measured), so it stops there."""
+    n, h = len(x), 1e-6
+    for _ in range(max_steps):
+        R = residuals(np.concatenate([x + h * np.eye(n), x - h * np.eye(n), x[None]]))
+        J = (R[:n] - R[n:2 * n]).T / (2 * h)
+        step = np.linalg.lstsq(J, R[-1], rcond=None)[0]
+        x = x - step
+        if np.abs(step).max() < 1e-10:
+            break
+    return x
+
+
+def _optimum(x0: np.ndarray, edges, z: np.ndarray, info, near: bool = False) -> np.ndarray:
+    """The exact optimum (N, 3) of sum r^T info r, r = Log(Z^-1 T_i^-1 T_j), first pose held, on the grader's
+    own residuals (no GTSAM in the loop): from afar, MINPACK's LM first; then Gauss-Newton on central
+    differences, which moves MINPACK's fixed point (set by its forward-difference Jacobian, error ~1e-8) to the
+    true optimum. near: x0 is already close (a re-solve after a small change of z): Gauss-Newton only."""
     from scipy.optimize import least_squares
-    Zinv, W = np.linalg.inv(_mat(z)), np.linalg.cholesky(info).transpose(0, 2, 1)   # W^T W = info
-
-    def residuals(free):
-        T = _mat(np.r_[x0[:1], free.reshape(-1, 3)])
-        r = _log2(Zinv @ np.linalg.inv(T[edges[:, 0]]) @ T[edges[:, 1]])
-        return np.einsum("mij,mj->mi", W, r).ravel()
-
-    x = least_squares(residuals, x0[1:].ravel(), method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15).x
-    # MINPACK's forward-difference Jacobian (error ~1e-8) sets where its fixed point J^T r = 0 lies: polish with
-    # Gauss-Newton on central differences (error ~1e-10), which converges quadratically to the true optimum.
-    for _ in range(3):
-        E = np.eye(len(x)) * 1e-6
-        J = np.stack([(residuals(x + e) - residuals(x - e)) / 2e-6 for e in E], axis=1)
-        x = x - np.linalg.lstsq(J, residuals(x), rcond=None)[0]
-    return np.r_[x0[:1], x.reshape(-1, 3)]
+    residuals = _residuals(x0[0], edges, z, info)
+    x = x0[1:].ravel()
+    if not near:
+        x = least_squares(lambda f: residuals(f[None])[0], x, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+    return np.r_[x0[:1], _gauss_newton(residuals, x).reshape(-1, 3)]
 
 
 def fd_pose_graph_gradient(x0, edges, z, info) -> tuple[np.ndarray, np.ndarray]:
     """The exact optimum (N, 3) and d(last pose)/dz (3, M, 3) by central differences of the converged solver
-    (each perturbed graph re-solved from the optimum; truncation ~h^2, solver noise ~1e-15 / h)."""
+    (each perturbed graph re-solved from the optimum; truncation ~h^2, solver noise ~1e-10 / h)."""
     x_opt = _optimum(np.asarray(x0, float), edges, z, info)
     G = np.zeros((3,) + z.shape)
     for m in range(len(z)):
         for k in range(3):
             e = np.zeros_like(z)
             e[m, k] = H_FD
-            G[:, m, k] = (_optimum(x_opt, edges, z + e, info)[-1] - _optimum(x_opt, edges, z - e, info)[-1]) / (2 * H_FD)
+            G[:, m, k] = (_optimum(x_opt, edges, z + e, info, near=True)[-1]
+                          - _optimum(x_opt, edges, z - e, info, near=True)[-1]) / (2 * H_FD)
     return x_opt, G
 
 
@@ -172,11 +197,12 @@ HINTS = [
 POSE_TOL, GRAD_TOL = 1e-6, 1e-4
 
 
+@cached
 def cases_differentiable(rng: np.random.Generator):
     for i in range(2):
         g = ring_graph(rng)
         args = (g["x0"], g["edges"], g["z"], g["info"])
-        exp = fd_pose_graph_gradient(*args)
+        exp = Lazy(lambda args=args: fd_pose_graph_gradient(*args))   # 84 re-solves: only for an output to judge
         run = shared_run(_call_one_thread(args))
         yield Case(f"ring {i + 1}: refined poses vs the optimum", args, exp, _pose_error, POSE_TOL, "max abs",
                    convert=_convert, call=run, key=f"ring-{i + 1}-poses", tags=("poses",))

@@ -10,10 +10,12 @@ Read docs/ENGINE.md for how a chapter adds exercises.
 """
 from __future__ import annotations
 
+import copy
 import importlib
 import re
 import secrets
 import time
+import types
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Sequence
 
@@ -23,6 +25,7 @@ from graders.core.attempt import RemoteAttempt
 from graders.core.chapters import by_number
 from graders.core.convert import OutputError, as_array, as_mask, as_points, as_pose, as_poses, as_rotation, as_sim3  # noqa: F401 (re-exported)
 from graders.core.report import CaseResult, ExerciseResult
+from graders.core.memo import val
 from graders.core.sandbox import safe_call
 
 KINDS = ("concept", "code", "debug", "design", "frontier")
@@ -240,23 +243,46 @@ def debug_practice(generators: dict[str, Callable[..., tuple[dict, Any]]]) -> Ca
     return debug_case
 
 
-def shared_run(run: Callable[[Callable], Any]) -> Callable[[Callable], Any]:
+class shared_run:
     """Run the learner's code once and judge the output several ways: `run(fn)` is called on the first
     case that uses it and its output (or its exception) is memoised for the others of the same draw.
-    Pass the result as `Case(call=...)` to every case that judges that one run."""
-    memo: dict[int, tuple[bool, Any]] = {}
+    Pass the result as `Case(call=...)` to every case that judges that one run. A copy (a replayed,
+    memoised draw: graders.core.memo.cached) starts with an empty memo: no grade sees another's run."""
 
-    def call(fn: Callable) -> Any:
-        if id(fn) not in memo:
+    def __init__(self, run: Callable[[Callable], Any]):
+        self.run, self.memo = run, {}
+
+    def __deepcopy__(self, memo: dict) -> "shared_run":
+        return shared_run(_rebound(self.run, memo))
+
+    def __call__(self, fn: Callable) -> Any:
+        if id(fn) not in self.memo:
             try:
-                memo[id(fn)] = (True, run(fn))
+                self.memo[id(fn)] = (True, self.run(fn), fn)    # fn kept: its id cannot be reused meanwhile
             except Exception as exc:   # the same error is reported on every case that judges this run
-                memo[id(fn)] = (False, exc)
-        ok, value = memo[id(fn)]
+                self.memo[id(fn)] = (False, exc, fn)
+        ok, value, _ = self.memo[id(fn)]
         if not ok:
             raise value
         return value
-    return call
+
+
+def _rebound(fn: Callable, memo: dict) -> Callable:
+    """A copy of the function `fn` whose closure cells and defaults are deep copies made with `memo`: copied
+    with the cases of its draw, it calls the learner on the copies of their inputs (a learner's in-place change
+    is seen by the engine's mutation check and cannot reach the draw that is kept)."""
+    if not isinstance(fn, types.FunctionType):
+        return copy.deepcopy(fn, memo)
+    cells = []
+    for cell in fn.__closure__ or ():
+        try:
+            cells.append(types.CellType(copy.deepcopy(cell.cell_contents, memo)))
+        except ValueError:          # an empty cell (a name assigned later in the enclosing function)
+            cells.append(types.CellType())
+    copied = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__, copy.deepcopy(fn.__defaults__, memo),
+                                tuple(cells) or None)
+    copied.__kwdefaults__ = copy.deepcopy(fn.__kwdefaults__, memo)
+    return copied
 
 
 _REGISTRY: dict[str, Exercise] = {}
@@ -415,6 +441,7 @@ def _judge_case(ex: Exercise, fn: Callable, case: Case) -> tuple[CaseResult, str
         row.hint = _error_hint(ex, case, row.message + "\n" + row.traceback)
         return row, outcome.kind
     try:
+        case.expected = val(case.expected)   # a Lazy oracle is computed only once there is an output to judge
         out = (case.convert or as_array)(outcome.value, case)
         row.error = float(case.metric(out, case.expected))
     except OutputError as exc:

@@ -15,6 +15,9 @@ from mutants.ch04_sfm import MUTANTS  # noqa: F401 (the contract's catalogue)
 
 SEEDS = [0, 1, 2]
 SEEDS_FOR = {"4.10": [0, 1], "4.14": [0, 1]}     # a few seconds per grade: two seeds
+# 4.14's photo-set rows (graders.ch04_sfm.photos) grade the same photos and matches whatever the seed: with the
+# second seed they would repeat the first's runs (~16 of the reference's ~22 CPU s per grade).
+SEED_FREE = {"4.14": lambda case: "photos" in case.tags}
 
 
 def colmap_pnp_ransac(X, x, K, thresh_px=4.0, seed=0):
