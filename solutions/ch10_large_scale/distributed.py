@@ -9,8 +9,9 @@
   their pairs and image paths, so a changed input is never reused); the folder goes once `out_path` is written.
 - Task keys carry a per-run id: two runs on one scheduler never share (or steal) each other's results.
 - With `address` it connects to a running scheduler (`dask scheduler`, and `dask worker ADDRESS` on each
-  node); without, it starts an in-process LocalCluster (threads, no dashboard) and closes it at the end. If no
-  cluster can be started it says so and runs the same batches serially, with the same retries and checkpoints.
+  node); without, it starts an in-process LocalCluster (threads; its dashboard on any free port, so no clash
+  on 8787) and closes it at the end. If no cluster can be started it says so and runs the same batches
+  serially, with the same retries and checkpoints.
 """
 from __future__ import annotations
 
