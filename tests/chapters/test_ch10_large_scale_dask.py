@@ -50,7 +50,7 @@ def test_reference_pipeline_on_a_multi_process_cluster(tmp_path):
         for t in threads:
             t.start()
         for t in threads:
-            t.join(120)
+            t.join(600)
         for k in (0, 1):
             assert np.array_equal(rows[k], problems[k][2]), k
 
@@ -63,7 +63,7 @@ def test_reference_pipeline_on_a_multi_process_cluster(tmp_path):
         run.start()
         victim = busy_worker(address, set(workers), lambda key: key.startswith("match-"))
         stop(workers.pop(victim))
-        run.join(120)
+        run.join(600)
         assert np.array_equal(result["rows"], expected)
         assert not os.path.exists(out + ".parts")
 

@@ -57,7 +57,7 @@ def test_batch_on_a_dask_cluster_survives_a_killed_worker(tmp_path, allowed_fail
         victim = busy_worker(address, set(workers), lambda key: key.endswith("-2"))
         time.sleep(1.0)                         # inside the grade: its sandbox and judge are running
         stop(workers[victim])
-        log, _ = batch.communicate(timeout=120)
+        log, _ = batch.communicate(timeout=600)
         assert batch.returncode == 0, log[-3000:]
         rows = _rows(out)
         assert set(rows) == {"alice", "slow", "dora"}, log[-3000:]
@@ -70,7 +70,7 @@ def test_batch_on_a_dask_cluster_survives_a_killed_worker(tmp_path, allowed_fail
             assert "slow" in lost and all("KilledWorker" in rows[s]["error"] for s in lost), log[-3000:]
             assert not any(docs[s]["extra_data"]["complete"] for s in lost)
             again = _batch(subs, out, address)
-            log, _ = again.communicate(timeout=120)
+            log, _ = again.communicate(timeout=600)
             assert f"{3 - len(lost)} already graded, {len(lost)} to grade" in log, log[-3000:]
             rows = _rows(out)
             docs = {s: json.loads((out / s / "results.json").read_text()) for s in rows}
