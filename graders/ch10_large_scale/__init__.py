@@ -35,8 +35,8 @@ __all__ = ["components", "components_after", "cv_fix_components", "top_k_pairs",
 # ---- part B (pointmaps, distributed, debug_learned, frontier, demo): add imports, DEBUG_GENERATORS entries
 # and __all__ names below this line.
 from . import questions_learned  # noqa: F401,E402 (registers 10.4-10.5)
-from .distributed import (PipelineStages, TransientTaskError, gt_run_pipeline, gt_serial_pipeline,  # noqa: E402
-                          pipeline_images, task_key)
+from .distributed import (PermanentTaskError, PipelineStages, TransientTaskError, gt_run_pipeline,  # noqa: E402
+                          gt_serial_pipeline, pipeline_images, save_images, task_key)
 from .pointmaps import (alignment_errors, alignment_loss, gt_global_alignment, pair_graph,  # noqa: E402
                         pointmap_scene)
 
@@ -46,7 +46,7 @@ from .debug_learned import cv_choose_pipelines, cv_chunked_poses, pose_errors  #
 from .frontier import gt_focal_from_pointmap, pointmap_view, race, race_scene  # noqa: E402
 
 DEBUG_GENERATORS.update(_DEBUG_B)
-__all__ += ["gt_focal_from_pointmap", "pointmap_view", "race", "race_scene", "cv_choose_pipelines", "cv_chunked_poses", "pose_errors", "PipelineStages", "TransientTaskError", "gt_run_pipeline", "gt_serial_pipeline", "pipeline_images",
+__all__ += ["gt_focal_from_pointmap", "pointmap_view", "race", "race_scene", "cv_choose_pipelines", "cv_chunked_poses", "pose_errors", "PipelineStages", "TransientTaskError", "PermanentTaskError", "save_images", "gt_run_pipeline", "gt_serial_pipeline", "pipeline_images",
             "task_key", "alignment_errors", "alignment_loss", "gt_global_alignment", "pair_graph", "pointmap_scene"]
 
 debug_case = debug_practice(DEBUG_GENERATORS)   # every DEBUG exercise's practice case (10.11-10.13)

@@ -1,16 +1,21 @@
-"""10.10 — a map/reduce feature pipeline on Dask: extraction per image, matching and verification per pair.
+"""10.10 — a map/reduce feature pipeline on Dask, as it runs on a cluster: images read by the workers from their
+paths, batched tasks (load + extract a batch of images, match + verify a batch of pairs), each batch's rows
+checkpointed atomically so a crashed client resumes, a result file replaced atomically.
 
-The three stages are given (`PipelineStages`: tiny, deterministic, pure numpy — Harris corners with 5x5
-patch descriptors, mutual nearest neighbours, a translation RANSAC that tries every match), so the
-exercise is the distributed part: one task per image and per pair with their dependencies, retries of
-failed tasks, one row per unordered pair in a fixed order, and a result file replaced atomically.
+The four stages are given (`PipelineStages`: tiny, deterministic, pure numpy — `load` reads an image from
+its path, Harris corners with 5x5 patch descriptors, mutual nearest neighbours, a translation RANSAC that
+tries every match), so the exercise is the distributed part: batched tasks with their dependencies, retries
+of failed tasks, one row per unordered pair in a fixed order, checkpoints and a result file written atomically.
 
-A run is judged three ways on one draw (`shared_run`): its rows against the grader's serial pipeline
-(exactly: the stages are deterministic, so a distributed run must agree bit for bit); with stages that
-fail transiently (an extraction and a verification raise `TransientTaskError` the first time, and where
-the task runs on a Dask worker that worker is closed too: "a worker lost mid-run"); and the result file,
-which must end complete at `out_path` while a reader that opened the previous version keeps reading it
-whole (write a temporary file beside it, then `os.replace`).
+A run is judged on one draw (`shared_run`), the judge calling it with `batch_size=2`: its rows against the
+grader's serial pipeline (exactly: the stages are deterministic, so a distributed run must agree bit for bit);
+with stages that fail transiently (an extraction and a verification raise `TransientTaskError` the first
+time, and where the task runs on a Dask worker that worker is closed too: "a worker lost mid-run"); the
+result file, which must end complete at `out_path` while a reader that opened the previous version keeps
+reading it whole (write a temporary file beside it, then `os.replace`), with nothing else left beside it;
+and a crash: every verification after the first M - 1 raises `PermanentTaskError` (the run must fail), then
+the same call again with healthy stages must give the right rows while verifying fewer than M pairs (the
+batches finished before the crash are read back, not recomputed).
 
 The judge prepares the folder of `out_path` (in graded mode, inside the learner process's own writable
 folder) and holds the previous file open; stages sleep 0-12 ms per task so that completion order is not
@@ -38,21 +43,30 @@ class TransientTaskError(RuntimeError):
     """A task that fails once and succeeds when retried (a pre-empted node, a network blip)."""
 
 
-class PipelineStages:
-    """The pipeline's three stages (not callable itself: its methods are the tasks).
+class PermanentTaskError(RuntimeError):
+    """A task that fails however often it is retried (here: the cluster going down mid-run)."""
 
+
+class PipelineStages:
+    """The pipeline's four stages (not callable itself: its methods are the tasks).
+
+    load(path) -> image (H, W) float, read from a `.npy` file (`save_images` writes them);
     extract(image (H, W)) -> (kp (K, 2) float, desc (K, 25) float); match(f1, f2) -> (M, 2) int indices;
     verify(f1, f2, matches) -> int, the inliers of the best translation (within 1.5 px).
     flaky: task keys (`task_key`: the stage's name and a checksum of its inputs) that fail the first time
     they run (marker files in `scratch` make "first" exact across threads and processes).
+    paths: if given, the only paths `load` reads (the judge's own images: learner code never makes it read
+    another file). crash_after: every verification after that many (counted in `scratch`) raises
+    `PermanentTaskError`.
     """
 
     def __init__(self, n_corners: int = 40, flaky: tuple[str, ...] = (), scratch: str | None = None,
-                 latency_s: float = 0.012):
+                 latency_s: float = 0.012, paths: tuple[str, ...] = (), crash_after: int | None = None):
         self.n_corners, self.flaky, self.scratch, self.latency_s = n_corners, tuple(flaky), scratch, latency_s
+        self.paths, self.crash_after = tuple(str(p) for p in paths), crash_after
 
     def _state(self) -> tuple:
-        return self.n_corners, self.flaky, self.scratch, self.latency_s
+        return self.n_corners, self.flaky, self.scratch, self.latency_s, self.paths, self.crash_after
 
     def __eq__(self, other) -> bool:      # by value: the sandbox compares a copy of the inputs after the call
         return isinstance(other, PipelineStages) and self._state() == other._state()
@@ -61,7 +75,7 @@ class PipelineStages:
         return hash(self._state())
 
     def reliable(self) -> "PipelineStages":
-        return PipelineStages(self.n_corners, (), None, 0.0)
+        return PipelineStages(self.n_corners, (), None, 0.0, self.paths)
 
     # -- failure injection and scrambled latencies
     def _task(self, kind: str, *inputs) -> None:
@@ -70,6 +84,8 @@ class PipelineStages:
             _record_where(self.scratch, kind)
         if self.latency_s:
             time.sleep(self.latency_s * (zlib.crc32(key.encode()) % 97) / 96)
+        if self.crash_after is not None and kind == "verify" and _runs(self.scratch, "verify") > self.crash_after:
+            raise PermanentTaskError(f"task {key} failed: the cluster is down (simulated); the run cannot finish")
         if key not in self.flaky or self.scratch is None:
             return
         try:   # first call only: O_EXCL makes "first" exact across threads and processes
@@ -80,6 +96,17 @@ class PipelineStages:
         raise TransientTaskError(f"task {key} failed transiently (simulated: its worker was lost); retry it")
 
     # -- the stages
+    def load(self, path: str) -> np.ndarray:
+        path = os.fspath(path)
+        if self.paths and path not in self.paths:
+            raise ValueError(f"{path!r} is not one of the pipeline's images")
+        self._task("load", path)
+        with _open_no_link(path, "rb") as f:            # never through a link planted in the folder
+            image = np.load(f, allow_pickle=False)
+        if image.ndim != 2 or image.dtype != np.float64:
+            raise ValueError(f"{path!r} is not an (H, W) float image")
+        return image
+
     def extract(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         self._task("extract", image)
         img = np.asarray(image, float)
@@ -120,7 +147,7 @@ def task_key(kind: str, *inputs) -> str:
     """A task's identity from its inputs (what a content-addressed cache would use)."""
     crc = 0
     for a in inputs:
-        crc = zlib.crc32(np.ascontiguousarray(a, float).tobytes(), crc)
+        crc = zlib.crc32(a.encode() if isinstance(a, str) else np.ascontiguousarray(a, float).tobytes(), crc)
     return f"{kind}-{crc:08x}"
 
 
@@ -151,6 +178,11 @@ def _record_where(scratch: str, kind: str) -> None:
         os.close(os.open(os.path.join(scratch, name), os.O_CREAT | os.O_EXCL | os.O_WRONLY))
     except OSError:
         pass
+
+
+def _runs(scratch: str | None, kind: str) -> int:
+    """How many runs of a stage the markers in `scratch` record."""
+    return sum(n.startswith(f".ran-{kind}-") for n in os.listdir(scratch)) if scratch else 0
 
 
 def _lose_this_worker() -> None:
@@ -190,41 +222,75 @@ def gt_serial_pipeline(images, pairs, stages: PipelineStages) -> np.ndarray:
                     int).reshape(-1, 3)
 
 
-def gt_run_pipeline(images, pairs, stages, out_path, address=None, n_workers=2, retries=3) -> np.ndarray:
-    """Stand-in: the tasks on an in-process LocalCluster (or the scheduler at `address`), futures as the
-    graph's edges, retries=, gathered in submission order, the cluster closed; the result replaced atomically."""
+def save_images(images, folder: str) -> list[str]:
+    """Write each (H, W) image to folder/images/<k>.npy (the folder is created); returns the paths."""
+    os.makedirs(os.path.join(folder, "images"), exist_ok=True)
+    paths = [os.path.join(folder, "images", f"{k}.npy") for k in range(len(images))]
+    for path, image in zip(paths, images):
+        with _open_no_link(path, "wb") as f:
+            np.save(f, np.asarray(image, float), allow_pickle=False)
+    return paths
+
+
+def _write_json(path: str, obj) -> None:
+    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(os.path.abspath(path)), suffix=".tmp")
+    with os.fdopen(fd, "w") as f:
+        json.dump(obj, f)
+    os.replace(tmp, path)
+
+
+def _standin_batch(load, extract, match, verify, paths: dict, pair_batch: list) -> list:
+    feats = {k: extract(load(p)) for k, p in paths.items()}
+    return [[i, j, int(verify(feats[i], feats[j], match(feats[i], feats[j])))] for i, j in pair_batch]
+
+
+def gt_run_pipeline(image_paths, pairs, stages, out_path, address=None, n_workers=2, retries=3,
+                    batch_size=64) -> np.ndarray:
+    """Stand-in: one task per batch of pairs (each loads and extracts the images it uses on its worker: simpler
+    than the reference, which extracts each image once), on an in-process LocalCluster (or the scheduler at
+    `address`), keys unique per run, retries=; each batch checkpointed in out_path + ".parts" as it completes
+    and skipped by a later run; the result replaced atomically, the checkpoints removed."""
+    import hashlib
     import logging
     import uuid
 
-    from distributed import Client, LocalCluster
+    from distributed import Client, LocalCluster, as_completed
     todo = sorted({(min(i, j), max(i, j)) for i, j in pairs if i != j})
-    cluster = None if address else LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=False,
-                                                 dashboard_address=None, silence_logs=logging.CRITICAL)
-    client = Client(address or cluster)
+    batches = [todo[k:k + batch_size] for k in range(0, len(todo), batch_size)]
+    parts = out_path + ".parts"
+    os.makedirs(parts, exist_ok=True)
+    names = [os.path.join(parts, hashlib.sha256(repr((b, [str(image_paths[i]) for p in b for i in p])).encode())
+                          .hexdigest()[:20] + ".json") for b in batches]
+    done = {n: json.load(open(n)) for n in names if os.path.exists(n)}
+    left = [k for k, n in enumerate(names) if n not in done]
+    cluster = None if address or not left else LocalCluster(n_workers=n_workers, threads_per_worker=1,
+                                                            processes=False, dashboard_address=":0",
+                                                            silence_logs=logging.CRITICAL)
+    client = Client(address or cluster) if left else None
     run = uuid.uuid4().hex[:8]             # keys unique per run: two runs on one scheduler never share results
     try:
-        feats = client.map(stages.extract, images, key=[f"extract-{run}-{k}" for k in range(len(images))],
-                           retries=retries)
-        verified = []
-        for i, j in todo:
-            m = client.submit(stages.match, feats[i], feats[j], key=f"match-{run}-{i}-{j}", retries=retries)
-            verified.append(client.submit(stages.verify, feats[i], feats[j], m, key=f"verify-{run}-{i}-{j}",
-                                          retries=retries))
-        counts = client.gather(verified)
+        futures = {client.submit(_standin_batch, stages.load, stages.extract, stages.match, stages.verify,
+                                 {i: image_paths[i] for p in batches[k] for i in p}, batches[k],
+                                 key=f"pairs-{run}-{k}", retries=retries): k for k in left}
+        for future in as_completed(futures):
+            rows = future.result()
+            _write_json(names[futures[future]], rows)
+            done[names[futures[future]]] = rows
     finally:
-        client.close()
+        if client is not None:
+            client.close()
         if cluster is not None:
             cluster.close()
-    rows = np.array([(i, j, int(n)) for (i, j), n in zip(todo, counts)], int).reshape(-1, 3)
-    folder = os.path.dirname(os.path.abspath(out_path))
-    fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
-    with os.fdopen(fd, "w") as f:
-        json.dump({"pairs": rows.tolist()}, f)
-    os.replace(tmp, out_path)
+    rows = np.array([r for n in names for r in done[n]], int).reshape(-1, 3)
+    _write_json(out_path, {"pairs": rows.tolist()})
+    shutil.rmtree(parts, ignore_errors=True)
     return rows
 
 
 # ----------------------------------------------------------------- judging
+
+JUDGE_BATCH = 2       # the judge's batch_size: 9 pairs -> 5 batches, enough for order and resume to show
+
 
 def _folder_for(fn) -> str:
     """Where the learner's process may write: a folder its user owns in its private folder in graded mode
@@ -241,11 +307,29 @@ def _open_no_link(path: str, mode: str):
     return os.fdopen(os.open(path, flags, 0o644), mode)
 
 
+def _after_run(folder: str, out_path: str) -> dict:
+    """What the file system shows after a run: the result file, what else is left, where the tasks ran."""
+    try:
+        with _open_no_link(out_path, "r") as f:
+            written = json.load(f)
+    except (OSError, ValueError) as exc:
+        written = f"unreadable ({type(exc).__name__}: {exc})"
+    names = os.listdir(folder)
+    leftovers = sorted(n for n in names if n not in ("matches.json", "images")
+                       and not n.startswith((".failed-", ".ran-")))
+    ran = [n.split("-")[1:4] for n in names if n.startswith(".ran-")]
+    return {"written": written, "leftovers": leftovers, "tasks": len(ran),
+            "local": sum(w == "local" for _, w, _ in ran), "local_loads": sum(k == "load" and w == "local"
+                                                                           for k, w, _ in ran),
+            "stale_workers": max([int(n) for _, _, n in ran] or [0])}
+
+
 def _run_and_inspect(fn, images, pairs, flaky_kinds: tuple[str, ...]) -> dict:
-    """Run the learner's pipeline once with flaky stages and a stale result file held open; report what
-    came back and what the file system shows afterwards."""
+    """Run the learner's pipeline once on images saved in its folder, with flaky stages and a stale result file
+    held open; report what came back and what the file system shows afterwards."""
     folder = _folder_for(fn)
     try:
+        paths = save_images(images, folder)
         out_path = os.path.join(folder, "matches.json")
         with _open_no_link(out_path, "w") as f:
             json.dump(STALE, f)
@@ -254,22 +338,37 @@ def _run_and_inspect(fn, images, pairs, flaky_kinds: tuple[str, ...]) -> dict:
         feats = [reference.extract(img) for img in images]
         keys = {"extract": task_key("extract", images[len(images) // 2]),
                 "verify": task_key("verify", feats[0][0], feats[2][0])}
-        stages = PipelineStages(flaky=tuple(keys[k] for k in flaky_kinds), scratch=folder)
+        stages = PipelineStages(flaky=tuple(keys[k] for k in flaky_kinds), scratch=folder, paths=tuple(paths))
         with _open_no_link(out_path, "r") as reader:         # a reader of the previous version
-            rows = fn(images, list(pairs), stages, out_path)
+            rows = fn(paths, list(pairs), stages, out_path, batch_size=JUDGE_BATCH)
             old_text = reader.read()
-        try:
-            with _open_no_link(out_path, "r") as f:
-                written = json.load(f)
-        except (OSError, ValueError) as exc:
-            written = f"unreadable ({type(exc).__name__}: {exc})"
-        names = os.listdir(folder)
-        leftovers = sorted(n for n in names if n != "matches.json" and not n.startswith((".failed-", ".ran-")))
-        ran = [n.split("-")[1:4] for n in names if n.startswith(".ran-")]
-        return {"rows": rows, "written": written, "old_intact": old_text == json.dumps(STALE),
+        return {"rows": rows, "old_intact": old_text == json.dumps(STALE),
                 "replaced": os.stat(out_path).st_ino != inode if os.path.exists(out_path) else False,
-                "leftovers": leftovers, "tasks": len(ran), "local": sum(w == "local" for _, w, _ in ran),
-                "stale_workers": max([int(n) for _, _, n in ran] or [0])}
+                **_after_run(folder, out_path)}
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def _crash_and_resume(fn, images, pairs) -> dict:
+    """Run the learner's pipeline with stages whose every verification after the first M - 1 fails for good (the
+    run must fail: the client 'crashes'); then the same call with healthy stages. Reports the second run's rows,
+    whether the first failed, and how many pairs the second verified (fewer than M: it resumed)."""
+    folder = _folder_for(fn)
+    try:
+        paths = save_images(images, folder)
+        out_path = os.path.join(folder, "matches.json")
+        m = len({(min(i, j), max(i, j)) for i, j in pairs if i != j})
+        crashing = PipelineStages(scratch=folder, paths=tuple(paths), crash_after=m - 1)
+        try:
+            fn(paths, list(pairs), crashing, out_path, batch_size=JUDGE_BATCH)
+            crashed = False
+        except Exception:           # noqa: BLE001 — the run is meant to fail; how is the learner's business
+            crashed = True
+        before = _runs(folder, "verify")
+        rows = fn(paths, list(pairs), PipelineStages(scratch=folder, paths=tuple(paths)), out_path,
+                  batch_size=JUDGE_BATCH)
+        return {"rows": rows, "crashed": crashed, "pairs": m, "verified": _runs(folder, "verify") - before,
+                **_after_run(folder, out_path)}
     finally:
         shutil.rmtree(folder, ignore_errors=True)
 
@@ -308,6 +407,18 @@ def _not_on_dask(out, expected) -> float:
     return float(out["local"] + (out["stale_workers"] > 0) + (out["tasks"] == 0))
 
 
+def _resume_problems(out, expected: np.ndarray) -> float:
+    """The second run's rows against the serial pipeline's, + 1 if it verified every pair again (nothing was
+    kept from before the crash), + 1 if the crashing run returned instead of failing."""
+    return _rows_differ(out["rows"], expected) + (out["verified"] >= out["pairs"]) + (not out["crashed"])
+
+
+def _convert_resume(out, case: Case) -> dict:
+    if not isinstance(out, dict) or "verified" not in out:
+        raise OutputError("the pipeline returned nothing to inspect")
+    return dict(out, rows=_convert_rows(out["rows"], case))
+
+
 def _convert_file(out, case: Case) -> dict:
     if not isinstance(out, dict) or "written" not in out:
         raise OutputError("the pipeline returned nothing to inspect")
@@ -316,12 +427,12 @@ def _convert_file(out, case: Case) -> dict:
 
 def _same_rows_other_order(case: Case, rows: np.ndarray) -> bool:
     e = case.expected
-    return len(rows) == len(e) and not np.array_equal(rows, e) and np.array_equal(
+    return isinstance(rows, np.ndarray) and len(rows) == len(e) and not np.array_equal(rows, e) and np.array_equal(
         rows[np.lexsort((rows[:, 1], rows[:, 0]))], e)
 
 
 def _duplicates(case: Case, rows: np.ndarray) -> bool:
-    return len(rows) > len(case.expected) or bool((rows[:, 0] >= rows[:, 1]).any())
+    return isinstance(rows, np.ndarray) and (len(rows) > len(case.expected) or bool((rows[:, 0] >= rows[:, 1]).any()))
 
 
 def _file_text(case: Case, out: dict) -> str:
@@ -337,12 +448,19 @@ def _file_text(case: Case, out: dict) -> str:
 
 
 def _dask_text(case: Case, out: dict) -> str:
+    why = []
     if out["stale_workers"]:
-        return (f"{out['stale_workers']} Dask workers of an earlier run were still running beside this run's: close "
-                "the client and the cluster you started (try/finally), every run.")
-    return (f"{out['local']} of {out['tasks']} tasks ran outside a Dask worker: this is the distributed part of "
-            "the pipeline — submit the tasks to a Client (client.map / client.submit on a LocalCluster you start, "
-            "or Client(address)); run serially only when no cluster can be started.")
+        why.append(f"{out['stale_workers']} Dask workers of an earlier run were still running beside this run's: close "
+                   "the client and the cluster you started (try/finally), every run.")
+    if out["local_loads"]:
+        why.append(f"{out['local_loads']} images were read on the client (stages.load ran outside a Dask worker): on a "
+                   "cluster the client sends paths and each task reads its images where it runs; shipping pixels from "
+                   "the client makes it the bottleneck and its memory the limit.")
+    if out["local"] > out["local_loads"] or out["tasks"] == 0:
+        why.append(f"{out['local'] - out['local_loads']} of {out['tasks']} tasks ran outside a Dask worker: this is the "
+                   "distributed part of the pipeline — submit the tasks to a Client (client.submit on a LocalCluster you "
+                   "start, or Client(address)); run serially only when no cluster can be started.")
+    return " ".join(why)
 
 
 PIPELINE_HINTS = [
@@ -354,6 +472,13 @@ PIPELINE_HINTS = [
          "(and never an image with itself).", _duplicates),
     Hint(_file_text, lambda c, out: "atomic" in c.tags and _file_problems(out, c.expected) > 0),
     Hint(_dask_text, lambda c, out: "dask" in c.tags and _not_on_dask(out, c.expected) > 0),
+    Hint(lambda c, out: f"the run after the crash verified all {out['pairs']} pairs again: what was done before the "
+         "crash was lost. Write each batch's rows atomically the moment it completes (as_completed), named by the "
+         "batch's content, and skip the batches already written when the pipeline runs again.",
+         lambda c, out: "resume" in c.tags and out["verified"] >= out["pairs"]),
+    Hint("a verification kept failing after its retries and your run still returned: a run that cannot finish "
+         "must raise (the batches already written stay for the next run), never return partial rows.",
+         lambda c, out: "resume" in c.tags and not out["crashed"]),
 ]
 
 
@@ -362,6 +487,7 @@ def _cases(rng: np.random.Generator):
     expected = gt_serial_pipeline(images, pairs, PipelineStages())
     runs = {kinds: shared_run(lambda fn, kinds=kinds: _run_and_inspect(fn, images, pairs, kinds))
             for kinds in ((), ("extract", "verify"))}
+    resume = shared_run(lambda fn: _crash_and_resume(fn, images, pairs))
     label = f"{len(images)} images, {len(pairs)} candidate pairs"
     # Exact: the stages are deterministic, so every row must equal the serial pipeline's.
     yield Case(f"{label}: rows as the serial pipeline", (), expected, _rows_differ, 0, "rows differ",
@@ -376,9 +502,12 @@ def _cases(rng: np.random.Generator):
                "problems", convert=_convert_file, call=runs[("extract", "verify")], key="dask", tags=("dask",),
                weight=2.0, local_only="the stages run in the grader's process there, where the Dask worker that "
                "called them cannot be seen (your notebook's own check judges it)")
+    yield Case(f"{label}: the run fails after {len(expected) - 1} verifications (batch_size={JUDGE_BATCH}); run "
+               "again, it resumes", (), expected, _resume_problems, 0, "problems", convert=_convert_resume,
+               call=resume, key="resume", tags=("resume",))
 
 
 register(Exercise(
     id="10.10", title="A map/reduce matching pipeline on Dask", name="run_pipeline", kind="code", points=3,
     cases=_cases, hints=PIPELINE_HINTS, fallback=gt_run_pipeline, timeout=60.0,
-    arg_names=("images", "pairs", "stages", "out_path")))
+    arg_names=("image_paths", "pairs", "stages", "out_path")))

@@ -1,6 +1,7 @@
 """`python -m graders batch SUBMISSIONS/ --out GRADES/`: grade a class overnight.
 
-    python -m graders batch SUBMISSIONS/ --out GRADES/ [--workers 2] [--chapter 4] [--secret-file S]
+    python -m graders batch SUBMISSIONS/ --out GRADES/ [--workers 2] [--chapter 4] [--only 4.5,4.6]
+                            [--secret-file S] [--scheduler tcp://HOST:PORT]
 
 A submission is a notebook or module in SUBMISSIONS/ (`alice.ipynb`), or a folder holding one
 (`alice/04_sfm.ipynb`); its name is the submission id. Each is graded in graded mode (its own
@@ -8,7 +9,8 @@ sandboxed processes, see `graders.grading.runner` and `graders.grading.isolation
 (Gradescope's format) atomically after every exercise, and adds a row to GRADES/gradebook.csv (a
 column per exercise, total, status, error). A crashed, hostile or unparsable submission gets a valid
 zero row with its reason, never a missing row. Re-running skips what is complete: a killed batch
-loses nothing already written.
+loses nothing already written. With `--scheduler` the same grades run on a Dask cluster's workers and come
+back here to be written (`graders.grading.cluster`).
 """
 from __future__ import annotations
 
@@ -60,8 +62,10 @@ def _write(path: Path, doc: dict) -> None:
     os.replace(tmp, path)
 
 
-def grade_one(sid: str, file: Path, out: Path, args, secret: bytes | None, only: list[str] | None) -> dict:
-    """Grade one submission into out/<sid>/results.json; never raises. Returns its gradebook row."""
+def grade_one(sid: str, file: Path, out: Path, args, secret: bytes | None, only: list[str] | None,
+              hidden: dict[str, int] | None = None) -> dict:
+    """Grade one submission into out/<sid>/results.json; never raises. Returns its gradebook row.
+    hidden: the submission's hidden seeds, computed from the secret elsewhere (a cluster's client)."""
     folder = out / sid
     folder.mkdir(parents=True, exist_ok=True)
     target = folder / "results.json"
@@ -75,7 +79,7 @@ def grade_one(sid: str, file: Path, out: Path, args, secret: bytes | None, only:
             write_gradescope(target, partial, "grading in progress")
         results, message = check_file(file, only=only or None, time_budget=args.time_budget,
                                       max_timeouts=args.max_timeouts, memory_gb=args.memory_gb, graded=True,
-                                      on_result=save, secret=secret, submission=sid)
+                                      on_result=save, secret=secret, submission=sid, hidden=hidden)
     except Exception as exc:          # our failure or an unreadable file: a zero row that says why
         status, message = "error", f"{type(exc).__name__}: {exc}"
         results = []
@@ -127,16 +131,34 @@ def _progress(done: int, total: int, started: float, sid: str, row: dict) -> str
             f"({rate:.1f}/min, ~{left / 60:.0f} min left)")
 
 
+def _id_order(exercise_id: str) -> list[int]:
+    return [int(p) for p in exercise_id.split(".")]
+
+
+def _save_remote(out: Path, sid: str, doc: dict, error: str) -> dict:
+    """A grade that came back from a cluster's worker, written where a local grade writes it. Returns its row."""
+    folder = out / sid
+    folder.mkdir(parents=True, exist_ok=True)
+    if error:
+        (folder / "grader-error.txt").write_text(error)
+    _write(folder / "results.json", doc)
+    return row_of(sid, doc)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m graders batch", description=__doc__.split("\n\n")[0])
     ap.add_argument("submissions")
     ap.add_argument("--out", required=True)
     ap.add_argument("--workers", type=int, default=2, help="submissions graded at once")
     ap.add_argument("--chapter", help="grade only this chapter's exercises (default: from each file)")
+    ap.add_argument("--only", help="grade only these exercises (comma-separated ids, e.g. 1.5,1.6)")
     ap.add_argument("--secret-file", help="instructor grading: hidden cases on a secret seed")
     ap.add_argument("--time-budget", type=float, default=TIME_BUDGET)
     ap.add_argument("--max-timeouts", type=int, default=MAX_TIMEOUTS)
     ap.add_argument("--memory-gb", type=float, default=MEMORY_GB)
+    ap.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                    help="grade on the workers of this Dask scheduler (each with the course installed); "
+                         "--workers is not used: each worker grades as many submissions at once as it has threads")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -147,24 +169,35 @@ def main(argv: list[str] | None = None) -> int:
     secret = read_secret(args.secret_file)
     HIDDEN_PATHS.extend(os.path.realpath(p) for p in (args.submissions, out))   # other learners' work
     only = [ex.id for ex in chapter(by_number(args.chapter).key)] if args.chapter else None
+    if args.only:
+        only = [i for i in args.only.split(",") if only is None or i in only]
     rows = {sid: row_of(sid, json.loads((out / sid / "results.json").read_text()))
             for sid in subs if _complete(out / sid / "results.json")}
     todo = [sid for sid in subs if sid not in rows]
-    print(f"{len(subs)} submissions: {len(rows)} already graded, {len(todo)} to grade with {args.workers} workers",
-          flush=True)
+    where = f"on the Dask cluster at {args.scheduler}" if args.scheduler else f"with {args.workers} workers"
+    print(f"{len(subs)} submissions: {len(rows)} already graded, {len(todo)} to grade {where}", flush=True)
     ids = sorted({k for r in rows.values() for k in r if k[:1].isdigit()} |
-                 set(only or []), key=lambda i: [int(p) for p in i.split(".")])
-    started, lock = time.monotonic(), threading.Lock()
-    with ThreadPoolExecutor(max_workers=max(1, args.workers)) as pool:
-        futures = {pool.submit(grade_one, sid, subs[sid], out, args, secret, only): sid for sid in todo}
-        for k, future in enumerate(as_completed(futures), 1):
-            sid = futures[future]
-            row = future.result()
-            with lock:
-                rows[sid] = row
-                ids = sorted(set(ids) | {c for c in row if c[:1].isdigit()}, key=lambda i: [int(p) for p in i.split(".")])
-                write_gradebook(out / "gradebook.csv", list(rows.values()), ids)
-            print(_progress(k, len(todo), started, sid, row), flush=True)
+                 set(only or []), key=_id_order)
+    started, lock, done = time.monotonic(), threading.Lock(), [0]
+
+    def record(sid: str, row: dict) -> None:
+        nonlocal ids
+        with lock:
+            rows[sid] = row
+            ids = sorted(set(ids) | {c for c in row if c[:1].isdigit()}, key=_id_order)
+            write_gradebook(out / "gradebook.csv", list(rows.values()), ids)
+            done[0] += 1
+        print(_progress(done[0], len(todo), started, sid, row), flush=True)
+
+    if args.scheduler:
+        from graders.grading.cluster import grade_on_cluster
+        grade_on_cluster(args.scheduler, grade_one, {sid: subs[sid] for sid in todo}, args, secret, only,
+                         lambda sid, doc, error: record(sid, _save_remote(out, sid, doc, error)))
+    else:
+        with ThreadPoolExecutor(max_workers=max(1, args.workers)) as pool:
+            futures = {pool.submit(grade_one, sid, subs[sid], out, args, secret, only): sid for sid in todo}
+            for future in as_completed(futures):
+                record(futures[future], future.result())
     write_gradebook(out / "gradebook.csv", list(rows.values()), ids)
     print(f"gradebook: {out / 'gradebook.csv'} ({len(rows)} rows)")
     return 0

@@ -254,9 +254,12 @@ def check_file(path: str | Path, seed: int | None = None, only: list[str] | None
                hard_limit: float = HARD_LIMIT, time_budget: float = TIME_BUDGET, max_timeouts: int = MAX_TIMEOUTS,
                memory_gb: float = MEMORY_GB, graded: bool = False,
                on_result: Callable[[list[ExerciseResult]], None] | None = None,
-               secret: bytes | None = None, submission: str | None = None) -> tuple[list[ExerciseResult], str]:
+               secret: bytes | None = None, submission: str | None = None,
+               hidden: dict[str, int] | None = None) -> tuple[list[ExerciseResult], str]:
     """Grade every exercise of the chapter(s) in `path`. Returns (results, message).
-    secret: instructor grading (hidden cases on a secret seed per submission; implies graded mode)."""
+    secret: instructor grading (hidden cases on a secret seed per submission; implies graded mode).
+    hidden: the seeds `hidden_seeds` derives from the secret, already computed (a batch on a Dask cluster
+    computes them on the client, so the secret never reaches a worker machine); implies graded mode."""
     path = Path(path)
     seed = secrets.randbits(32) if seed is None else seed
     exercises = []
@@ -275,8 +278,10 @@ def check_file(path: str | Path, seed: int | None = None, only: list[str] | None
         msg = f"{path} does not exist"
         return [_failed(ex, msg, seed) for ex in exercises], msg
     message = "\n".join(extracted.problems)
-    if graded or secret is not None:
+    graded = graded or secret is not None or hidden is not None
+    if graded:
         message = "\n".join(filter(None, [isolation_note(), message]))
-    hidden = hidden_seeds(secret, submission or path.stem, [ex.id for ex in exercises]) if secret else None
+    if secret:
+        hidden = hidden_seeds(secret, submission or path.stem, [ex.id for ex in exercises])
     return run_workers(extracted.source, exercises, seed, hard_limit, time_budget, max_timeouts, memory_gb,
-                       graded or secret is not None, on_result, hidden), message
+                       graded, on_result, hidden), message

@@ -98,3 +98,20 @@ def test_the_race_scores_both_routes_on_one_scene():
     sc = ch10.race_scene(np.random.default_rng(7), n_views=6, keypoints=120)
     res = ch10.race(sc, ch10.gt_global_alignment)
     assert res["classical"]["rot_deg"] < res["pointmaps"]["rot_deg"]
+
+
+def test_pipeline_load_reads_only_the_judges_images_never_through_a_link(tmp_path):
+    """10.10's `load` stage runs in the judge in graded mode on a path the learner's code passes: only the images the
+    judge saved, opened without following a link the learner may have put in their place."""
+    import os
+    images, _ = ch10.pipeline_images(np.random.default_rng(0))
+    paths = ch10.save_images(images[:2], str(tmp_path))
+    stages = ch10.PipelineStages(paths=tuple(paths))
+    assert np.array_equal(stages.load(paths[1]), images[1])
+    (tmp_path / "secret").write_text("root's secret")
+    with pytest.raises(ValueError, match="not one of the pipeline's images"):
+        stages.load(str(tmp_path / "secret"))
+    os.remove(paths[0])
+    os.symlink(tmp_path / "secret", paths[0])
+    with pytest.raises(OSError):
+        stages.load(paths[0])

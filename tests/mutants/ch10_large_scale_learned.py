@@ -4,7 +4,7 @@ Each entry is (exercise id, short name, function, hint fragment or None). 10.9's
 writing DUSt3R's global alignment (one scale for every pair, confidences ignored, no spanning-tree start,
 a spanning tree over the wrong weights, camera-to-world poses returned); 10.10's those of a first
 distributed pipeline (no retries, results in completion order, duplicated pairs, a result file written in
-place); the DEBUG ones the wrong fixes of 10.12-10.13. Building blocks that are not the point of a mutant
+place, no Dask, a cluster left open, no checkpoint per batch, images read on the client); the DEBUG ones the wrong fixes of 10.12-10.13. Building blocks that are not the point of a mutant
 come from the reference solution, so each mutant differs from a correct implementation in one mistake.
 """
 from __future__ import annotations
@@ -108,114 +108,114 @@ MUTANTS = [
 from solutions.ch10_large_scale import distributed as ref_dist  # noqa: E402
 
 
-def _cluster_map(images, todo, stages, retries):
-    """Extraction, matching and verification on an in-process LocalCluster; returns futures of verify."""
+def _pipeline(paths, pairs, stages, out_path, *, retries=3, batch_size=64, dedupe=True, in_order=True,
+              atomic=True, close=True, checkpoint=True, load_on_client=False, dask=True):
+    """The pipeline with one switch per mistake (every default is right): batches of pairs, each task loading and
+    extracting the images it uses, checkpoints in out_path + ".parts" written as batches complete."""
+    import json
     import logging
-
-    from distributed import Client, LocalCluster
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None,
-                           silence_logs=logging.CRITICAL)
-    client = Client(cluster)
-    kw = {"retries": retries} if retries else {}
-    feats = client.map(stages.extract, images, key=[f"extract-{k}" for k in range(len(images))], **kw)
-    matches = [client.submit(stages.match, feats[i], feats[j], key=f"match-{i}-{j}", **kw) for i, j in todo]
-    verified = [client.submit(stages.verify, feats[i], feats[j], m, key=f"verify-{i}-{j}", **kw)
-                for (i, j), m in zip(todo, matches)]
-    return client, cluster, verified
-
-
-def pipeline_no_retries(images, pairs, stages, out_path, address=None, n_workers=2, retries=3):
-    """No retries=: the first transient failure ends the run."""
-    todo = ref_dist.unique_pairs(pairs)
-    client, cluster, verified = _cluster_map(images, todo, stages, 0)
-    try:
-        counts = client.gather(verified)
-    finally:
-        client.close()
-        cluster.close()
-    rows = np.array([(i, j, n) for (i, j), n in zip(todo, counts)], int).reshape(-1, 3)
-    ref_dist.write_atomically(out_path, {"pairs": rows.tolist()})
-    return rows
-
-
-def pipeline_completion_order(images, pairs, stages, out_path, address=None, n_workers=2, retries=3):
-    """Rows appended as tasks finish (as_completed): the right rows, in whatever order the cluster chose."""
-    from distributed import as_completed
-    todo = ref_dist.unique_pairs(pairs)
-    client, cluster, verified = _cluster_map(images, todo, stages, retries)
-    which = {f.key: ij for f, ij in zip(verified, todo)}
-    try:
-        rows = [(*which[f.key], int(f.result())) for f in as_completed(verified)]
-    finally:
-        client.close()
-        cluster.close()
-    rows = np.array(rows, int).reshape(-1, 3)
-    ref_dist.write_atomically(out_path, {"pairs": rows.tolist()})
-    return rows
-
-
-def pipeline_duplicate_pairs(images, pairs, stages, out_path, address=None, n_workers=2, retries=3):
-    """Every candidate as retrieval returned it: (j, i) next to (i, j), repeats, (i, i)."""
-    todo = [(int(i), int(j)) for i, j in pairs]
-    client, cluster, verified = _cluster_map(images, todo, stages, retries)
-    try:
-        counts = client.gather(verified)
-    finally:
-        client.close()
-        cluster.close()
-    rows = np.array([(i, j, n) for (i, j), n in zip(todo, counts)], int).reshape(-1, 3)
-    ref_dist.write_atomically(out_path, {"pairs": rows.tolist()})
-    return rows
-
-
-def pipeline_writes_in_place(images, pairs, stages, out_path, address=None, n_workers=2, retries=3):
-    """The result file opened with "w" and written where it is: a crash mid-write leaves a torn file."""
-    import json
-    todo = ref_dist.unique_pairs(pairs)
-    client, cluster, verified = _cluster_map(images, todo, stages, retries)
-    try:
-        counts = client.gather(verified)
-    finally:
-        client.close()
-        cluster.close()
-    rows = np.array([(i, j, n) for (i, j), n in zip(todo, counts)], int).reshape(-1, 3)
-    with open(out_path, "w") as f:
-        json.dump({"pairs": rows.tolist()}, f)
-    return rows
-
-
-def pipeline_serial_loop(images, pairs, stages, out_path, address=None, n_workers=2, retries=3):
-    """No Dask at all: a serial loop with its own retries, the right rows, the file replaced atomically."""
-    import json
     import os
-    import tempfile
+    import shutil
+    import uuid
+    todo = ref_dist.unique_pairs(pairs) if dedupe else [(int(i), int(j)) for i, j in pairs]
+    batches = ref_dist.chunks(todo, batch_size)
+    parts = out_path + ".parts"
+    os.makedirs(parts, exist_ok=True)
+    names = [ref_dist.batch_name(b, paths) for b in batches]
+    done = ref_dist.read_done(parts, names) if checkpoint else {}
+    images = [stages.load(p) for p in paths] if load_on_client else None
 
-    def attempt(fn, *args):
-        for k in range(retries + 1):
-            try:
-                return fn(*args)
-            except Exception:
-                if k == retries:
-                    raise
-    todo = sorted({(min(i, j), max(i, j)) for i, j in pairs if i != j})
-    feats = [attempt(stages.extract, img) for img in images]
-    rows = np.array([(i, j, attempt(stages.verify, feats[i], feats[j], attempt(stages.match, feats[i], feats[j])))
-                     for i, j in todo], int).reshape(-1, 3)
-    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(os.path.abspath(out_path)))
-    with os.fdopen(fd, "w") as f:
-        json.dump({"pairs": rows.tolist()}, f)
-    os.replace(tmp, out_path)
+    def task(batch):
+        feats = {i: stages.extract(images[i] if images is not None else stages.load(paths[i]))
+                 for pair in batch for i in pair}
+        return [[i, j, int(stages.verify(feats[i], feats[j], stages.match(feats[i], feats[j])))] for i, j in batch]
+
+    left = [k for k, n in enumerate(names) if n not in done]
+    finished_order = []
+    if dask:
+        from distributed import Client, LocalCluster, as_completed
+        cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=":0",
+                               silence_logs=logging.CRITICAL)
+        client = Client(cluster)
+        run = uuid.uuid4().hex[:8]
+        try:
+            kw = {"retries": retries} if retries else {}
+            futures = {client.submit(task, batches[k], key=f"pairs-{run}-{k}", **kw): k for k in left}
+            for future in as_completed(futures):
+                k = futures[future]
+                done[names[k]] = future.result()
+                finished_order.append(k)
+                if checkpoint:
+                    ref_dist.write_atomically(os.path.join(parts, names[k]), {"rows": done[names[k]]})
+        finally:
+            if close:
+                client.close()
+                cluster.close()
+    else:
+        for k in left:
+            for attempt in range(retries + 1):
+                try:
+                    done[names[k]] = task(batches[k])
+                    break
+                except Exception:
+                    if attempt == retries:
+                        raise
+            ref_dist.write_atomically(os.path.join(parts, names[k]), {"rows": done[names[k]]})
+    order = range(len(names)) if in_order else [k for k in range(len(names)) if k not in finished_order] + finished_order
+    rows = np.array([r for k in order for r in done[names[k]]], int).reshape(-1, 3)
+    if atomic:
+        ref_dist.write_atomically(out_path, {"pairs": rows.tolist()})
+    else:
+        with open(out_path, "w") as f:
+            json.dump({"pairs": rows.tolist()}, f)
+    shutil.rmtree(parts, ignore_errors=True)
     return rows
 
 
-def pipeline_cluster_left_open(images, pairs, stages, out_path, address=None, n_workers=2, retries=3):
+def pipeline_no_retries(image_paths, pairs, stages, out_path, address=None, n_workers=2, retries=3, batch_size=64):
+    """No retries=: the first transient failure ends the run."""
+    return _pipeline(image_paths, pairs, stages, out_path, retries=0, batch_size=batch_size)
+
+
+def pipeline_completion_order(image_paths, pairs, stages, out_path, address=None, n_workers=2, retries=3,
+                              batch_size=64):
+    """Rows appended as batches finish (as_completed): the right rows, in whatever order the cluster chose."""
+    return _pipeline(image_paths, pairs, stages, out_path, batch_size=batch_size, in_order=False)
+
+
+def pipeline_duplicate_pairs(image_paths, pairs, stages, out_path, address=None, n_workers=2, retries=3,
+                             batch_size=64):
+    """Every candidate as retrieval returned it: (j, i) next to (i, j), repeats, (i, i)."""
+    return _pipeline(image_paths, pairs, stages, out_path, batch_size=batch_size, dedupe=False)
+
+
+def pipeline_writes_in_place(image_paths, pairs, stages, out_path, address=None, n_workers=2, retries=3,
+                             batch_size=64):
+    """The result file opened with "w" and written where it is: a crash mid-write leaves a torn file."""
+    return _pipeline(image_paths, pairs, stages, out_path, batch_size=batch_size, atomic=False)
+
+
+def pipeline_serial_loop(image_paths, pairs, stages, out_path, address=None, n_workers=2, retries=3, batch_size=64):
+    """No Dask at all: a serial loop with its own retries and checkpoints, the right rows, the file atomic."""
+    return _pipeline(image_paths, pairs, stages, out_path, batch_size=batch_size, dask=False)
+
+
+def pipeline_cluster_left_open(image_paths, pairs, stages, out_path, address=None, n_workers=2, retries=3,
+                               batch_size=64):
     """Right in every other way, but the client and the LocalCluster are never closed."""
-    todo = ref_dist.unique_pairs(pairs)
-    client, cluster, verified = _cluster_map(images, todo, stages, retries)
-    counts = client.gather(verified)
-    rows = np.array([(i, j, n) for (i, j), n in zip(todo, counts)], int).reshape(-1, 3)
-    ref_dist.write_atomically(out_path, {"pairs": rows.tolist()})
-    return rows
+    return _pipeline(image_paths, pairs, stages, out_path, batch_size=batch_size, close=False)
+
+
+def pipeline_no_checkpoint(image_paths, pairs, stages, out_path, address=None, n_workers=2, retries=3,
+                           batch_size=64):
+    """Batches gathered in memory and written once at the end: a crash loses every batch already done."""
+    return _pipeline(image_paths, pairs, stages, out_path, batch_size=batch_size, checkpoint=False)
+
+
+def pipeline_loads_on_client(image_paths, pairs, stages, out_path, address=None, n_workers=2, retries=3,
+                             batch_size=64):
+    """Every image read on the client and shipped to the workers inside the tasks."""
+    return _pipeline(image_paths, pairs, stages, out_path, batch_size=batch_size, load_on_client=True)
 
 
 MUTANTS += [
@@ -225,6 +225,8 @@ MUTANTS += [
     ("10.10", "completion order", pipeline_completion_order, "in another order"),
     ("10.10", "duplicated pairs", pipeline_duplicate_pairs, "duplicated pairs"),
     ("10.10", "written in place", pipeline_writes_in_place, "os.replace"),
+    ("10.10", "no checkpoint per batch", pipeline_no_checkpoint, "verified all"),
+    ("10.10", "images read on the client", pipeline_loads_on_client, "read on the client"),
 ]
 
 

@@ -1,0 +1,89 @@
+"""10.10's reference as it runs on a real cluster: a `dask scheduler` and two `dask worker` processes started here (free
+ports, no dashboards), the workers reading the images from their paths. Two runs at once on one scheduler keep their
+own rows (keys unique per run); a worker killed mid-run loses nothing (the scheduler reruns its batch); a client
+killed mid-run leaves its finished batches, and the next run verifies only the rest."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+
+from dask_cluster import ROOT, busy_worker, start_cluster, stop
+from graders import ch10_large_scale as ch10
+from solutions.ch10_large_scale import run_pipeline
+
+
+def _problem(seed: int, folder, n_images: int):
+    images, pairs = ch10.pipeline_images(np.random.default_rng(seed), n_images=n_images)
+    folder.mkdir()
+    return ch10.save_images(images, str(folder)), pairs, ch10.gt_serial_pipeline(images, pairs, ch10.PipelineStages())
+
+
+def _verified(scratch) -> int:
+    return sum(n.startswith(".ran-verify-worker-") for n in os.listdir(scratch))
+
+
+CLIENT = """import sys, json
+from graders import ch10_large_scale as ch10
+from solutions.ch10_large_scale import run_pipeline
+paths, pairs = json.loads(sys.argv[2]), [tuple(p) for p in json.loads(sys.argv[3])]
+run_pipeline(paths, pairs, ch10.PipelineStages(latency_s=0.3), sys.argv[4], address=sys.argv[1], batch_size=2)
+"""
+
+
+def test_reference_pipeline_on_a_multi_process_cluster(tmp_path):
+    address, scheduler, workers = start_cluster(tmp_path, 2)
+    try:
+        # Two runs at once on one scheduler, different images: each gets its own rows.
+        problems = [_problem(seed, tmp_path / f"run{seed}", 6) for seed in (1, 2)]
+        rows = [None, None]
+
+        def one(k):
+            paths, pairs, _ = problems[k]
+            rows[k] = run_pipeline(paths, pairs, ch10.PipelineStages(latency_s=0.05), str(tmp_path / f"run{k + 1}.json"),
+                                   address=address, batch_size=2)
+        threads = [threading.Thread(target=one, args=(k,)) for k in (0, 1)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(600)
+        for k in (0, 1):
+            assert np.array_equal(rows[k], problems[k][2]), k
+
+        # A worker killed while it runs a batch of pairs: the scheduler reruns the batch on the other one.
+        paths, pairs, expected = _problem(3, tmp_path / "kill", 7)
+        out = str(tmp_path / "kill.json")
+        result = {}
+        run = threading.Thread(target=lambda: result.update(rows=run_pipeline(
+            paths, pairs, ch10.PipelineStages(latency_s=0.3), out, address=address, batch_size=2)))
+        run.start()
+        victim = busy_worker(address, set(workers), lambda key: key.startswith("match-"))
+        stop(workers.pop(victim))
+        run.join(600)
+        assert np.array_equal(result["rows"], expected)
+        assert not os.path.exists(out + ".parts")
+
+        # A client killed once it has checkpointed a batch; run again, it verifies only what is left.
+        out = str(tmp_path / "crash.json")
+        import json
+        client = subprocess.Popen([sys.executable, "-c", CLIENT, address, json.dumps(paths), json.dumps(pairs), out],
+                                  cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)), start_new_session=True,
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not (os.path.isdir(out + ".parts") and os.listdir(out + ".parts")):
+            time.sleep(0.05)
+        stop(client)
+        kept = len(os.listdir(out + ".parts"))
+        assert kept >= 1
+        scratch = tmp_path / "scratch"
+        scratch.mkdir()
+        again = run_pipeline(paths, pairs, ch10.PipelineStages(scratch=str(scratch)), out, address=address, batch_size=2)
+        assert np.array_equal(again, expected)
+        assert _verified(scratch) <= len(expected) - 2 * kept      # each kept batch held 2 pairs, none verified again
+        assert not os.path.exists(out + ".parts")
+    finally:
+        stop(*workers.values(), scheduler)
