@@ -9,6 +9,7 @@ import numpy as np
 
 from graders.core.engine import Case, Exercise, Hint, register
 from graders.kit.geometry import hartley, to_h
+from graders.core.memo import cached
 from .scenes import graf_grid, graf_matches, matrix33, null_vector, rms_transfer, transfer_px, two_view
 
 
@@ -47,6 +48,7 @@ def _convert_H(out, case):
     return matrix33(out, "H")
 
 
+@cached
 def cases_homography(rng: np.random.Generator) -> list[Case]:
     out = []
     # Exact data: 4 points of a plane.

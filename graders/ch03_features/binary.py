@@ -12,6 +12,7 @@ import cv2
 
 from graders.core.compare import max_abs
 from graders.core.engine import Case, Exercise, OutputError, like, register
+from graders.core.memo import cached
 from .common import common, homography_pair, nn_index_accuracy, transfer
 from ..oracles.features import cv_fast
 
@@ -141,6 +142,7 @@ ORB_HINTS = [
 ]
 
 
+@cached
 def cases_hamming(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, n, m, b in [("random 40 × 50, 32 bytes", 40, 50, 32), ("ORB-sized 500 × 400", 500, 400, 32),

@@ -10,6 +10,7 @@ import numpy as np
 
 from graders.kit import scene
 from graders.core.engine import Case, Exercise, Hint, OutputError, register
+from graders.core.memo import cached
 from .common import to_u8
 from ..oracles.features import sift_detector
 
@@ -144,6 +145,7 @@ FRONTIER_HINTS = [
 ]
 
 
+@cached
 def cases_frontier(rng: np.random.Generator) -> list[Case]:
     P1, P2 = patch_pairs(rng, 3000, TRAIN_TEXTURES)
     Q1, Q2 = patch_pairs(rng, 500, TEST_TEXTURES)

@@ -11,6 +11,7 @@ import numpy as np
 
 from graders.kit import datasets
 from graders.core.engine import Case, Exercise, Hint, OutputError, register
+from graders.core.memo import cached
 from ..oracles.features import cv_dog, cv_sift_descriptors
 from .common import (_both, _points, cv_ratio_matches, detector_pair_case, graf_half, homography_pair, mma,
                      nn_index_accuracy, swap_hint, to_u8)
@@ -179,6 +180,7 @@ def _desc_pair(width):
     return convert
 
 
+@cached
 def cases_sift(rng: np.random.Generator) -> list[Case]:
     out = []
     pairs = [(str(rng.choice(["astronaut", "coffee", "grass"])), None),

@@ -16,6 +16,7 @@ from scipy.spatial.transform import Rotation
 from graders.kit import datasets
 from graders.core.engine import Case, Exercise, OutputError, like, register
 from graders.kit.geometry import umeyama
+from graders.core.memo import cached
 
 MAX_DIFF = 0.01  # s: evo's default association window (`evo_ape ... --t_max_diff 0.01`)
 
@@ -190,6 +191,7 @@ def _metric(out, expected):
 TOL = 1e-6
 
 
+@cached
 def cases_trajectory_errors(rng: np.random.Generator):
     if datasets.available("trajectories"):
         pair = load_tum_pair()

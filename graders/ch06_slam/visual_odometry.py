@@ -23,6 +23,7 @@ from graders.oracles.flow import klt_tracks
 from graders.oracles.two_view import SOLVERS
 from graders.oracles.vo import centres, standin_vo
 from graders.kit.corridor import render_corridor
+from graders.core.memo import cached
 
 F, W, H = 500.0, 640, 480
 K = np.array([[F, 0, W / 2], [0, F, H / 2], [0, 0, 1.0]])
@@ -131,6 +132,7 @@ TOL_DRIFT = 0.3
 TOL_ATE_RENDERED = 0.06
 
 
+@cached
 def cases_vo(rng: np.random.Generator):
     seq = rendered_vo_sequence(rng)
     args = (seq["frames"], K_R.copy(), dict(SOLVERS))

@@ -15,6 +15,7 @@ from graders.core.convert import OutputError
 from graders.core.engine import Case, Exercise, Hint, register, shared_run
 
 from graders.kit.threads import torch_threads
+from graders.core.memo import cached
 
 from .nerf import to_numpy
 
@@ -163,6 +164,7 @@ def _convert(out, case):
     return arr
 
 
+@cached
 def _fit_cases(rng: np.random.Generator):
     target = target_image(rng)
     H, W = target.shape[:2]

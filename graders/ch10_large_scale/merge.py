@@ -27,6 +27,7 @@ from graders.core.engine import Case, Exercise, Hint, register, shared_run
 from graders.kit.geometry import camera_centre, project, umeyama
 from graders.oracles.bundle_adjust import scipy_bundle_adjust
 from graders.kit.scene import look_at, random_rotation
+from graders.core.memo import cached
 
 W, H, F = 640, 480, 500.0
 
@@ -198,6 +199,7 @@ def gauge_errors(cams: dict, pts: dict, truth: dict) -> tuple[float, float]:
     return float(eC), float(eX)
 
 
+@cached
 def _cases(rng: np.random.Generator):
     for key, label, kw in [("wide", "40 shared points", dict(n_shared=40)),
                            ("thin", "a thin overlap: 8 shared points", dict(n_shared=8))]:

@@ -22,6 +22,7 @@ import numpy as np
 from graders.core.convert import OutputError
 from graders.core.engine import Case, Exercise, like, register, shared_run
 from graders.kit.scene import TEXTURES, look_at, render_plane, rotation_about, texture
+from graders.core.memo import cached
 
 W, H = 160, 120                                  # rendered views: small, so SIFT costs ~25 ms an image
 RICH = ("astronaut", "brick", "camera", "chelsea", "coffee", "coins", "gravel", "immunohistochemistry",
@@ -259,6 +260,7 @@ def _place_cases(rng: np.random.Generator, n_places=10, views=4, k=5, branching=
                1e-9, "recall short", convert=_convert, call=run, key="places-recall", info=info, tags=("places",))
 
 
+@cached
 def _cases(rng: np.random.Generator):
     for i, (b, L) in enumerate([(3, 2), (2, 3)]):
         P = structured_problem(rng, branching=b, depth=L)
