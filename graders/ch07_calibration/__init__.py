@@ -22,7 +22,7 @@ from .field_debug import cv_fix_mount_shift, gt_fix_rolling_shutter, rs_project
 from .demo import distorted_grid, draw_coverage
 from .frontier import drifting_rig, gt_recalibration_trigger
 from .handeye import gt_hand_eye, hand_eye_motions
-from .stereo import (cv_stereo_calibrate, cv_stereo_extrinsics, cv_stereo_rectify, real_stereo, rectified,
+from .stereo import (cv_stereo_calibrate, cv_stereo_extrinsics, cv_stereo_rectify, fusiello_rectify, real_stereo, rectified,
                      synthetic_stereo, vertical_disparity)
 from .timesync import gt_time_offset, imu_camera_rates
 from .zhang import (cv_refine_calibration, gt_extrinsics_from_homography, gt_homography,
@@ -31,7 +31,7 @@ from .zhang import (cv_refine_calibration, gt_extrinsics_from_homography, gt_hom
 __all__ = [
     "PATTERN", "SIZE", "SQUARE", "board", "cv_board_poses", "cv_calibrate", "cv_fix_stereo_drift",
     "cv_fix_time_offset", "cv_fix_mount_shift", "gt_fix_rolling_shutter", "rs_project", "cv_refine_calibration", "cv_refine_corners", "cv_stereo_calibrate",
-    "cv_stereo_extrinsics", "cv_stereo_rectify", "debug_case", "distorted_grid", "draw_coverage", "drifting_rig",
+    "cv_stereo_extrinsics", "cv_stereo_rectify", "fusiello_rectify", "debug_case", "distorted_grid", "draw_coverage", "drifting_rig",
     "gt_extrinsics_from_homography", "gt_hand_eye", "gt_homography", "gt_intrinsics_from_homographies",
     "gt_recalibration_trigger", "gt_time_offset", "hand_eye_motions", "imu_camera_rates", "per_view_rms",
     "project_board", "real_available", "real_corners", "real_images", "real_stereo", "rectified",

@@ -1,8 +1,10 @@
 """Stereo calibration and rectification from scratch (7.9-7.10).
 
 Conventions: camera 1 -> camera 2 as X_2 = R X_1 + t; board poses X_ci = R_ci X + t_ci; rectification
-as cv2.stereoRectify (Bouguet's method) with CALIB_ZERO_DISPARITY: each camera turned by half of R
-(R1 = W R^{1/2}, R2 = W R^{-1/2}) and both by W, which sends the baseline to the x axis.
+by Bouguet's method (the one cv2.stereoRectify implements, here with CALIB_ZERO_DISPARITY's shared
+principal point): each camera turned by half of R (R1 = W R^{1/2}, R2 = W R^{-1/2}) and both by W, which
+sends the baseline to the x axis. Any rectification with the same properties is as right (e.g. Fusiello,
+Trucco & Verri's, MVA 2000).
 """
 from __future__ import annotations
 
@@ -66,8 +68,8 @@ def _rotvec(R):
 
 
 def stereo_rectify(K1, d1, K2, d2, R, t, image_size):
-    """Exercise 7.10: rectifying rotations and projections (R1, R2, P1, P2) as cv2.stereoRectify
-    (CALIB_ZERO_DISPARITY) defines them: R1 = W R^{1/2}, R2 = W R^{-1/2}, where W turns the
+    """Exercise 7.10: rectifying rotations and projections (R1, R2, P1, P2) by Bouguet's method (as
+    cv2.stereoRectify with CALIB_ZERO_DISPARITY): R1 = W R^{1/2}, R2 = W R^{-1/2}, where W turns the
     half-rotated baseline onto ±x; P1 = [f 0 cx 0; 0 f cy 0; 0 0 1 0], P2 = P1 + f T_x e1, T_x =
     (R2 t)_x. f: the smaller focal length; (cx, cy): the centre of the image (one choice of many:
     OpenCV fits them to the undistorted image).
