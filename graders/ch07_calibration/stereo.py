@@ -49,22 +49,62 @@ def cv_stereo_rectify(K1, d1, K2, d2, R, t, image_size):
     return R1, R2, P1, P2
 
 
+def _pixels_and_jacobian(X, K, d, R, t):
+    """Pixels (N, 2) of X (N, 3) through the pose (R, t) and their Jacobian (2N, 6) with respect to a left
+    perturbation (δ, ε) of the pose, R <- Exp(δ) R, t <- t + ε: cv2.projectPoints' Jacobian in the rotation
+    vector, taken at 0 on the pre-rotated points (where d Exp(δ) / dδ = [·]x exactly)."""
+    uv, J = cv2.projectPoints(np.asarray(X, float) @ np.asarray(R, float).T, np.zeros(3), np.asarray(t, float),
+                              np.asarray(K, float), np.asarray(d, float))
+    return uv.reshape(-1, 2), J[:, :6]
+
+
+def _board_pose_for_rig(X, u1, u2, K1, d1, K2, d2, R, t, Rb, tb, iters: int = 30):
+    """Board pose (Rb, tb) in camera 1 minimising both cameras' reprojection error for the rig (R, t):
+    Levenberg-Marquardt on left perturbations with analytic Jacobians (camera 2 sees (R Rb, R tb + t), so a
+    perturbation (δ, ε) of the board is (R δ, R ε) there). Returns the minimal sum of squares.
+
+    A rig within a fraction of a degree of the optimum converges from camera 1's PnP pose in 2-4 steps
+    (small residuals: Gauss-Newton is quadratic there); a hopeless one (the inverse rig, 50-100 px) crawls,
+    and `iters` stops it at an upper bound of its minimum (30 steps: within 2 % of it, measured). Stopping
+    early only ever raises the RMS, so it cannot pass a rig that the converged value would fail."""
+    M = np.zeros((6, 6))
+    M[:3, :3] = M[3:, 3:] = R
+    lam = 1e-3
+
+    def residual(Rb, tb):
+        a, Ja = _pixels_and_jacobian(X, K1, d1, Rb, tb)
+        b, Jb = _pixels_and_jacobian(X, K2, d2, R @ Rb, R @ tb + t)
+        return np.r_[(a - u1).ravel(), (b - u2).ravel()], np.r_[Ja, Jb @ M]
+
+    r, J = residual(Rb, tb)
+    cost = r @ r
+    for _ in range(iters):
+        A, g = J.T @ J, J.T @ r
+        step = -np.linalg.solve(A + lam * np.diag(np.diag(A)), g)
+        Rn, tn = cv2.Rodrigues(step[:3])[0] @ Rb, tb + step[3:]
+        rn, Jn = residual(Rn, tn)
+        change = (rn @ rn - cost) / max(cost, 1e-300)
+        if change < 0:
+            Rb, tb, r, J, cost, lam = Rn, tn, rn, Jn, rn @ rn, lam / 10
+        else:
+            lam *= 10
+        if abs(change) <= 1e-12 or lam > 1e12:   # the minimum, to round-off
+            break
+    return float(cost)
+
+
 def stereo_rms(X, uv1, uv2, K1, d1, K2, d2, R, t) -> float:
     """Both cameras' reprojection RMS after the board poses are re-fitted for the rig (R, t): each view's
-    board pose in camera 1 by least squares on both images (cv2.stereoCalibrate's cost, poses optimal)."""
-    from scipy.optimize import least_squares
-    total, n = 0.0, 0
+    board pose in camera 1 by least squares on both images (cv2.stereoCalibrate's cost, poses optimal).
+    Each view starts from camera 1's PnP pose and is refined by LM with analytic Jacobians (~10 iterations)."""
+    X, R, t = np.asarray(X, float), np.asarray(R, float), np.asarray(t, float).reshape(3)
+    args = [np.asarray(a, float) for a in (K1, d1, K2, d2)]
+    total = 0.0
     for u1, u2 in zip(uv1, uv2):
-        _, r, tb = cv2.solvePnP(np.asarray(X, float), np.asarray(u1, float), K1, d1)
-        def res(p):
-            Rb, tbb = so3_exp(p[:3]), p[3:]
-            a = boards.project_board(X, K1, d1, Rb, tbb) - u1
-            b = boards.project_board(X, K2, d2, R @ Rb, R @ tbb + t) - u2
-            return np.r_[a.ravel(), b.ravel()]
-        p = least_squares(res, np.r_[r.ravel(), tb.ravel()], method="lm", xtol=1e-14, ftol=1e-14).x
-        total += np.sum(res(p) ** 2)
-        n += 2 * len(X)
-    return float(np.sqrt(total / n))
+        _, r, tb = cv2.solvePnP(X, np.asarray(u1, float), args[0], args[1])
+        total += _board_pose_for_rig(X, np.asarray(u1, float), np.asarray(u2, float), *args, R, t,
+                                     cv2.Rodrigues(r)[0], tb.ravel())
+    return float(np.sqrt(total / (2 * len(X) * len(uv1))))
 
 
 # ----------------------------------------------------------------- data
