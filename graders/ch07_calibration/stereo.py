@@ -258,7 +258,8 @@ def held_out_pairs(rng: np.random.Generator, d: dict, n: int = 300) -> dict:
     u1 = boards.project_board(X1, d["K1"], d["d1"], np.eye(3), np.zeros(3))   # exactly X1's pixel
     u2 = boards.project_board(X1, d["K2"], d["d2"], d["R"], np.asarray(d["t"], float))
     keep = (u2 > 15).all(1) & (u2[:, 0] < w - 15) & (u2[:, 1] < h - 15)
-    return {"uv1": u1[keep], "uv2": u2[keep], "K1": d["K1"], "d1": d["d1"], "K2": d["K2"], "d2": d["d2"]}
+    return {"uv1": u1[keep], "uv2": u2[keep], "X1": X1[keep], "K1": d["K1"], "d1": d["d1"], "K2": d["K2"],
+            "d2": d["d2"]}
 
 
 def max_vertical_disparity(pairs, out) -> float:

@@ -512,26 +512,58 @@ MUTANTS += [
 from solutions.ch07_calibration import debug as ref_debug  # noqa: E402
 
 
-def stereo_fix_keeps_old_rig(case):
-    return np.asarray(case["R"], float), np.asarray(case["t"], float)
+def rectify_points_lens_ignored(case):
+    """The colleague's code as it was: K⁻¹, R_i, P_i, no undistortion."""
+    no_lens = dict(case, d1=np.zeros(5), d2=np.zeros(5))
+    return ref_debug.fix_rectify_points(no_lens)
 
 
-def stereo_fix_inverted(case):
-    R, t = ref_debug.fix_stereo_drift(case)
-    return R.T, -R.T @ t
+def rectify_points_lens_forward(case):
+    """The lens model applied to the normalised pixels (distorting them again) instead of inverted."""
+    out = []
+    for i in (1, 2):
+        K = np.asarray(case[f"K{i}"], float)
+        x = (np.asarray(case[f"uv{i}"], float) - K[:2, 2]) @ np.linalg.inv(K[:2, :2]).T
+        xd = ref_stereo._distort(x, np.asarray(case[f"d{i}"], float))
+        ray = np.c_[xd, np.ones(len(xd))] @ np.asarray(case[f"R{i}"], float).T
+        p = ray @ np.asarray(case[f"P{i}"], float)[:, :3].T
+        out.append(p[:, :2] / p[:, 2:])
+    return tuple(out)
 
 
-def time_fix_unchanged(case):
+def rectify_points_one_iteration(case):
+    """The inverse lens by a single fixed-point step: x = (x_d − tangential(x_d)) / radial(x_d)."""
+    saved = ref_debug._undistort
+    ref_debug._undistort = lambda x_d, dist, iters=1, tol=0.0: saved(x_d, dist, iters=1, tol=0.0)
+    try:
+        return ref_debug.fix_rectify_points(case)
+    finally:
+        ref_debug._undistort = saved
+
+
+def clock_unchanged(case):
     return np.asarray(case["t_cam"], float).copy()
 
 
-def time_fix_wrong_way(case):
-    return 2 * np.asarray(case["t_cam"], float) - ref_debug.fix_time_offset(case)
+def clock_constant_offset(case):
+    """7.12 on the whole log: one constant shift, right on average, wrong at both ends."""
+    return np.asarray(case["t_cam"], float) + ref_motion.time_offset(case["t_imu"], case["w_imu"], case["t_cam"],
+                                                                      case["w_cam"])
+
+
+def clock_drift_wrong_way(case):
+    """δ0 + ε s fitted, but the drift applied with its sign flipped."""
+    t = np.asarray(case["t_cam"], float)
+    fixed = ref_debug.fix_clock_drift(case)
+    skew = np.polyfit(t, fixed - t, 1)[0]
+    return fixed - 2 * skew * t
 
 
 MUTANTS += [
-    ("7.18", "old rig kept (recalibrated the intrinsics instead)", stereo_fix_keeps_old_rig, "old rig"),
-    ("7.18", "rig inverted", stereo_fix_inverted, "inverted"),
-    ("7.19", "timestamps unchanged", time_fix_unchanged, "unchanged"),
-    ("7.19", "shifted the wrong way", time_fix_wrong_way, "wrong way"),
+    ("7.18", "lens ignored (the colleague's code)", rectify_points_lens_ignored, "lens is ignored"),
+    ("7.18", "lens applied forward", rectify_points_lens_forward, "applied forward"),
+    ("7.18", "one fixed-point step", rectify_points_one_iteration, "not converged"),
+    ("7.19", "timestamps unchanged", clock_unchanged, "unchanged"),
+    ("7.19", "one constant offset (7.12 on the whole log)", clock_constant_offset, "one constant shift"),
+    ("7.19", "drift applied the wrong way", clock_drift_wrong_way, "wrong way"),
 ]
