@@ -161,6 +161,22 @@ def boards_seen_by_both(rng: np.random.Generator, K1, d1, K2, d2, R, t, n_views,
 ARGS_9 = ("X", "uv1", "uv2", "K1", "d1", "K2", "d2", "Rs1", "ts1", "Rs2", "ts2")
 
 
+_ORACLE_9: dict[bytes, tuple] = {}
+
+
+def _oracle_9(args) -> tuple:
+    """cv2.stereoCalibrate's rig and its RMS with re-fitted board poses, remembered for the last few draws (a
+    seed's cases are rebuilt for every answer graded on it; both are pure functions of the inputs)."""
+    key = b"".join(np.ascontiguousarray(a, float).tobytes() for a in args)
+    if key not in _ORACLE_9:
+        if len(_ORACLE_9) >= 16:
+            _ORACLE_9.pop(next(iter(_ORACLE_9)))
+        R_o, t_o, _ = cv_stereo_calibrate(*args)
+        _ORACLE_9[key] = (R_o, t_o, stereo_rms(*args, R_o, t_o))
+    R_o, t_o, rms = _ORACLE_9[key]
+    return R_o.copy(), t_o.copy(), rms
+
+
 def _convert_rig(out, case):
     return as_pose(out)   # (R, t): R in SO(3), t finite (3,)
 
@@ -172,8 +188,7 @@ def _extrinsics_cases(rng: np.random.Generator):
     draws.append(("synthetic", "a synthetic rig (8 views, 0.2 px)", synthetic_stereo(rng)))
     for key, label, d in draws:
         args = tuple(d[k] for k in ARGS_9)
-        R_o, t_o, _ = cv_stereo_calibrate(*args[:7])
-        rms_o = stereo_rms(*args[:7], R_o, t_o)
+        R_o, t_o, rms_o = _oracle_9(args[:7])
         run = shared_run(lambda fn, args=args: fn(*args))
         info = {"d": d, "rms_o": rms_o}
         # 0.01°: the same cost's minimum agrees with OpenCV's to ~1e-5° (measured); a single view's
