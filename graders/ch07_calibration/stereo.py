@@ -262,9 +262,22 @@ def vertical_disparity(d, out) -> float:
     return float(np.median(np.abs(y1 - y2)))
 
 
+def invertible(x: np.ndarray, dist, margin: float = 0.9) -> np.ndarray:
+    """(N,) bool: the lens is invertible, with a margin, out to each ideal normalised point x (N, 2): along the
+    ray from the centre, r R'(r) / R(r) stays within ±margin (R: the radial factor). At −1 the distorted
+    radius r R(r) folds back (a strong barrel lens does so inside the corners of the image), and no method
+    can tell which of two ideal points a pixel there came from; within ±margin the fixed point
+    x <- (x_d − tangential(x)) / R(x) contracts by that factor per step."""
+    k1, k2, _, _, k3 = np.asarray(dist, float)
+    r2 = np.sum(np.asarray(x, float) ** 2, axis=1)[:, None] * np.linspace(0.0, 1.0, 33) ** 2
+    radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    return (np.abs(2 * r2 * (k1 + 2 * k2 * r2 + 3 * k3 * r2 * r2)) < margin * radial).all(axis=1)
+
+
 def held_out_pairs(rng: np.random.Generator, d: dict, n: int = 300) -> dict:
     """Exact (noise-free) correspondences the rectification never saw: pixels of camera 1 drawn over the image,
-    depths 0.4-5 m, seen through the rig (R, t) by camera 2; only those inside both images are kept."""
+    depths 0.4-5 m, seen through the rig (R, t) by camera 2; kept if inside both images and where both lenses
+    are invertible (`invertible`)."""
     w, h = boards.SIZE
     u1 = np.c_[rng.uniform(15, w - 15, n), rng.uniform(15, h - 15, n)]
     x1 = cv2.undistortPoints(u1.reshape(-1, 1, 2), d["K1"], d["d1"], None, None, None,
@@ -272,7 +285,9 @@ def held_out_pairs(rng: np.random.Generator, d: dict, n: int = 300) -> dict:
     X1 = np.c_[x1, np.ones(n)] * rng.uniform(0.4, 5.0, (n, 1))
     u1 = boards.project_board(X1, d["K1"], d["d1"], np.eye(3), np.zeros(3))   # exactly X1's pixel
     u2 = boards.project_board(X1, d["K2"], d["d2"], d["R"], np.asarray(d["t"], float))
-    keep = (u2 > 15).all(1) & (u2[:, 0] < w - 15) & (u2[:, 1] < h - 15)
+    X2 = X1 @ np.asarray(d["R"], float).T + np.asarray(d["t"], float)
+    keep = ((u2 > 15).all(1) & (u2[:, 0] < w - 15) & (u2[:, 1] < h - 15) & invertible(X1[:, :2] / X1[:, 2:], d["d1"])
+            & invertible(X2[:, :2] / X2[:, 2:], d["d2"]))
     return {"uv1": u1[keep], "uv2": u2[keep], "X1": X1[keep], "K1": d["K1"], "d1": d["d1"], "K2": d["K2"],
             "d2": d["d2"]}
 

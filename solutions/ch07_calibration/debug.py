@@ -7,7 +7,7 @@ from .motion import time_offset
 from .stereo import _pixels
 
 
-def _undistort(x_d: np.ndarray, dist, iters: int = 100, tol: float = 1e-12) -> np.ndarray:
+def _undistort(x_d: np.ndarray, dist, iters: int = 1000, tol: float = 1e-12) -> np.ndarray:
     """Ideal normalised coordinates (N, 2) whose Brown-Conrady distortion is x_d (N, 2): the fixed point of
     x = (x_d − tangential(x)) / radial(x), started at x_d, iterated until the step is below tol."""
     k1, k2, p1, p2, k3 = np.asarray(dist, float)
