@@ -45,18 +45,26 @@ def gt_time_offset(t_imu, w_imu, t_cam, w_cam, max_offset: float = 0.1) -> float
     gyro interpolated at t_cam + δ) after a 1 ms scan of ±max_offset."""
     n_imu, n_cam = np.linalg.norm(w_imu, axis=1), np.linalg.norm(w_cam, axis=1)
     keep = (t_cam - max_offset > t_imu[0]) & (t_cam + max_offset < t_imu[-1])
-    def cost(d):
-        return float(np.mean((np.interp(t_cam[keep] + d, t_imu, n_imu) - n_cam[keep]) ** 2))
+    tc, nc = t_cam[keep], n_cam[keep]
+
+    def cost(d):                                  # d: (L,) offsets -> (L,) mean squared differences
+        d = np.atleast_1d(d)
+        return np.mean((np.interp(tc + d[:, None], t_imu, n_imu) - nc) ** 2, axis=1)
     grid = np.arange(-max_offset, max_offset + 1e-9, 1e-3)
-    d0 = grid[np.argmin([cost(d) for d in grid])]
+    d0 = grid[np.argmin(cost(grid))]
     lo, hi = d0 - 1e-3, d0 + 1e-3
     g = (np.sqrt(5) - 1) / 2
-    for _ in range(40):
-        a, b = hi - g * (hi - lo), lo + g * (hi - lo)
-        if cost(a) < cost(b):
-            hi = b
+    a, b = hi - g * (hi - lo), lo + g * (hi - lo)
+    fa, fb = cost(a)[0], cost(b)[0]
+    for _ in range(40):                           # golden section: one new evaluation per step
+        if fa < fb:
+            hi, b, fb = b, a, fa
+            a = hi - g * (hi - lo)
+            fa = cost(a)[0]
         else:
-            lo = a
+            lo, a, fa = a, b, fb
+            b = lo + g * (hi - lo)
+            fb = cost(b)[0]
     return 0.5 * (lo + hi)
 
 
