@@ -230,8 +230,8 @@ register(Exercise(
 # ----------------------------------------------------------------- 7.10 stereo_rectify
 #
 # A rectification is judged by what it must do, not by agreement with one method's R1 (Bouguet's, in
-# cv2.stereoRectify; Fusiello, Trucco & Verri's, MVA 2000, turns camera 1 less and camera 2 more, 0.2-1.3°
-# from OpenCV's R1 on the synthetic rigs, and is just as valid): (1) corresponding points land on the same
+# cv2.stereoRectify; Fusiello, Trucco & Verri's, MVA 2000, turns camera 1 less and camera 2 more, 0.01-1.3°
+# from OpenCV's R1 on the real and synthetic rigs, and is just as valid): (1) corresponding points land on the same
 # row, (2) both new cameras share one K' and the baseline lies along x, (3) no needless distortion: each
 # camera is turned no further than some valid rectification turns it, the image stays upright, and the
 # new focal length keeps about the original sampling.
