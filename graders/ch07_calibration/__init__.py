@@ -17,21 +17,21 @@ from . import handeye, questions, stereo, timesync, zhang  # noqa: F401 (registe
 from .boards import (PATTERN, SIZE, SQUARE, board, cv_board_poses, cv_calibrate, per_view_rms, project_board,
                      real_available, real_corners, real_images, reprojection_rms, synthetic_rig)
 from .corners import cv_refine_corners
-from .debug import cv_fix_stereo_drift, cv_fix_time_offset, debug_case
+from .debug import cv_fix_rectified_edges, debug_case, gt_fix_clock_drift
 from .field_debug import cv_fix_mount_shift, gt_fix_rolling_shutter, rs_project
 from .demo import distorted_grid, draw_coverage
 from .frontier import drifting_rig, gt_recalibration_trigger
 from .handeye import gt_hand_eye, hand_eye_motions
-from .stereo import (cv_stereo_calibrate, cv_stereo_extrinsics, cv_stereo_rectify, real_stereo, rectified,
+from .stereo import (cv_stereo_calibrate, cv_stereo_extrinsics, cv_stereo_rectify, fusiello_rectify, real_stereo, rectified,
                      synthetic_stereo, vertical_disparity)
 from .timesync import gt_time_offset, imu_camera_rates
 from .zhang import (cv_refine_calibration, gt_extrinsics_from_homography, gt_homography,
                     gt_intrinsics_from_homographies)
 
 __all__ = [
-    "PATTERN", "SIZE", "SQUARE", "board", "cv_board_poses", "cv_calibrate", "cv_fix_stereo_drift",
-    "cv_fix_time_offset", "cv_fix_mount_shift", "gt_fix_rolling_shutter", "rs_project", "cv_refine_calibration", "cv_refine_corners", "cv_stereo_calibrate",
-    "cv_stereo_extrinsics", "cv_stereo_rectify", "debug_case", "distorted_grid", "draw_coverage", "drifting_rig",
+    "PATTERN", "SIZE", "SQUARE", "board", "cv_board_poses", "cv_calibrate", "cv_fix_rectified_edges",
+    "gt_fix_clock_drift", "cv_fix_mount_shift", "gt_fix_rolling_shutter", "rs_project", "cv_refine_calibration", "cv_refine_corners", "cv_stereo_calibrate",
+    "cv_stereo_extrinsics", "cv_stereo_rectify", "fusiello_rectify", "debug_case", "distorted_grid", "draw_coverage", "drifting_rig",
     "gt_extrinsics_from_homography", "gt_hand_eye", "gt_homography", "gt_intrinsics_from_homographies",
     "gt_recalibration_trigger", "gt_time_offset", "hand_eye_motions", "imu_camera_rates", "per_view_rms",
     "project_board", "real_available", "real_corners", "real_images", "real_stereo", "rectified",

@@ -1,71 +1,135 @@
-"""7.18-7.19 — DEBUG: repair a drifted stereo rig and a camera whose clock lags the IMU (7.21-7.22, the field
-cases, live in `field_debug`; `debug_case` serves all four).
+"""7.18-7.19 — DEBUG: rows that line up at the centre of a rectified pair but not at its edges, and a camera
+whose clock runs at the wrong rate (7.21-7.22, the field cases, live in `field_debug`; `debug_case` serves all
+four). Neither repeats a CODE exercise: 7.18 inverts the lens model (the chapter otherwise only applies it),
+7.19 estimates a time offset that changes along the log (7.12's is constant).
 
-Each generator returns (the case shown to the learner, the hidden truth); a fix is judged by what it
-produces on data it never saw: 7.18 by the vertical disparity of held-out board views rectified with
-the returned rig, 7.19 by the shift the returned timestamps apply against the true offset.
+Each generator returns (the case shown to the learner, the hidden truth). 7.18 is judged against the exact
+rectified pixels of the case's correspondences (projected from their 3D points, not recovered from the
+pixels); 7.19 by the corrected timestamps against the true clock mapping, beyond the stand-in's own error.
 """
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from graders.core.convert import OutputError
 from graders.core.engine import Exercise, Hint, debug_cases, debug_practice, register
-from graders.kit.geometry import so3_exp
 
 from . import boards
-from .stereo import _convert_rig, boards_seen_by_both, cv_stereo_calibrate, cv_stereo_rectify, synthetic_stereo, vertical_disparity
-from .timesync import gt_time_offset, imu_camera_rates
 from .field_debug import debug_mount_shift, debug_rolling_shutter  # 7.21-7.22 (registered there)
+from .stereo import fusiello_rectify, held_out_pairs, synthetic_stereo
+from .timesync import gt_time_offset, imu_camera_rates
+
+CONVERGED = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 1000, 1e-14)   # contraction <= 0.9: ~300 steps
 
 
-def debug_stereo_drift(rng: np.random.Generator) -> tuple[dict, dict]:
-    """7.18 — stereo stopped matching after a knock: camera 2 turned by 0.3-1° about a random axis; the
-    intrinsics are still right. The case: the old (drifted) rig and 6 fresh board views of both cameras."""
-    d = synthetic_stereo(rng, n_views=6)
-    w = rng.normal(size=3)
-    knock = so3_exp(w / np.linalg.norm(w) * np.radians(rng.uniform(0.3, 1.0)))
-    # Truth after the knock: camera 2 turned about its own centre (R <- knock R, t <- knock t).
-    R_new, t_new = knock @ d["R"], knock @ d["t"]
-    X = d["X"]
-    cam2 = lambda Rb, tb: boards.project_board(X, d["K2"], d["d2"], R_new @ Rb, R_new @ tb + t_new)
-    fresh = dict(d)
-    fresh["uv2"] = np.array([cam2(Rb, tb) for Rb, tb in zip(*d["poses_true"])]) + rng.normal(0, 0.2, d["uv2"].shape)
-    # Held-out boards seen by the knocked rig: never shown to the learner.
-    held_poses = boards_seen_by_both(rng, d["K1"], d["d1"], d["K2"], d["d2"], R_new, t_new, 4, X)
-    held_uv1 = np.array([boards.project_board(X, d["K1"], d["d1"], Rb, tb) for Rb, tb in held_poses])
-    held_uv2 = np.array([cam2(Rb, tb) for Rb, tb in held_poses])
-    case = {k: fresh[k] for k in ("X", "uv1", "uv2", "K1", "d1", "K2", "d2")}
-    case.update(R=d["R"], t=d["t"])
-    held_out = {"uv1": held_uv1 + rng.normal(0, 0.2, held_uv1.shape),
-                "uv2": held_uv2 + rng.normal(0, 0.2, held_uv2.shape),
-                "K1": d["K1"], "d1": d["d1"], "K2": d["K2"], "d2": d["d2"]}
-    truth = {"R": R_new, "t": t_new, "held": held_out,
-             "vd_truth": vertical_disparity(held_out, cv_stereo_rectify(d["K1"], d["d1"], d["K2"], d["d2"], R_new,
-                                                                        t_new, boards.SIZE))}
+# ----------------------------------------------------------------- 7.18 rectified rows fail at the edges
+
+def _project(P, X):
+    x = X @ P[:, :3].T + P[:, 3]
+    return x[:, :2] / x[:, 2:]
+
+
+def debug_rectified_edges(rng: np.random.Generator) -> tuple[dict, dict]:
+    """7.18 — a colleague's point rectification (K⁻¹, then R_i, then P_i) leaves rows aligned to a fraction of a
+    pixel at the image centre and several pixels off towards the corners: it never undoes the lens. The case: a
+    synthetic rig's K, dist, a valid rectification (R1, R2, P1, P2) and up to 300 raw correspondences uv1, uv2, all where
+    both lenses are invertible (stereo.invertible: beyond a strong lens's fold no pixel has a unique ideal point)."""
+    d = synthetic_stereo(rng, n_views=1, noise=0.0)
+    R1, R2, P1, P2 = fusiello_rectify(d["K1"], d["d1"], d["K2"], d["d2"], d["R"], d["t"], boards.SIZE)
+    pairs = held_out_pairs(rng, d, n=300)
+    X_rect = pairs["X1"] @ R1.T                      # the points in the rectified frame of camera 1
+    case = {"K1": d["K1"], "d1": d["d1"], "K2": d["K2"], "d2": d["d2"], "R1": R1, "R2": R2, "P1": P1, "P2": P2,
+            "uv1": pairs["uv1"], "uv2": pairs["uv2"]}
+    return case, {"rect1": _project(P1, X_rect), "rect2": _project(P2, X_rect)}
+
+
+def _convert_rect_points(out, case):
+    n = len(case.args[0]["uv1"])
+    try:
+        a, b = (np.asarray(o, float).reshape(n, 2) for o in out)
+    except Exception:
+        raise OutputError(f"expected (rect1, rect2): two ({n}, 2) arrays of rectified pixels") from None
+    if not (np.isfinite(a).all() and np.isfinite(b).all()):
+        raise OutputError("rectified pixels must be finite")
+    return a, b
+
+
+def _metric_rect_points(out, truth):
+    """Largest distance (px) of a returned rectified pixel from the exact one."""
+    return float(max(np.linalg.norm(out[0] - truth["rect1"], axis=1).max(),
+                     np.linalg.norm(out[1] - truth["rect2"], axis=1).max()))
+
+
+def cv_fix_rectified_edges(case: dict):
+    """Stand-in: cv2.undistortPoints with R_i, P_i, iterated to convergence."""
+    return tuple(cv2.undistortPoints(np.asarray(case[f"uv{i}"], float).reshape(-1, 1, 2), case[f"K{i}"],
+                                     case[f"d{i}"], None, case[f"R{i}"], case[f"P{i}"], CONVERGED).reshape(-1, 2)
+                 for i in (1, 2))
+
+
+def _like(c, out, dist_scale: float) -> bool:
+    """The output is what K⁻¹ → R_i → P_i gives with the lens scaled by dist_scale (0: ignored)."""
+    k = c.args[0]
+    want = [cv2.undistortPoints(np.asarray(k[f"uv{i}"], float).reshape(-1, 1, 2), k[f"K{i}"],
+                                dist_scale * np.asarray(k[f"d{i}"], float), None, k[f"R{i}"], k[f"P{i}"],
+                                CONVERGED).reshape(-1, 2) for i in (1, 2)]
+    return bool(max(np.abs(o - w).max() for o, w in zip(out, want)) < 1e-6)
+
+
+def _forward_lens(c, out) -> bool:
+    """The output is the lens applied to the pixels (distorting them again) before R_i and P_i."""
+    k = c.args[0]
+    for i, o in zip((1, 2), out):
+        K, d = np.asarray(k[f"K{i}"], float), np.asarray(k[f"d{i}"], float)
+        x = cv2.undistortPoints(np.asarray(k[f"uv{i}"], float).reshape(-1, 1, 2), K, None).reshape(-1, 2)
+        xd = cv2.projectPoints(np.c_[x, np.ones(len(x))], np.zeros(3), np.zeros(3), np.eye(3), d)[0].reshape(-1, 2)
+        want = cv2.undistortPoints(xd.reshape(-1, 1, 2), np.eye(3), None, None, k[f"R{i}"], k[f"P{i}"]).reshape(-1, 2)
+        if np.abs(o - want).max() > 1e-6:
+            return False
+    return True
+
+
+def _right_at_centre_only(c, out) -> bool:
+    """Within 0.05 px on the fifth of camera 1's points nearest its principal point, wrong (< 10 px) further out:
+    an inverse lens that stopped early (the error grows with the radius)."""
+    k = c.args[0]
+    r = np.linalg.norm(np.asarray(k["uv1"], float) - np.asarray(k["K1"], float)[:2, 2], axis=1)
+    err = np.linalg.norm(out[0] - c.expected["rect1"], axis=1)
+    return bool(err[r <= np.quantile(r, 0.2)].max() < 0.05 and _metric_rect_points(out, c.expected) < 10.0)
+
+
+EDGE_HINTS = [
+    Hint("the lens is ignored: the pixels are distorted, so undo the distortion (invert the Brown-Conrady model on "
+         "normalised coordinates) before turning by R_i and projecting with P_i.", lambda c, out: _like(c, out, 0.0)),
+    Hint("the lens model is applied forward, distorting the pixels a second time: it maps ideal to distorted "
+         "coordinates, so invert it (iterate x = (x_d − tangential(x)) / radial(x)).", _forward_lens),
+    Hint(lambda c, out: f"the inverse is not converged ({_metric_rect_points(out, c.expected):.3f} px off at the image "
+         "edges, right near the centre): iterate until the step is below 1e-9 (cv2.undistortPoints: pass criteria; "
+         "its default termination stops early on strong lenses).", lambda c, out: _right_at_centre_only(c, out)),
+]
+
+
+# ----------------------------------------------------------------- 7.19 a clock that runs at the wrong rate
+
+DRIFT_SECONDS = 120.0
+
+
+def debug_clock_drift(rng: np.random.Generator) -> tuple[dict, dict]:
+    """7.19 — IMU and camera agree at the start of a 2-minute log and drift apart: the camera's clock runs at a
+    rate off by 50-300 ppm (6-36 ms over the log) on top of a 3-30 ms offset: the sample stamped s was taken at
+    s + δ0 + ε s."""
+    delta0 = rng.choice([-1, 1]) * rng.uniform(0.003, 0.030)
+    skew = rng.choice([-1, 1]) * rng.uniform(50e-6, 300e-6)
+    d = imu_camera_rates(rng, delta0, skew=skew, duration=DRIFT_SECONDS)
+    case = {k: d[k] for k in ("t_imu", "w_imu", "t_cam", "w_cam")}
+    truth = {"delta0": delta0, "skew": skew, "t_cam": d["t_cam"]}
+    truth["slack_ms"] = _clock_error_ms(gt_fix_clock_drift(case), truth)
     return case, truth
 
 
-def _metric_stereo(out, truth):
-    """Median vertical disparity (px) of the held-out views rectified with the returned rig, beyond what
-    the true rig leaves (noise only)."""
-    h = truth["held"]
-    rect = cv_stereo_rectify(h["K1"], h["d1"], h["K2"], h["d2"], out[0], out[1], boards.SIZE)
-    return max(0.0, vertical_disparity(h, rect) - truth["vd_truth"])
-
-
-def cv_fix_stereo_drift(case: dict):
-    """Stand-in: cv2.stereoCalibrate (intrinsics fixed) on the fresh views."""
-    R, t, _ = cv_stereo_calibrate(case["X"], case["uv1"], case["uv2"], case["K1"], case["d1"], case["K2"], case["d2"])
-    return R, t
-
-
-def debug_time_offset(rng: np.random.Generator) -> tuple[dict, dict]:
-    """7.19 — the IMU and the camera disagree while turning: the camera's clock lags by 3-40 ms."""
-    d = imu_camera_rates(rng)
-    case = {k: d[k] for k in ("t_imu", "w_imu", "t_cam", "w_cam")}
-    slack = 1e3 * abs(gt_time_offset(*case.values()) - d["delta"])
-    return case, {"delta": d["delta"], "slack_ms": slack, "t_cam": d["t_cam"]}
+def _clock_error_ms(t_fixed, truth) -> float:
+    return 1e3 * float(np.abs(t_fixed - truth["t_cam"] * (1 + truth["skew"]) - truth["delta0"]).max())
 
 
 def _convert_times(out, case):
@@ -76,45 +140,51 @@ def _convert_times(out, case):
     return t
 
 
-def _metric_times(out, truth):
-    """ms between the shift the learner applied (median of t_fixed − t_cam) and the true offset, beyond the
-    stand-in's own error on this draw; a shift that is not constant counts its spread too."""
-    shift = out - truth["t_cam"]
-    return max(0.0, 1e3 * (abs(float(np.median(shift)) - truth["delta"]) + float(np.ptp(shift))) - truth["slack_ms"])
+def _metric_clock(out, truth):
+    """Largest error (ms) of the corrected stamps against the true times, beyond the stand-in's own on this draw."""
+    return max(0.0, _clock_error_ms(out, truth) - truth["slack_ms"])
 
 
-def cv_fix_time_offset(case: dict) -> np.ndarray:
-    return np.asarray(case["t_cam"], float) + gt_time_offset(*(case[k] for k in ("t_imu", "w_imu", "t_cam", "w_cam")))
+def gt_fix_clock_drift(case: dict, window: float = 20.0) -> np.ndarray:
+    """Stand-in: the offset of each 20 s window (7.12's stand-in on that window's frames), a straight line
+    δ(s) = δ0 + ε s fitted through them, and every stamp moved by it."""
+    t_cam = np.asarray(case["t_cam"], float)
+    centres, deltas = [], []
+    for start in np.arange(t_cam[0], t_cam[-1] - window / 2, window):
+        sel = (t_cam >= start) & (t_cam < start + window)
+        deltas.append(gt_time_offset(case["t_imu"], case["w_imu"], t_cam[sel], case["w_cam"][sel]))
+        centres.append(t_cam[sel].mean())
+    skew, delta0 = np.polyfit(centres, deltas, 1)
+    return t_cam + delta0 + skew * t_cam
 
 
-def _rig_unchanged(c, out):
-    return bool(np.allclose(out[0], c.args[0]["R"]) and np.allclose(out[1], c.args[0]["t"]))
+def _shift(c, out):
+    return out - c.args[0]["t_cam"]
 
 
-STEREO_FIX_HINTS = [
-    Hint("that is the old rig: the intrinsics are fine (each camera still fits its board at ~0.2 px), the rig "
-         "between them moved. Re-estimate (R, t) from the fresh views (7.9).", _rig_unchanged),
-    Hint("the rig is inverted (camera 2 -> camera 1): X_2 = R X_1 + t.",
-         lambda c, out: np.allclose(out[0], c.expected["R"].T, atol=0.02)),
-]
-TIME_FIX_HINTS = [
-    Hint("the timestamps are unchanged: shift them by the offset the rates reveal (7.12).",
+DRIFT_HINTS = [
+    Hint("the timestamps are unchanged: the camera's stamps are late by an amount that grows along the log.",
          lambda c, out: bool(np.allclose(out, c.args[0]["t_cam"]))),
-    Hint("shifted the wrong way: the camera sample stamped s was taken at s + δ, so t_fixed = t_cam + δ.",
-         lambda c, out: abs(float(np.median(out - c.args[0]["t_cam"])) + c.expected["delta"]) < 1e-3),
+    Hint("one constant shift: right on average, but the offset grows along the log (the camera clock's rate is off "
+         "by ε): estimate δ on windows and fit δ(s) = δ0 + ε s.", lambda c, out: float(np.ptp(_shift(c, out))) < 1e-4),
+    Hint("the drift runs the wrong way: with δ(s) = δ0 + ε s, the stamp s becomes s + δ0 + ε s.",
+         lambda c, out: abs(float(np.polyfit(c.args[0]["t_cam"], _shift(c, out), 1)[0]) + c.expected["skew"])
+         < 0.2 * abs(c.expected["skew"])),
 ]
 
 register(
-    # 0.05 px of median vertical disparity beyond the true rig's (0.1-0.2 px of noise): stereoCalibrate on
-    # the 6 fresh views lands within 0.01 px of it; the old rig leaves 1.5-10 px.
-    Exercise(id="7.18", title="Stereo stopped matching after a knock", name="fix_stereo_drift", kind="debug",
-             points=2, cases=debug_cases(debug_stereo_drift, _metric_stereo, 0.05, unit="px", convert=_convert_rig,
-                                         n=2), hints=STEREO_FIX_HINTS, fallback=cv_fix_stereo_drift, timeout=60.0),
-    # 0.5 ms beyond the stand-in's own error: as 7.12.
-    Exercise(id="7.19", title="IMU and camera disagree", name="fix_time_offset", kind="debug", points=2,
-             cases=debug_cases(debug_time_offset, _metric_times, 0.5, unit="ms", convert=_convert_times, n=2),
-             hints=TIME_FIX_HINTS, fallback=cv_fix_time_offset, timeout=30.0),
+    # 0.01 px: a converged inverse lands within 1e-9 px of the exact rectified pixel; the lens ignored is 8-60 px
+    # off at the corners, cv2.undistortPoints' default termination 1e-6-0.8 px (measured on 10 synthetic rigs).
+    Exercise(id="7.18", title="Rows line up at the centre, not at the edges", name="fix_rectify_points",
+             kind="debug", points=2, cases=debug_cases(debug_rectified_edges, _metric_rect_points, 0.01, unit="px",
+                                                      convert=_convert_rect_points, n=2),
+             hints=EDGE_HINTS, fallback=cv_fix_rectified_edges, timeout=30.0),
+    # 0.5 ms beyond the stand-in's own largest error (a tenth of a gyro period, as 7.12): one constant shift
+    # leaves about half the drift, 3-18 ms, at the ends of the log.
+    Exercise(id="7.19", title="IMU and camera drift apart", name="fix_clock_drift", kind="debug", points=2,
+             cases=debug_cases(debug_clock_drift, _metric_clock, 0.5, unit="ms", convert=_convert_times, n=2),
+             hints=DRIFT_HINTS, fallback=gt_fix_clock_drift, timeout=60.0),
 )
 
-debug_case = debug_practice({"7.18": debug_stereo_drift, "7.19": debug_time_offset,
+debug_case = debug_practice({"7.18": debug_rectified_edges, "7.19": debug_clock_drift,
                              "7.21": debug_mount_shift, "7.22": debug_rolling_shutter})

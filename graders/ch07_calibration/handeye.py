@@ -8,6 +8,7 @@ own error on the same noisy motions.
 """
 from __future__ import annotations
 
+import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -71,11 +72,25 @@ def gt_hand_eye(A: np.ndarray, B: np.ndarray) -> np.ndarray:
 
     def res(p):
         R, t = so3_exp(p[:3]) @ Rx, p[3:]
-        r = [np.r_[so3_log(a[:3, :3] @ R @ (R @ b[:3, :3]).T),
+        r = [np.r_[cv2.Rodrigues(a[:3, :3] @ R @ (R @ b[:3, :3]).T)[0].ravel(),   # log: C, 10x scipy's
                    100.0 * (a[:3, :3] @ t + a[:3, 3] - R @ b[:3, 3] - t)] for a, b in zip(A, B)]
         return np.concatenate(r)
     p = least_squares(res, np.r_[np.zeros(3), tx], method="lm").x
     return _T(so3_exp(p[:3]) @ Rx, p[3:])
+
+
+_STAND_IN: dict[bytes, np.ndarray] = {}
+
+
+def _stand_in(A, B) -> np.ndarray:
+    """gt_hand_eye, remembered for the last few draws: a seed's cases are rebuilt for every answer graded on it
+    (the test suite grades a dozen), and the stand-in is a pure function of (A, B)."""
+    key = np.ascontiguousarray(A).tobytes() + np.ascontiguousarray(B).tobytes()
+    if key not in _STAND_IN:
+        if len(_STAND_IN) >= 32:
+            _STAND_IN.pop(next(iter(_STAND_IN)))
+        _STAND_IN[key] = gt_hand_eye(A, B)
+    return _STAND_IN[key].copy()
 
 
 def _angle_deg(R1, R2) -> float:
@@ -109,7 +124,7 @@ def _cases(rng: np.random.Generator):
                           convert=_convert_X, key=f"exact-{i + 1}-t", info=d, tags=("exact",)))
     for i in range(2):
         d = hand_eye_motions(rng, n=12)
-        Xo = gt_hand_eye(d["A"], d["B"])
+        Xo = _stand_in(d["A"], d["B"])
         eR, et = rotation_angle_deg(Xo[:3, :3], d["X"][:3, :3]), 1e3 * float(np.linalg.norm(Xo[:3, 3] - d["X"][:3, 3]))
         # Noisy (0.1°, 0.5 mm per motion, 12 motions): within 2x the stand-in's error on the same draw
         # + 0.05° / + 1 mm (a rotation-first method without refinement, or another weighting of the

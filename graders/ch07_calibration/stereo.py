@@ -1,9 +1,10 @@
 """7.9-7.10 — stereo calibration (the rig's relative pose through a shared board) and rectification.
 
-Oracles: cv2.stereoCalibrate (CALIB_FIX_INTRINSIC) from the same corners and intrinsics, and
-cv2.stereoRectify (CALIB_ZERO_DISPARITY), on the 13 real left/right pairs and on synthetic rigs
-with known truth. Rectification is judged the way it is used: corresponding corners, rectified
-through (R_i, P_i), must lie on the same image row.
+Oracles: cv2.stereoCalibrate (CALIB_FIX_INTRINSIC) from the same corners and intrinsics, on the 13 real
+left/right pairs and on synthetic rigs with known truth. Rectification is judged by what it must do, with
+no method's R1 as the answer: exact held-out correspondences, rectified through (R_i, P_i) by
+cv2.undistortPoints, on the same row; one K' and the baseline along x; no needless turn or scaling.
+cv2.stereoRectify (Bouguet's method) and Fusiello et al.'s (`fusiello_rectify`) both pass.
 """
 from __future__ import annotations
 
@@ -48,22 +49,62 @@ def cv_stereo_rectify(K1, d1, K2, d2, R, t, image_size):
     return R1, R2, P1, P2
 
 
+def _pixels_and_jacobian(X, K, d, R, t):
+    """Pixels (N, 2) of X (N, 3) through the pose (R, t) and their Jacobian (2N, 6) with respect to a left
+    perturbation (δ, ε) of the pose, R <- Exp(δ) R, t <- t + ε: cv2.projectPoints' Jacobian in the rotation
+    vector, taken at 0 on the pre-rotated points (where d Exp(δ) / dδ = [·]x exactly)."""
+    uv, J = cv2.projectPoints(np.asarray(X, float) @ np.asarray(R, float).T, np.zeros(3), np.asarray(t, float),
+                              np.asarray(K, float), np.asarray(d, float))
+    return uv.reshape(-1, 2), J[:, :6]
+
+
+def _board_pose_for_rig(X, u1, u2, K1, d1, K2, d2, R, t, Rb, tb, iters: int = 30):
+    """Board pose (Rb, tb) in camera 1 minimising both cameras' reprojection error for the rig (R, t):
+    Levenberg-Marquardt on left perturbations with analytic Jacobians (camera 2 sees (R Rb, R tb + t), so a
+    perturbation (δ, ε) of the board is (R δ, R ε) there). Returns the minimal sum of squares.
+
+    A rig within a fraction of a degree of the optimum converges from camera 1's PnP pose in 2-4 steps
+    (small residuals: Gauss-Newton is quadratic there); a hopeless one (the inverse rig, 50-100 px) crawls,
+    and `iters` stops it at an upper bound of its minimum (30 steps: within 2 % of it, measured). Stopping
+    early only ever raises the RMS, so it cannot pass a rig that the converged value would fail."""
+    M = np.zeros((6, 6))
+    M[:3, :3] = M[3:, 3:] = R
+    lam = 1e-3
+
+    def residual(Rb, tb):
+        a, Ja = _pixels_and_jacobian(X, K1, d1, Rb, tb)
+        b, Jb = _pixels_and_jacobian(X, K2, d2, R @ Rb, R @ tb + t)
+        return np.r_[(a - u1).ravel(), (b - u2).ravel()], np.r_[Ja, Jb @ M]
+
+    r, J = residual(Rb, tb)
+    cost = r @ r
+    for _ in range(iters):
+        A, g = J.T @ J, J.T @ r
+        step = -np.linalg.solve(A + lam * np.diag(np.diag(A)), g)
+        Rn, tn = cv2.Rodrigues(step[:3])[0] @ Rb, tb + step[3:]
+        rn, Jn = residual(Rn, tn)
+        change = (rn @ rn - cost) / max(cost, 1e-300)
+        if change < 0:
+            Rb, tb, r, J, cost, lam = Rn, tn, rn, Jn, rn @ rn, lam / 10
+        else:
+            lam *= 10
+        if abs(change) <= 1e-12 or lam > 1e12:   # the minimum, to round-off
+            break
+    return float(cost)
+
+
 def stereo_rms(X, uv1, uv2, K1, d1, K2, d2, R, t) -> float:
     """Both cameras' reprojection RMS after the board poses are re-fitted for the rig (R, t): each view's
-    board pose in camera 1 by least squares on both images (cv2.stereoCalibrate's cost, poses optimal)."""
-    from scipy.optimize import least_squares
-    total, n = 0.0, 0
+    board pose in camera 1 by least squares on both images (cv2.stereoCalibrate's cost, poses optimal).
+    Each view starts from camera 1's PnP pose and is refined by LM with analytic Jacobians (~10 iterations)."""
+    X, R, t = np.asarray(X, float), np.asarray(R, float), np.asarray(t, float).reshape(3)
+    args = [np.asarray(a, float) for a in (K1, d1, K2, d2)]
+    total = 0.0
     for u1, u2 in zip(uv1, uv2):
-        _, r, tb = cv2.solvePnP(np.asarray(X, float), np.asarray(u1, float), K1, d1)
-        def res(p):
-            Rb, tbb = so3_exp(p[:3]), p[3:]
-            a = boards.project_board(X, K1, d1, Rb, tbb) - u1
-            b = boards.project_board(X, K2, d2, R @ Rb, R @ tbb + t) - u2
-            return np.r_[a.ravel(), b.ravel()]
-        p = least_squares(res, np.r_[r.ravel(), tb.ravel()], method="lm", xtol=1e-14, ftol=1e-14).x
-        total += np.sum(res(p) ** 2)
-        n += 2 * len(X)
-    return float(np.sqrt(total / n))
+        _, r, tb = cv2.solvePnP(X, np.asarray(u1, float), args[0], args[1])
+        total += _board_pose_for_rig(X, np.asarray(u1, float), np.asarray(u2, float), *args, R, t,
+                                     cv2.Rodrigues(r)[0], tb.ravel())
+    return float(np.sqrt(total / (2 * len(X) * len(uv1))))
 
 
 # ----------------------------------------------------------------- data
@@ -120,6 +161,22 @@ def boards_seen_by_both(rng: np.random.Generator, K1, d1, K2, d2, R, t, n_views,
 ARGS_9 = ("X", "uv1", "uv2", "K1", "d1", "K2", "d2", "Rs1", "ts1", "Rs2", "ts2")
 
 
+_ORACLE_9: dict[bytes, tuple] = {}
+
+
+def _oracle_9(args) -> tuple:
+    """cv2.stereoCalibrate's rig and its RMS with re-fitted board poses, remembered for the last few draws (a
+    seed's cases are rebuilt for every answer graded on it; both are pure functions of the inputs)."""
+    key = b"".join(np.ascontiguousarray(a, float).tobytes() for a in args)
+    if key not in _ORACLE_9:
+        if len(_ORACLE_9) >= 16:
+            _ORACLE_9.pop(next(iter(_ORACLE_9)))
+        R_o, t_o, _ = cv_stereo_calibrate(*args)
+        _ORACLE_9[key] = (R_o, t_o, stereo_rms(*args, R_o, t_o))
+    R_o, t_o, rms = _ORACLE_9[key]
+    return R_o.copy(), t_o.copy(), rms
+
+
 def _convert_rig(out, case):
     return as_pose(out)   # (R, t): R in SO(3), t finite (3,)
 
@@ -131,8 +188,7 @@ def _extrinsics_cases(rng: np.random.Generator):
     draws.append(("synthetic", "a synthetic rig (8 views, 0.2 px)", synthetic_stereo(rng)))
     for key, label, d in draws:
         args = tuple(d[k] for k in ARGS_9)
-        R_o, t_o, _ = cv_stereo_calibrate(*args[:7])
-        rms_o = stereo_rms(*args[:7], R_o, t_o)
+        R_o, t_o, rms_o = _oracle_9(args[:7])
         run = shared_run(lambda fn, args=args: fn(*args))
         info = {"d": d, "rms_o": rms_o}
         # 0.01°: the same cost's minimum agrees with OpenCV's to ~1e-5° (measured); a single view's
@@ -172,6 +228,13 @@ register(Exercise(
 
 
 # ----------------------------------------------------------------- 7.10 stereo_rectify
+#
+# A rectification is judged by what it must do, not by agreement with one method's R1 (Bouguet's, in
+# cv2.stereoRectify; Fusiello, Trucco & Verri's, MVA 2000, turns camera 1 less and camera 2 more, 0.01-1.3°
+# from OpenCV's R1 on the real and synthetic rigs, and is just as valid): (1) corresponding points land on the same
+# row, (2) both new cameras share one K' and the baseline lies along x, (3) no needless distortion: each
+# camera is turned no further than some valid rectification turns it, the image stays upright, and the
+# new focal length keeps about the original sampling.
 
 def _convert_rect(out, case):
     try:
@@ -199,15 +262,100 @@ def vertical_disparity(d, out) -> float:
     return float(np.median(np.abs(y1 - y2)))
 
 
-def _structure(out, t) -> float:
-    """How far (px) P1, P2 are from [f 0 cx 0; 0 f cy 0; 0 0 1 0] and P1 + f T_x e1 with T_x = (R2 t)_x."""
+def invertible(x: np.ndarray, dist, margin: float = 0.9) -> np.ndarray:
+    """(N,) bool: the lens is invertible, with a margin, out to each ideal normalised point x (N, 2): along the
+    ray from the centre, r R'(r) / R(r) stays within ±margin (R: the radial factor). At −1 the distorted
+    radius r R(r) folds back (a strong barrel lens does so inside the corners of the image), and no method
+    can tell which of two ideal points a pixel there came from; within ±margin the fixed point
+    x <- (x_d − tangential(x)) / R(x) contracts by that factor per step."""
+    k1, k2, _, _, k3 = np.asarray(dist, float)
+    r2 = np.sum(np.asarray(x, float) ** 2, axis=1)[:, None] * np.linspace(0.0, 1.0, 33) ** 2
+    radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    return (np.abs(2 * r2 * (k1 + 2 * k2 * r2 + 3 * k3 * r2 * r2)) < margin * radial).all(axis=1)
+
+
+def held_out_pairs(rng: np.random.Generator, d: dict, n: int = 300) -> dict:
+    """Exact (noise-free) correspondences the rectification never saw: pixels of camera 1 drawn over the image,
+    depths 0.4-5 m, seen through the rig (R, t) by camera 2; kept if inside both images and where both lenses
+    are invertible (`invertible`)."""
+    w, h = boards.SIZE
+    u1 = np.c_[rng.uniform(15, w - 15, n), rng.uniform(15, h - 15, n)]
+    x1 = cv2.undistortPoints(u1.reshape(-1, 1, 2), d["K1"], d["d1"], None, None, None,
+                             (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-14)).reshape(-1, 2)
+    X1 = np.c_[x1, np.ones(n)] * rng.uniform(0.4, 5.0, (n, 1))
+    u1 = boards.project_board(X1, d["K1"], d["d1"], np.eye(3), np.zeros(3))   # exactly X1's pixel
+    u2 = boards.project_board(X1, d["K2"], d["d2"], d["R"], np.asarray(d["t"], float))
+    X2 = X1 @ np.asarray(d["R"], float).T + np.asarray(d["t"], float)
+    keep = ((u2 > 15).all(1) & (u2[:, 0] < w - 15) & (u2[:, 1] < h - 15) & invertible(X1[:, :2] / X1[:, 2:], d["d1"])
+            & invertible(X2[:, :2] / X2[:, 2:], d["d2"]))
+    return {"uv1": u1[keep], "uv2": u2[keep], "X1": X1[keep], "K1": d["K1"], "d1": d["d1"], "K2": d["K2"],
+            "d2": d["d2"]}
+
+
+def max_vertical_disparity(pairs, out) -> float:
+    """Largest |y1 − y2| (px) of exact correspondences rectified through (R_i, P_i)."""
     R1, R2, P1, P2 = out
-    f = P1[0, 0]
-    want2 = P1.copy()
-    want2[0, 3] = f * (R2 @ t)[0]
-    ideal1 = np.array([[f, 0, P1[0, 2], 0], [0, f, P1[1, 2], 0], [0, 0, 1, 0]])
-    return float(max(np.abs(P1 - ideal1).max(), np.abs(P2[:, [0, 1, 3]] - want2[:, [0, 1, 3]]).max(),
-                     abs(P2[1, 2] - P1[1, 2]), 1e6 * (f <= 0)))
+    y1 = rectified(pairs["uv1"], pairs["K1"], pairs["d1"], R1, P1)[:, 1]
+    y2 = rectified(pairs["uv2"], pairs["K2"], pairs["d2"], R2, P2)[:, 1]
+    return float(np.abs(y1 - y2).max())
+
+
+def _structure(out, t) -> float:
+    """How far (px) P1, P2 are from one K' = [fx 0 cx; 0 fy cy; 0 0 1] (no skew) with P1 = [K' | 0] and
+    P2 = [K' | (fx T_x, 0, 0)], T_x = (R2 t)_x (the baseline in the rectified frame)."""
+    R1, R2, P1, P2 = out
+    Kn = P1[:, :3]
+    want1 = np.array([[Kn[0, 0], 0, Kn[0, 2], 0], [0, Kn[1, 1], Kn[1, 2], 0], [0, 0, 1, 0]])
+    want2 = np.c_[Kn, [Kn[0, 0] * (R2 @ t)[0], 0, 0]]
+    return float(max(np.abs(P1 - want1).max(), np.abs(P2 - want2).max(), 1e6 * (min(Kn[0, 0], Kn[1, 1]) <= 0)))
+
+
+def _tilt_beyond_needed(out, R, t) -> float:
+    """Degrees by which the common new optical axis z' (camera 1's frame) lies off the arc of the circle
+    perpendicular to the baseline between the two cameras' own optical axes projected onto it; 180 if an
+    image is turned upside down or sideways. Every z' on that arc is Pareto-minimal (no other rectification
+    tilts both cameras less); z' off it tilts both further than needed."""
+    R1, R2 = out[0], out[1]
+    if min(R1[0, 0], R1[1, 1], R2[0, 0], R2[1, 1]) <= 0:        # new x or y axis against the old one
+        return 180.0
+    b = -R.T @ t / np.linalg.norm(t)                             # baseline direction, camera 1's frame
+
+    def on_circle(v):
+        v = v - b * (b @ v)
+        return v / np.linalg.norm(v)
+    p1, p2, z = on_circle(np.r_[0.0, 0, 1]), on_circle(R.T @ np.r_[0.0, 0, 1]), R1[2]
+    angle = lambda a, c: np.degrees(np.arctan2(b @ np.cross(a, c), a @ c))   # signed, about b
+    phi, end = angle(p1, on_circle(z)), angle(p1, p2)
+    off_plane = np.degrees(np.arcsin(min(1.0, abs(b @ z))))
+    return float(max(off_plane, min(0.0, end) - phi, phi - max(0.0, end), 0.0))
+
+
+def _scale(out, K1, K2) -> float:
+    """How many times the new focal lengths lie outside [the smallest, the largest] of the cameras' (1 inside)."""
+    f_new = np.array([out[2][0, 0], out[2][1, 1]])
+    f_old = np.array([K1[0, 0], K1[1, 1], K2[0, 0], K2[1, 1]])
+    if (f_new <= 0).any():
+        return np.inf
+    return float(max(f_new.max() / f_old.max(), f_old.min() / f_new.min(), 1.0))
+
+
+def fusiello_rectify(K1, d1, K2, d2, R, t, image_size):
+    """Fusiello, Trucco & Verri's rectification ("A compact algorithm for rectification of stereo pairs",
+    MVA 12:16-22, 2000), written here as an alternative to OpenCV's: the new x axis along the baseline, the
+    new y axis orthogonal to it and to camera 1's old optical axis, z = x × y; both cameras get that
+    orientation (R1 = W, R2 = W Rᵀ) and one K' = the mean of K1, K2 without skew. The paper's code takes
+    x along c1 − c2; with camera 2 to the right of camera 1 (the real rig) that turns both images upside
+    down, so x is oriented along the old x axis instead."""
+    R, t = np.asarray(R, float), np.asarray(t, float).reshape(3)
+    c2 = -R.T @ t                                        # camera 2's centre in camera 1's frame
+    x = c2 / np.linalg.norm(c2) * (1.0 if c2[0] >= 0 else -1.0)
+    y = np.cross([0.0, 0.0, 1.0], x)
+    y /= np.linalg.norm(y)
+    W = np.array([x, y, np.cross(x, y)])
+    Kn = (np.asarray(K1, float) + np.asarray(K2, float)) / 2
+    Kn[0, 1] = 0.0
+    R2 = W @ R.T
+    return W, R2, np.c_[Kn, np.zeros(3)], np.c_[Kn, [Kn[0, 0] * (R2 @ t)[0], 0.0, 0.0]]
 
 
 def _rectify_cases(rng: np.random.Generator):
@@ -215,37 +363,71 @@ def _rectify_cases(rng: np.random.Generator):
     if boards.real_available():
         draws.insert(0, ("real", "the real rig", real_stereo()))
     for key, label, d in draws:
-        args = (d["K1"], d["d1"], d["K2"], d["d2"], d["R"], d["t"], boards.SIZE)
-        ref = cv_stereo_rectify(*args)
+        R, t = np.asarray(d["R"], float), np.asarray(d["t"], float).reshape(3)
+        args = (d["K1"], d["d1"], d["K2"], d["d2"], R, t, boards.SIZE)
         run = shared_run(lambda fn, args=args: fn(*args))
-        vd_o = vertical_disparity(d, ref)
-        info = {"d": d, "ref": ref}
-        # 1e-4°: R1, R2 are defined in closed form (Bouguet); float64 reaches 1e-10°.
-        yield Case(f"{label}: R1, R2 vs cv2.stereoRectify", args, ref,
-                   lambda o, r: max(rotation_angle_deg(o[0], r[0]), rotation_angle_deg(o[1], r[1])), 1e-4, "deg",
-                   convert=_convert_rect, call=run, key=f"{key}-R", info=info, tags=(key,))
-        # 1e-6 px of structure: same f and cy in both, P2's f T_x (exact algebra).
-        yield Case(f"{label}: P1, P2 (shared f, cy; P2[0, 3] = f T_x)", args, None,
-                   lambda o, _, t=np.asarray(d["t"], float): _structure(o, t), 1e-6, "px", convert=_convert_rect,
-                   call=run, key=f"{key}-P", info=info, tags=(key,))
-        # Median vertical disparity within 0.02 px of OpenCV's own rectification of the same corners
-        # (noise and the calibration's residual leave OpenCV itself at 0.02-0.2 px).
-        yield Case(f"{label}: median vertical disparity beyond OpenCV's ({vd_o:.3f} px)", args, vd_o,
-                   lambda o, v, d=d: max(0.0, vertical_disparity(d, o) - v), 0.02, "px", convert=_convert_rect,
-                   call=run, key=f"{key}-vd", info=info, tags=(key,))
+        info = {"R": R, "t": t}
+        pairs = held_out_pairs(rng, d)
+        common = dict(convert=_convert_rect, call=run, info=info, tags=(key,))
+        # 1e-3 px: an exact rectification leaves ~1e-12 px on exact correspondences (float64, undistortion
+        # converged to 1e-14; measured for OpenCV's, Fusiello's and the reference); a camera turned 0.001° too
+        # far moves rows by f · 1.7e-5 ≈ 0.01 px.
+        yield Case(f"{label}: rows aligned ({len(pairs['uv1'])} held-out correspondences, max |y1 - y2|)", args,
+                   None, lambda o, _, p=pairs: max_vertical_disparity(p, o), 1e-3, "px", key=f"{key}-rows", **common)
+        # 1e-6 px of structure: P1 = [K' | 0], P2 = [K' | (f T_x, 0, 0)] is exact algebra.
+        yield Case(f"{label}: one K' for both, baseline along x (P2 = P1 + f T_x e1)", args, None,
+                   lambda o, _: _structure(o, t), 1e-6, "px", key=f"{key}-P", **common)
+        # 1°: Fusiello's z' is at the arc's camera-1 end; Bouguet's (OpenCV's) is inside the arc on 96 % of rigs
+        # drawn like these and up to 0.47° past an end on the rest (5000 draws: its W, the smallest rotation
+        # taking the half-turned baseline onto x, is not the one that keeps z' on the arc). 1° moves the
+        # rectified view by f tan 1° ≈ 10 px at f ≈ 550 px, 2 % of the image height; the 8° mutant keystones.
+        yield Case(f"{label}: no needless turn (new optical axis between the cameras' own, image upright)", args,
+                   None, lambda o, _: _tilt_beyond_needed(o, R, t), 1.0, "deg", key=f"{key}-tilt", **common)
+        # A factor 2: a rectified pixel within one octave of the original sampling; 10x finer only interpolates,
+        # 10x coarser throws pixels away. cv2.stereoRectify's default (alpha = -1) picks f' at 0.83-1.26 of the
+        # cameras' focal lengths on these rigs (measured, 21 rigs); cropping to valid pixels (alpha = 0) zooms up
+        # to 3.9x on the strongest synthetic lenses: a separate choice that the spec leaves out.
+        yield Case(f"{label}: no needless scaling (f' within 2x of the cameras' focal lengths)", args, None,
+                   lambda o, _: _scale(o, d["K1"], d["K2"]), 2.0, "x", key=f"{key}-scale", **common)
+
+
+def _swapped(c, out) -> bool:
+    R = c.info["R"]
+    return rotation_angle_deg(out[1], out[0] @ R) < 1e-3 < rotation_angle_deg(out[1], out[0] @ R.T)
+
+
+def _not_parallel(c, out) -> bool:
+    return rotation_angle_deg(out[1] @ c.info["R"] @ out[0].T, np.eye(3)) > 1e-3
+
+
+def _oblique_baseline(c, out) -> bool:
+    b = out[1] @ c.info["t"]
+    return float(np.hypot(b[1], b[2])) > 1e-6 * float(np.linalg.norm(b))
 
 
 RECTIFY_HINTS = [
-    Hint("R1 and R2 are swapped: camera 1 turns by W R^{1/2}, camera 2 by W R^{-1/2}.",
-         lambda c, out: c.key.endswith("-R") and rotation_angle_deg(out[0], c.expected[1]) < 1e-3),
-    Hint("each camera should turn by half of R (R^{±1/2}), then both by W; putting the whole rotation on one "
-         "camera also rectifies, but it is not cv2.stereoRectify's (distortion-balanced) choice.",
-         lambda c, out: c.key.endswith("-R") and rotation_angle_deg(out[1] @ c.info["d"]["R"] @ out[0].T,
-                                                                     np.eye(3)) < 1e-3),
+    Hint("R1 and R2 are swapped: R1 turns camera 1 and R2 camera 2, with R2 = R1 Rᵀ (X_2 = R X_1 + t).", _swapped),
+    Hint("the rectified cameras are not parallel: camera 2 must also undo the rig's rotation, R2 = R1 Rᵀ "
+         "(so that R2 R R1ᵀ = I); the same rotation for both leaves rows misaligned.", _not_parallel),
+    Hint("camera 1 was not turned: R2 = Rᵀ makes the cameras parallel, but the baseline stays oblique; turn both "
+         "so that it lies along x (R_i c ∥ e1).",
+         lambda c, out: _oblique_baseline(c, out) and rotation_angle_deg(out[0], np.eye(3)) < 1e-9),
+    Hint("the baseline is not along the new x axis: W must send it onto x ((R2 t)_y = (R2 t)_z = 0).",
+         _oblique_baseline),
     Hint("P2[0, 3] must be f · T_x, T_x = (R2 t)_x (the baseline in the rectified frame): it is what turns a "
          "disparity into depth.", lambda c, out: c.key.endswith("-P") and abs(out[3][0, 3]) < 1e-12),
-    Hint("both rectified cameras need the same f and the same cy, or rows do not line up.",
-         lambda c, out: not c.key.endswith("-R")),
+    Hint("both rectified cameras need one K' (the same f, cx, cy, no skew): with different cy or f, rows do not "
+         "line up; with different cx, zero disparity is not at infinity.",
+         lambda c, out: np.abs(out[2][:, :3] - out[3][:, :3]).max() > 1e-6),
+    Hint("an image is upside down or sideways: orient the new x axis along the baseline in the direction of the "
+         "old x axis (and y with the old y).", lambda c, out: c.key.endswith("-tilt") and
+         min(out[0][0, 0], out[0][1, 1], out[1][0, 0], out[1][1, 1]) <= 0),
+    Hint("both cameras are turned about the baseline further than needed: the new optical axis should lie "
+         "between the two cameras' own (Bouguet: R^{±1/2}, then the smallest W; Fusiello: camera 1's axis).",
+         lambda c, out: c.key.endswith("-tilt")),
+    Hint(lambda c, out: f"the rectified image is needlessly scaled (f' = {out[2][0, 0]:.0f} px against the cameras' "
+         f"~{c.args[0][0, 0]:.0f} px): keep f' near the cameras' focal lengths (e.g. the smaller f_y).",
+         lambda c, out: c.key.endswith("-scale")),
 ]
 
 register(Exercise(

@@ -23,18 +23,20 @@ def _rates(rng: np.random.Generator, n_terms=6):
                                for i in range(3)], 1)
 
 
-def imu_camera_rates(rng: np.random.Generator, delta: float | None = None, rotate: bool = True) -> dict:
+def imu_camera_rates(rng: np.random.Generator, delta: float | None = None, rotate: bool = True, skew: float = 0.0,
+                     duration: float = DURATION) -> dict:
     """Gyro samples (t_imu (M,), w_imu (M, 3)) and camera rates (t_cam (F,), w_cam (F, 3)) with
-    w_cam[k] = R_ci ω(t_cam[k] + δ) + noise; δ in ±[3, 40] ms unless given."""
+    w_cam[k] = R_ci ω(t_cam[k] + δ + skew · t_cam[k]) + noise (skew: the camera clock's rate error, 0 for a
+    constant offset); δ in ±[3, 40] ms unless given."""
     if delta is None:
         delta = rng.choice([-1, 1]) * rng.uniform(0.003, 0.040)
     omega = _rates(rng)
-    t_imu = np.arange(0, DURATION, 1 / IMU_HZ) + rng.uniform(0, 1 / IMU_HZ)
-    t_cam = np.arange(0.2, DURATION - 0.2, 1 / CAM_HZ) + rng.uniform(0, 1 / CAM_HZ)
+    t_imu = np.arange(0, duration, 1 / IMU_HZ) + rng.uniform(0, 1 / IMU_HZ)
+    t_cam = np.arange(0.2, duration - 0.2, 1 / CAM_HZ) + rng.uniform(0, 1 / CAM_HZ)
     w = rng.normal(size=3)
     R_ci = so3_exp(w / np.linalg.norm(w) * np.radians(rng.uniform(60, 180))) if rotate else np.eye(3)
     w_imu = omega(t_imu) + rng.normal(0, 0.02, (len(t_imu), 3))            # gyro noise 0.02 rad/s
-    w_cam = omega(t_cam + delta) @ R_ci.T + rng.normal(0, 0.05, (len(t_cam), 3))   # VO rates 0.05 rad/s
+    w_cam = omega(t_cam + delta + skew * t_cam) @ R_ci.T + rng.normal(0, 0.05, (len(t_cam), 3))   # VO: 0.05 rad/s
     return {"t_imu": t_imu, "w_imu": w_imu, "t_cam": t_cam, "w_cam": w_cam, "delta": float(delta), "R_ci": R_ci}
 
 
@@ -43,18 +45,26 @@ def gt_time_offset(t_imu, w_imu, t_cam, w_cam, max_offset: float = 0.1) -> float
     gyro interpolated at t_cam + δ) after a 1 ms scan of ±max_offset."""
     n_imu, n_cam = np.linalg.norm(w_imu, axis=1), np.linalg.norm(w_cam, axis=1)
     keep = (t_cam - max_offset > t_imu[0]) & (t_cam + max_offset < t_imu[-1])
-    def cost(d):
-        return float(np.mean((np.interp(t_cam[keep] + d, t_imu, n_imu) - n_cam[keep]) ** 2))
+    tc, nc = t_cam[keep], n_cam[keep]
+
+    def cost(d):                                  # d: (L,) offsets -> (L,) mean squared differences
+        d = np.atleast_1d(d)
+        return np.mean((np.interp(tc + d[:, None], t_imu, n_imu) - nc) ** 2, axis=1)
     grid = np.arange(-max_offset, max_offset + 1e-9, 1e-3)
-    d0 = grid[np.argmin([cost(d) for d in grid])]
+    d0 = grid[np.argmin(cost(grid))]
     lo, hi = d0 - 1e-3, d0 + 1e-3
     g = (np.sqrt(5) - 1) / 2
-    for _ in range(40):
-        a, b = hi - g * (hi - lo), lo + g * (hi - lo)
-        if cost(a) < cost(b):
-            hi = b
+    a, b = hi - g * (hi - lo), lo + g * (hi - lo)
+    fa, fb = cost(a)[0], cost(b)[0]
+    for _ in range(40):                           # golden section: one new evaluation per step
+        if fa < fb:
+            hi, b, fb = b, a, fa
+            a = hi - g * (hi - lo)
+            fa = cost(a)[0]
         else:
-            lo = a
+            lo, a, fa = a, b, fb
+            b = lo + g * (hi - lo)
+            fb = cost(b)[0]
     return 0.5 * (lo + hi)
 
 

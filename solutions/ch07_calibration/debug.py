@@ -1,45 +1,55 @@
-"""Chapter 7's DEBUG fixes (7.18-7.19), built on the chapter's own pieces (numpy/scipy only)."""
+"""Chapter 7's DEBUG fixes (7.18-7.19, 7.21-7.22), built on the chapter's own pieces (numpy/scipy only)."""
 from __future__ import annotations
 
 import numpy as np
 
 from .motion import time_offset
-from .stereo import _pixels, stereo_extrinsics
-from .zhang import board_homography, extrinsics_from_homography, refine_calibration
+from .stereo import _pixels
 
 
-def _board_poses(X, uv, K, dist):
-    """Each view's board pose with the intrinsics held: the pose from H, then LM on that view alone."""
-    Rs, ts = [], []
-    for u in uv:
-        R0, t0 = extrinsics_from_homography(board_homography(X[:, :2], u), K)
-        Rs.append(R0)
-        ts.append(t0)
-    Rs, ts = np.array(Rs), np.array(ts)
-    from scipy.optimize import least_squares
-    from solutions.geometry import rodrigues, so3_log
-    out_R, out_t = [], []
-    for u, R0, t0 in zip(uv, Rs, ts):
-        res = lambda p: (_pixels(X, K, dist, rodrigues(p[:3]) @ R0, p[3:]) - u).ravel()
-        p = least_squares(res, np.r_[np.zeros(3), t0], method="lm").x
-        out_R.append(rodrigues(p[:3]) @ R0)
-        out_t.append(p[3:])
-    return np.array(out_R), np.array(out_t)
+def _undistort(x_d: np.ndarray, dist, iters: int = 1000, tol: float = 1e-12) -> np.ndarray:
+    """Ideal normalised coordinates (N, 2) whose Brown-Conrady distortion is x_d (N, 2): the fixed point of
+    x = (x_d − tangential(x)) / radial(x), started at x_d, iterated until the step is below tol."""
+    k1, k2, p1, p2, k3 = np.asarray(dist, float)
+    x = x_d.copy()
+    for _ in range(iters):
+        u, v = x[:, 0], x[:, 1]
+        r2 = u * u + v * v
+        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        tangential = np.c_[2 * p1 * u * v + p2 * (r2 + 2 * u * u), p1 * (r2 + 2 * v * v) + 2 * p2 * u * v]
+        x_new = (x_d - tangential) / radial[:, None]
+        step = np.abs(x_new - x).max()
+        x = x_new
+        if step < tol:
+            break
+    return x
 
 
-def fix_stereo_drift(case: dict) -> tuple[np.ndarray, np.ndarray]:
-    """Exercise 7.18: the rig moved, the cameras did not: keep K1, d1, K2, d2 and re-estimate (R, t) from the
-    fresh views (each camera's board poses, then 7.9's average and joint refinement)."""
-    X, K1, d1, K2, d2 = (np.asarray(case[k], float) for k in ("X", "K1", "d1", "K2", "d2"))
-    Rs1, ts1 = _board_poses(X, case["uv1"], K1, d1)
-    Rs2, ts2 = _board_poses(X, case["uv2"], K2, d2)
-    return stereo_extrinsics(X, case["uv1"], case["uv2"], K1, d1, K2, d2, Rs1, ts1, Rs2, ts2)
+def _rectify(uv, K, dist, R_i, P_i) -> np.ndarray:
+    """Raw pixels (N, 2) -> rectified pixels (N, 2): K⁻¹, undo the lens, turn by R_i, project with P_i."""
+    K = np.asarray(K, float)
+    x_d = (np.asarray(uv, float) - K[:2, 2]) @ np.linalg.inv(K[:2, :2]).T
+    ray = np.c_[_undistort(x_d, dist), np.ones(len(x_d))] @ np.asarray(R_i, float).T
+    p = ray @ np.asarray(P_i, float)[:, :3].T
+    return p[:, :2] / p[:, 2:]
 
 
-def fix_time_offset(case: dict) -> np.ndarray:
-    """Exercise 7.19: the camera's stamps lag by δ: estimate δ from the rates (7.12), return t_cam + δ."""
-    delta = time_offset(case["t_imu"], case["w_imu"], case["t_cam"], case["w_cam"])
-    return np.asarray(case["t_cam"], float) + delta
+def fix_rectify_points(case: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Exercise 7.18: the colleague's rectification skipped the lens (right at the centre, where r ≈ 0, wrong at the
+    edges). Rectify each camera's raw pixels through K⁻¹, the inverse of the lens model, R_i and P_i."""
+    return tuple(_rectify(case[f"uv{i}"], case[f"K{i}"], case[f"d{i}"], case[f"R{i}"], case[f"P{i}"])
+                 for i in (1, 2))
+
+
+def fix_clock_drift(case: dict, window: float = 20.0) -> np.ndarray:
+    """Exercise 7.19: the camera's clock runs at the wrong rate, so its offset grows along the log: δ of each
+    20 s window by 7.12, a straight line δ(s) = δ0 + ε s through them, and every stamp s moved to s + δ(s)."""
+    t_cam, w_cam = np.asarray(case["t_cam"], float), np.asarray(case["w_cam"], float)
+    starts = np.arange(t_cam[0], t_cam[-1] - window / 2, window)
+    sel = [(t_cam >= s) & (t_cam < s + window) for s in starts]
+    deltas = [time_offset(case["t_imu"], case["w_imu"], t_cam[m], w_cam[m]) for m in sel]
+    skew, delta0 = np.polyfit([t_cam[m].mean() for m in sel], deltas, 1)
+    return t_cam + delta0 + skew * t_cam
 
 
 def _change_point(r: np.ndarray, margin: int = 5) -> int:

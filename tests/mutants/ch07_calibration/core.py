@@ -238,24 +238,27 @@ def stereo_averaged_not_refined(X, uv1, uv2, K1, d1, K2, d2, Rs1, ts1, Rs2, ts2)
 
 
 # ----------------------------------------------------------------- 7.10 stereo_rectify
+# Fusiello's rectification (camera 1 turned by W alone, camera 2 by W Rᵀ) is valid: it is a LIBRARY row of the
+# contract (graders.ch07_calibration.fusiello_rectify), not a mutant. Each mutant below breaks one property.
 
 def rectify_swapped(K1, d1, K2, d2, R, t, image_size):
     R1, R2, P1, P2 = ref_stereo.stereo_rectify(K1, d1, K2, d2, R, t, image_size)
     return R2, R1, P1, P2
 
 
-def rectify_whole_rotation_on_camera_2(K1, d1, K2, d2, R, t, image_size):
-    """W from the baseline of camera 2 seen from camera 1; camera 1 turned by W, camera 2 by W R⁻¹."""
-    c = -np.asarray(R).T @ np.asarray(t, float)          # camera 2's centre in camera 1
-    e1 = c / np.linalg.norm(c) * np.sign(-c[0] if c[0] != 0 else 1)
-    e2 = np.cross([0, 0, 1.0], e1)
-    e2 /= np.linalg.norm(e2)
-    W = np.array([e1, e2, np.cross(e1, e2)])
-    R1, R2 = W, W @ np.asarray(R).T
-    _, _, P1, P2 = ref_stereo.stereo_rectify(K1, d1, K2, d2, R, t, image_size)
+def rectify_same_rotation_for_both(K1, d1, K2, d2, R, t, image_size):
+    """Both cameras turned by camera 1's R1: the rig's own rotation R is never undone."""
+    R1, _, P1, P2 = ref_stereo.stereo_rectify(K1, d1, K2, d2, R, t, image_size)
+    return R1, R1, P1, P2
+
+
+def rectify_only_camera_2(K1, d1, K2, d2, R, t, image_size):
+    """Camera 2 turned parallel to camera 1 (R2 = Rᵀ), camera 1 left as it is: the baseline stays oblique."""
+    _, _, P1, _ = ref_stereo.stereo_rectify(K1, d1, K2, d2, R, t, image_size)
+    R2 = np.asarray(R, float).T
     P2 = P1.copy()
     P2[0, 3] = P1[0, 0] * (R2 @ np.asarray(t, float))[0]
-    return R1, R2, P1, P2
+    return np.eye(3), R2, P1, P2
 
 
 def rectify_no_baseline_in_P2(K1, d1, K2, d2, R, t, image_size):
@@ -270,14 +273,51 @@ def rectify_own_principal_points(K1, d1, K2, d2, R, t, image_size):
     return R1, R2, P1, P2
 
 
+def _about_x(deg):
+    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    return np.array([[1.0, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def rectify_tilted_about_baseline(K1, d1, K2, d2, R, t, image_size):
+    """Rows aligned, but both cameras pitched 8° further about the baseline (a frame chosen with the new
+    y axis off the old one): a valid epipolar geometry with a needlessly keystoned image."""
+    R1, R2, P1, P2 = ref_stereo.stereo_rectify(K1, d1, K2, d2, R, t, image_size)
+    return _about_x(8.0) @ R1, _about_x(8.0) @ R2, P1, P2
+
+
+def rectify_upside_down(K1, d1, K2, d2, R, t, image_size):
+    """The new x axis against the old one (what Fusiello et al.'s code, x along c1 − c2, gives when camera 2 is to
+    the right of camera 1): both images turned by 180° about the optical axis."""
+    R1, R2, P1, _ = ref_stereo.stereo_rectify(K1, d1, K2, d2, R, t, image_size)
+    flip = np.diag([-1.0, -1.0, 1.0])
+    R1, R2 = flip @ R1, flip @ R2
+    P2 = P1.copy()
+    P2[0, 3] = P1[0, 0] * (R2 @ np.asarray(t, float))[0]
+    return R1, R2, P1, P2
+
+
+def rectify_zoomed_10x(K1, d1, K2, d2, R, t, image_size):
+    """Rows aligned, but f' ten times the cameras' focal lengths: a tenth of the view, each pixel 10x10."""
+    R1, R2, P1, P2 = ref_stereo.stereo_rectify(K1, d1, K2, d2, R, t, image_size)
+    P1, P2 = P1.copy(), P2.copy()
+    P1[:2, :2] *= 10.0
+    P2[:2, :2] *= 10.0
+    P2[0, 3] *= 10.0
+    return R1, R2, P1, P2
+
+
 MUTANTS += [
     ("7.9", "T12 inverted", stereo_inverse_rig, "inverse rig"),
     ("7.9", "first view's relative pose", stereo_first_view_only, "single view"),
     ("7.9", "averaged, not refined", stereo_averaged_not_refined, "not the least-squares optimum"),
     ("7.10", "R1 and R2 swapped", rectify_swapped, "swapped"),
-    ("7.10", "whole rotation on camera 2", rectify_whole_rotation_on_camera_2, "half of R"),
+    ("7.10", "same rotation for both cameras", rectify_same_rotation_for_both, "not parallel"),
+    ("7.10", "only camera 2 turned", rectify_only_camera_2, "camera 1 was not turned"),
     ("7.10", "P2 without f T_x", rectify_no_baseline_in_P2, "f · T_x"),
-    ("7.10", "each camera's own principal point", rectify_own_principal_points, "same cy"),
+    ("7.10", "each camera's own principal point", rectify_own_principal_points, "one K'"),
+    ("7.10", "tilted 8 deg about the baseline", rectify_tilted_about_baseline, "further than needed"),
+    ("7.10", "upside down", rectify_upside_down, "upside down"),
+    ("7.10", "zoomed 10x", rectify_zoomed_10x, "needlessly scaled"),
 ]
 
 
@@ -472,26 +512,58 @@ MUTANTS += [
 from solutions.ch07_calibration import debug as ref_debug  # noqa: E402
 
 
-def stereo_fix_keeps_old_rig(case):
-    return np.asarray(case["R"], float), np.asarray(case["t"], float)
+def rectify_points_lens_ignored(case):
+    """The colleague's code as it was: K⁻¹, R_i, P_i, no undistortion."""
+    no_lens = dict(case, d1=np.zeros(5), d2=np.zeros(5))
+    return ref_debug.fix_rectify_points(no_lens)
 
 
-def stereo_fix_inverted(case):
-    R, t = ref_debug.fix_stereo_drift(case)
-    return R.T, -R.T @ t
+def rectify_points_lens_forward(case):
+    """The lens model applied to the normalised pixels (distorting them again) instead of inverted."""
+    out = []
+    for i in (1, 2):
+        K = np.asarray(case[f"K{i}"], float)
+        x = (np.asarray(case[f"uv{i}"], float) - K[:2, 2]) @ np.linalg.inv(K[:2, :2]).T
+        xd = ref_stereo._distort(x, np.asarray(case[f"d{i}"], float))
+        ray = np.c_[xd, np.ones(len(xd))] @ np.asarray(case[f"R{i}"], float).T
+        p = ray @ np.asarray(case[f"P{i}"], float)[:, :3].T
+        out.append(p[:, :2] / p[:, 2:])
+    return tuple(out)
 
 
-def time_fix_unchanged(case):
+def rectify_points_one_iteration(case):
+    """The inverse lens by a single fixed-point step: x = (x_d − tangential(x_d)) / radial(x_d)."""
+    saved = ref_debug._undistort
+    ref_debug._undistort = lambda x_d, dist, iters=1, tol=0.0: saved(x_d, dist, iters=1, tol=0.0)
+    try:
+        return ref_debug.fix_rectify_points(case)
+    finally:
+        ref_debug._undistort = saved
+
+
+def clock_unchanged(case):
     return np.asarray(case["t_cam"], float).copy()
 
 
-def time_fix_wrong_way(case):
-    return 2 * np.asarray(case["t_cam"], float) - ref_debug.fix_time_offset(case)
+def clock_constant_offset(case):
+    """7.12 on the whole log: one constant shift, right on average, wrong at both ends."""
+    return np.asarray(case["t_cam"], float) + ref_motion.time_offset(case["t_imu"], case["w_imu"], case["t_cam"],
+                                                                      case["w_cam"])
+
+
+def clock_drift_wrong_way(case):
+    """δ0 + ε s fitted, but the drift applied with its sign flipped."""
+    t = np.asarray(case["t_cam"], float)
+    fixed = ref_debug.fix_clock_drift(case)
+    skew = np.polyfit(t, fixed - t, 1)[0]
+    return fixed - 2 * skew * t
 
 
 MUTANTS += [
-    ("7.18", "old rig kept (recalibrated the intrinsics instead)", stereo_fix_keeps_old_rig, "old rig"),
-    ("7.18", "rig inverted", stereo_fix_inverted, "inverted"),
-    ("7.19", "timestamps unchanged", time_fix_unchanged, "unchanged"),
-    ("7.19", "shifted the wrong way", time_fix_wrong_way, "wrong way"),
+    ("7.18", "lens ignored (the colleague's code)", rectify_points_lens_ignored, "lens is ignored"),
+    ("7.18", "lens applied forward", rectify_points_lens_forward, "applied forward"),
+    ("7.18", "one fixed-point step", rectify_points_one_iteration, "not converged"),
+    ("7.19", "timestamps unchanged", clock_unchanged, "unchanged"),
+    ("7.19", "one constant offset (7.12 on the whole log)", clock_constant_offset, "one constant shift"),
+    ("7.19", "drift applied the wrong way", clock_drift_wrong_way, "wrong way"),
 ]
