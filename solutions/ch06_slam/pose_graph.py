@@ -154,13 +154,15 @@ def _first(mask: np.ndarray, n: int = 5) -> str:
     return ", ".join(map(str, idx[:n])) + (f", ... ({len(idx)} in all)" if len(idx) > n else "")
 
 
-def nearest_psd(info) -> np.ndarray:
+def nearest_psd(info, floor=0.0) -> np.ndarray:
     """The nearest symmetric positive semi-definite matrices in the Frobenius norm (Higham, "Computing a nearest
     symmetric positive semidefinite matrix", Linear Algebra Appl. 103, 1988): the symmetric part with its
-    negative eigenvalues set to 0. (M, k, k) -> (M, k, k). A repair that changes the problem: use it knowingly."""
+    eigenvalues below `floor` (scalar or (M,), default 0) raised to it; floor > 0 gives the nearest matrices with
+    every eigenvalue >= floor, which a Cholesky (GTSAM's noise models) accepts. (M, k, k) -> (M, k, k).
+    A repair that changes the problem: use it knowingly."""
     S = 0.5 * (np.asarray(info, float) + np.swapaxes(info, 1, 2))
     ev, Q = np.linalg.eigh(S)
-    return (Q * np.maximum(ev, 0.0)[:, None, :]) @ np.swapaxes(Q, 1, 2)
+    return (Q * np.maximum(ev, np.reshape(floor, (-1, 1)))[:, None, :]) @ np.swapaxes(Q, 1, 2)
 
 
 def _optimize(T, edges, Z, info, kernel, c, max_iter, rel_tol, marquardt=False):
@@ -192,7 +194,7 @@ def _optimize(T, edges, Z, info, kernel, c, max_iter, rel_tol, marquardt=False):
             D = H.diagonal() * (lam / (1 + lam)) if marquardt else lam
             predicted = -g @ delta + np.sum(D * delta**2)
             if f_new < f:
-                gain = (f - f_new) / max(predicted, 1e-300)
+                gain = (f - f_new) / predicted if predicted > 0 else 1.0
                 lam, nu = lam * max(1 / 3, 1 - (2 * gain - 1) ** 3), 2.0
                 break
             if predicted <= rel_tol * f or lam > 1e16:  # converged: what is left to gain is rounding
