@@ -169,8 +169,8 @@ def _optimize(T, edges, Z, info, kernel, c, max_iter, rel_tol, marquardt=False):
     """Gauss-Newton steps while they lower the cost; after a failed one, Levenberg-Marquardt with lambda I (or
     lambda diag(H) with `marquardt`) and Nielsen's update of lambda from the gain ratio rho (H. B. Nielsen,
     "Damping parameter in Marquardt's method", IMM-REP-1999-05: lambda x max(1/3, 1 - (2 rho - 1)^3) after a good
-    step, x nu with nu doubling after a bad one; g2o's OptimizationAlgorithmLevenberg runs the same rule). Stop on a
-    relative decrease below rel_tol, or when no damped step lowers the cost."""
+    step, x nu with nu doubling after a bad one; g2o's OptimizationAlgorithmLevenberg runs it with the factor
+    capped at 2/3). Stop on a relative decrease below rel_tol, or when no damped step lowers the cost."""
     T, info = np.array(T, float), check_information(info)
     k = info.shape[-1]
     cost = lambda P: _kernel(chi2_terms(P, edges, Z, info), kernel, c)   # noqa: E731
