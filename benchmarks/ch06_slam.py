@@ -1,10 +1,11 @@
 """Chapter 6: pose-graph optimisation of the real intel (SE(2), 1,728 poses, 2,512 edges) and parking-garage
 (SE(3), 1,661 poses, 6,275 edges) graphs, the reference optimiser and GTSAM side by side (pose_graph_table),
-and front-end's trajectory metrics against evo (trajectory_table).
+the same graphs in every g2o form - edges only, an odometry edge missing, a third of the information
+matrices indefinite (g2o_forms_table) - and front-end's trajectory metrics against evo (trajectory_table).
 
 - reference: `solutions.ch06_slam.optimize_pose_graph` (numpy/scipy: analytic Jacobians on the manifold,
-  sparse normal equations summed straight into a CSC pattern worked out once, SuperLU in symmetric mode, LM
-  with Gauss-Newton steps, first pose held).
+  sparse normal equations summed straight into a CSC pattern worked out once, SuperLU in symmetric mode,
+  Gauss-Newton steps then lambda I damping with Nielsen's update after a failed one, first pose held).
 - GTSAM 4.3.0: GaussNewtonOptimizer and LevenbergMarquardtOptimizer on BetweenFactorPose2/3 + a constrained
   prior on pose 0 (the graders' `to_gtsam`), relative and absolute error tolerances 1e-10 like the reference.
 
