@@ -8,96 +8,12 @@ Residual (GTSAM's BetweenFactor): r = Log(Z^-1 T_i^-1 T_j); objective chi2 = sum
 """
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
-from scipy.spatial.transform import Rotation
 
+from .g2o_format import _info_from_upper, _pose_from_g2o, read_g2o, write_g2o  # noqa: F401 (6.8, 6.27 live there)
 from .lie import adjoint, exp, inverse, log, right_jacobian_inv
-
-
-def _pose_from_g2o(values: np.ndarray, d: int) -> np.ndarray:
-    """g2o's (x, y, theta) or (x, y, z, qx, qy, qz, qw) rows -> (N, d+1, d+1)."""
-    T = np.zeros((len(values), d + 1, d + 1))
-    T[:, d, d] = 1.0
-    if d == 2:
-        c, s = np.cos(values[:, 2]), np.sin(values[:, 2])
-        T[:, 0, 0], T[:, 0, 1], T[:, 1, 0], T[:, 1, 1] = c, -s, s, c
-        T[:, :2, 2] = values[:, :2]
-    else:
-        T[:, :3, :3] = Rotation.from_quat(values[:, 3:7]).as_matrix()  # scipy's order is g2o's: (qx, qy, qz, qw)
-        T[:, :3, 3] = values[:, :3]
-    return T
-
-
-def _info_from_upper(upper: np.ndarray, k: int) -> np.ndarray:
-    """g2o stores the upper triangle row by row: I11 I12 .. I1k I22 .. Ikk. (M, k(k+1)/2) -> (M, k, k)."""
-    iu = np.triu_indices(k)
-    info = np.zeros((len(upper), k, k))
-    info[:, iu[0], iu[1]] = upper
-    info[:, iu[1], iu[0]] = upper
-    return info
-
-
-def read_g2o(path: str | Path) -> dict:
-    """Exercise 6.8: read a g2o pose graph (VERTEX_SE2/EDGE_SE2 or VERTEX_SE3:QUAT/EDGE_SE3:QUAT).
-
-    Returns {"ids": (N,) vertex ids in increasing order, "T": (N, d+1, d+1), "edges": (M, 2) indices into
-    T (rows of "ids"), "Z": (M, d+1, d+1), "info": (M, k, k) in the residual's order}. For SE(3), g2o's
-    information is ordered (translation, rotation); it is permuted to (rotation, translation), as GTSAM does.
-    """
-    verts, edges = {}, []
-    for line in Path(path).read_text().splitlines():
-        tok = line.split()
-        if not tok:
-            continue
-        if tok[0] in ("VERTEX_SE2", "VERTEX_SE3:QUAT"):
-            verts[int(tok[1])] = [float(v) for v in tok[2:]]
-        elif tok[0] in ("EDGE_SE2", "EDGE_SE3:QUAT"):
-            edges.append([float(v) for v in tok[1:]])
-    d = 2 if len(next(iter(verts.values()))) == 3 else 3
-    ids = np.array(sorted(verts))
-    T = _pose_from_g2o(np.array([verts[i] for i in ids]), d)
-    E = np.array(edges).reshape(-1, 2 + (3 if d == 2 else 7) + (6 if d == 2 else 21))
-    index = {v: n for n, v in enumerate(ids)}
-    ij = np.array([[index[int(a)], index[int(b)]] for a, b in E[:, :2]], dtype=int).reshape(-1, 2)
-    nz = 3 if d == 2 else 7
-    k = 3 if d == 2 else 6
-    info = _info_from_upper(E[:, 2 + nz:], k)
-    if d == 3:
-        order = [3, 4, 5, 0, 1, 2]
-        info = info[:, order][:, :, order]
-    return {"ids": ids, "T": T, "edges": ij, "Z": _pose_from_g2o(E[:, 2:2 + nz], d), "info": info}
-
-
-def write_g2o(path: str | Path, graph: dict) -> None:
-    """Exercise 6.27: write `graph` (read_g2o's dict) as g2o text.
-
-    Vertex n is written under its id graph["ids"][n] (0..N-1 if absent), each edge as the ids of its rows;
-    SE(3) quaternions as qx qy qz qw; information back to g2o's order (translation first for SE(3)), upper
-    triangle row by row; every number with repr, so the round trip loses nothing.
-    """
-    T, ids = graph["T"], graph.get("ids", np.arange(len(graph["T"])))
-    d = T.shape[-1] - 1
-
-    def pose(P):
-        if d == 2:
-            return [P[0, 2], P[1, 2], np.arctan2(P[1, 0], P[0, 0])]
-        return list(P[:3, 3]) + list(Rotation.from_matrix(P[:3, :3]).as_quat())
-
-    info = graph["info"]
-    if d == 3:
-        order = [3, 4, 5, 0, 1, 2]
-        info = info[:, order][:, :, order]
-    iu = np.triu_indices(info.shape[-1])
-    tag = ("VERTEX_SE2", "EDGE_SE2") if d == 2 else ("VERTEX_SE3:QUAT", "EDGE_SE3:QUAT")
-    lines = [" ".join([tag[0], str(int(i))] + [repr(float(v)) for v in pose(P)]) for i, P in zip(ids, T)]
-    for (a, b), Z, I in zip(graph["edges"], graph["Z"], info):
-        lines.append(" ".join([tag[1], str(int(ids[a])), str(int(ids[b]))]
-                              + [repr(float(v)) for v in pose(Z) + list(I[iu])]))
-    Path(path).write_text("\n".join(lines) + "\n")
 
 
 def between_residuals(T: np.ndarray, edges: np.ndarray, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -184,11 +100,12 @@ class _GaugeFixedAssembly:
         self.diag = np.searchsorted(uniq, np.arange(m) * m + np.arange(m))   # where H_ii sits in the data
         self.g_index = (k * np.asarray(edges)[:, :, None] + np.arange(k)).ravel()
 
-    def __call__(self, Hb: np.ndarray, gb: np.ndarray, lam: float = 0.0) -> tuple[sp.csc_matrix, np.ndarray]:
-        """(H + lam diag(H), g) without the first pose."""
+    def __call__(self, Hb: np.ndarray, gb: np.ndarray, lam: float = 0.0,
+                 marquardt: bool = False) -> tuple[sp.csc_matrix, np.ndarray]:
+        """(H + lam I, g) without the first pose; (H + lam diag(H), g) with `marquardt`."""
         data = np.bincount(self.slot, Hb.ravel()[self.keep], minlength=self.size)
         if lam:
-            data[self.diag] += lam * np.maximum(data[self.diag], 1e-12)
+            data[self.diag] += lam * (np.maximum(data[self.diag], 1e-12) if marquardt else 1.0)
         g = np.bincount(self.g_index, gb.ravel(), minlength=self.m + len(gb[0, 0]))
         return sp.csc_matrix((data, self.indices, self.indptr), shape=(self.m, self.m)), g[len(gb[0, 0]):]
 
@@ -200,32 +117,89 @@ def _solve_spd(A: sp.csc_matrix, b: np.ndarray) -> np.ndarray:
     return lu.solve(b)
 
 
-def _optimize(T, edges, Z, info, kernel, c, max_iter, rel_tol):
-    T = np.array(T, float)
+def check_information(info, rtol: float = 1e-9) -> np.ndarray:
+    """Every information matrix must be finite, symmetric and positive semi-definite; returns them symmetrised.
+
+    info (M, k, k). Asymmetry up to rtol x the largest entry is rounding and is averaged away; a negative
+    eigenvalue below -rtol x the largest |eigenvalue| makes chi2 unbounded below along its eigenvector (an
+    optimiser then runs off to chi2 < 0), so it raises ValueError naming the edges. Nothing is repaired here:
+    `nearest_psd` is the explicit, opt-in repair. (GTSAM 4.3.0 does not check: noiseModel::Gaussian::Information
+    takes the upper factor of an Eigen LLT without looking at its status, gtsam/linear/NoiseModel.cpp, so an
+    indefinite matrix silently becomes another one, and a diagonal one with a negative entry a NaN sigma.)"""
+    info = np.asarray(info, float)
+    if info.ndim != 3 or info.shape[1] != info.shape[2]:
+        raise ValueError(f"information: expected (M, k, k) matrices, got shape {info.shape}")
+    if not np.isfinite(info).all():
+        raise ValueError(f"information of edges {_first(~np.isfinite(info).all(axis=(1, 2)))} is not finite")
+    swapped = np.swapaxes(info, 1, 2)
+    asym = np.abs(info - swapped).max(axis=(1, 2)) > rtol * np.abs(info).max(axis=(1, 2))
+    if asym.any():
+        raise ValueError(f"information of edges {_first(asym)} is not symmetric (a covariance or a transposed fill "
+                         "would be; g2o stores the upper triangle row by row)")
+    info = 0.5 * (info + swapped)
+    ev = np.linalg.eigvalsh(info)
+    bad = ev[:, 0] < -rtol * np.abs(ev).max(axis=1)
+    if bad.any():
+        worst = int(np.argmin(ev[:, 0] / np.maximum(np.abs(ev).max(axis=1), 1e-300)))
+        raise ValueError(
+            f"{bad.sum()} of {len(info)} information matrices are indefinite (edges {_first(bad)}; edge {worst}: "
+            f"eigenvalues {np.array2string(ev[worst], precision=3)}): chi2 = sum r^T info r has no minimum, it falls "
+            "without bound along their negative directions. Not optimised. Check how they were read (order of the "
+            "entries, covariance for information); to go on anyway, repair them knowingly with nearest_psd.")
+    return info
+
+
+def _first(mask: np.ndarray, n: int = 5) -> str:
+    idx = np.flatnonzero(mask)
+    return ", ".join(map(str, idx[:n])) + (f", ... ({len(idx)} in all)" if len(idx) > n else "")
+
+
+def nearest_psd(info, floor=0.0) -> np.ndarray:
+    """The nearest symmetric positive semi-definite matrices in the Frobenius norm (Higham, "Computing a nearest
+    symmetric positive semidefinite matrix", Linear Algebra Appl. 103, 1988): the symmetric part with its
+    eigenvalues below `floor` (scalar or (M,), default 0) raised to it; floor > 0 gives the nearest matrices with
+    every eigenvalue >= floor, which a Cholesky (GTSAM's noise models) accepts. (M, k, k) -> (M, k, k).
+    A repair that changes the problem: use it knowingly."""
+    S = 0.5 * (np.asarray(info, float) + np.swapaxes(info, 1, 2))
+    ev, Q = np.linalg.eigh(S)
+    return (Q * np.maximum(ev, np.reshape(floor, (-1, 1)))[:, None, :]) @ np.swapaxes(Q, 1, 2)
+
+
+def _optimize(T, edges, Z, info, kernel, c, max_iter, rel_tol, marquardt=False):
+    """Gauss-Newton steps while they lower the cost; after a failed one, Levenberg-Marquardt with lambda I (or
+    lambda diag(H) with `marquardt`) and Nielsen's update of lambda from the gain ratio rho (H. B. Nielsen,
+    "Damping parameter in Marquardt's method", IMM-REP-1999-05: lambda x max(1/3, 1 - (2 rho - 1)^3) after a good
+    step, x nu with nu doubling after a bad one; g2o's OptimizationAlgorithmLevenberg runs it with the factor
+    capped at 2/3). Stop on a relative decrease below rel_tol, or when no damped step lowers the cost."""
+    T, info = np.array(T, float), check_information(info)
     k = info.shape[-1]
     cost = lambda P: _kernel(chi2_terms(P, edges, Z, info), kernel, c)   # noqa: E731
     rho, w = cost(T)
-    f, lam = rho.sum(), 0.0    # pure Gauss-Newton until a step fails (Marquardt damping slows the weak directions)
+    f, lam, nu = rho.sum(), 0.0, 2.0
     assemble = _GaugeFixedAssembly(edges, k, k * len(T))              # gauge: the first pose is held
     for _ in range(max_iter):
         Hb, gb, _, _ = _edge_blocks(T, edges, Z, info, w)
         while True:
-            H, g = assemble(Hb, gb, lam)
+            H, g = assemble(Hb, gb, lam, marquardt)
             try:
                 delta = _solve_spd(H, -g)
             except RuntimeError:                        # singular (a pose left unconstrained): damp and retry
-                lam = max(10 * lam, 1e-6)
+                lam, nu = _raise_damping(lam, nu, H)
                 continue
             T_new = T.copy()
             T_new[1:] = T[1:] @ exp(delta.reshape(-1, k))
             rho_new, w_new = cost(T_new)
             f_new = rho_new.sum()
-            if f_new <= f:
-                lam = lam / 10 if lam > 1e-9 else 0.0
+            # the model's decrease of sum rho: -2 g.delta - delta^T H delta = -g.delta + delta^T D delta, D the damping
+            D = H.diagonal() * (lam / (1 + lam)) if marquardt else lam
+            predicted = -g @ delta + np.sum(D * delta**2)
+            if f_new < f:
+                gain = (f - f_new) / predicted if predicted > 0 else 1.0
+                lam, nu = lam * max(1 / 3, 1 - (2 * gain - 1) ** 3), 2.0
                 break
-            if f_new - f <= rel_tol * f or lam > 1e8:   # converged: what is left is rounding
+            if predicted <= rel_tol * f or lam > 1e16:  # converged: what is left to gain is rounding
                 return T
-            lam = max(10 * lam, 1e-6)
+            lam, nu = _raise_damping(lam, nu, H)
         done = f - f_new <= rel_tol * f
         T, f, w = T_new, f_new, w_new
         if done:
@@ -233,12 +207,20 @@ def _optimize(T, edges, Z, info, kernel, c, max_iter, rel_tol):
     return T
 
 
-def optimize_pose_graph(T, edges, Z, info, max_iter: int = 100, rel_tol: float = 1e-10) -> np.ndarray:
-    """Exercise 6.10: Levenberg-Marquardt on the manifold: pure Gauss-Newton steps, damping lambda diag(H) only
-    after a step fails (from the start, Marquardt's scaling slows the weakly constrained directions: the
-    garage took 8 iterations instead of 5).
+def _raise_damping(lam: float, nu: float, H: sp.csc_matrix) -> tuple[float, float]:
+    """After a failed step: lambda x nu, nu doubled; from Gauss-Newton, lambda = 1e-6 x the largest diagonal of H."""
+    if lam == 0.0:
+        return 1e-6 * max(float(H.diagonal().max()), 1e-12), 2.0
+    return lam * nu, 2 * nu
 
-    Minimises sum_e r_e^T info_e r_e with the first pose held fixed (the gauge). Returns T (N, d+1, d+1)."""
+
+def optimize_pose_graph(T, edges, Z, info, max_iter: int = 100, rel_tol: float = 1e-10) -> np.ndarray:
+    """Exercise 6.10: Levenberg-Marquardt on the manifold: pure Gauss-Newton steps, damping lambda I only after
+    a step fails, lambda updated from the gain ratio. (Marquardt's lambda diag(H) from the start slowed the
+    weakly constrained directions: the garage took 8 iterations instead of 5.)
+
+    Minimises sum_e r_e^T info_e r_e with the first pose held fixed (the gauge). Returns T (N, d+1, d+1).
+    Information matrices that are not positive semi-definite raise ValueError (`check_information`)."""
     return _optimize(T, np.asarray(edges), Z, np.asarray(info, float), None, 1.0, max_iter, rel_tol)
 
 

@@ -113,6 +113,67 @@ def read_quaternion_w_first(path):
     return _read_with(path, quat_w_first=True)
 
 
+def read_vertices_only(path):
+    """The reference reader before issue 33: the dimension and the ids come from the VERTEX lines alone, so a
+    file of edges only stops with StopIteration."""
+    verts, edges = {}, []
+    for line in open(path).read().splitlines():
+        tok = line.split()
+        if not tok:
+            continue
+        if tok[0] in ("VERTEX_SE2", "VERTEX_SE3:QUAT"):
+            verts[int(tok[1])] = [float(v) for v in tok[2:]]
+        elif tok[0] in ("EDGE_SE2", "EDGE_SE3:QUAT"):
+            edges.append([float(v) for v in tok[1:]])
+    d = 2 if len(next(iter(verts.values()))) == 3 else 3
+    ids = _np.array(sorted(verts))
+    T = _pg._pose_from_g2o(_np.array([verts[i] for i in ids]), d)
+    nz, k = (3, 3) if d == 2 else (7, 6)
+    E = _np.array(edges).reshape(-1, 2 + nz + k * (k + 1) // 2)
+    index = {v: n for n, v in enumerate(ids)}
+    ij = _np.array([[index[int(a)], index[int(b)]] for a, b in E[:, :2]], dtype=int).reshape(-1, 2)
+    info = _pg._info_from_upper(E[:, 2 + nz:], k)
+    if d == 3:
+        info = info[:, [3, 4, 5, 0, 1, 2]][:, :, [3, 4, 5, 0, 1, 2]]
+    return {"ids": ids, "T": T, "edges": ij, "Z": _pg._pose_from_g2o(E[:, 2:2 + nz], d), "info": info}
+
+
+def read_edge_only_poses_at_identity(path):
+    """Reads every form, but a pose without a VERTEX line stays at the identity (no odometry chain)."""
+    import re
+    text = open(path).read()
+    if re.search(r"^VERTEX_SE", text, re.M):
+        return _pg.read_g2o(path)
+    g = _pg.read_g2o(path)
+    return dict(g, T=_np.tile(_np.eye(g["T"].shape[-1]), (len(g["T"]), 1, 1)))
+
+
+def read_tags_by_prefix(path):
+    """Chains the odometry when there are no VERTEX lines, but takes any tag starting with VERTEX or EDGE_SE2 /
+    EDGE_SE3 as a pose element: landmark lines (VERTEX_XY, EDGE_SE2_XY) are read as poses and edges."""
+    from solutions.ch06_slam.g2o_format import chain_odometry
+    verts, pairs, rows = {}, [], []
+    for line in open(path).read().splitlines():
+        tok = line.split()
+        if tok and tok[0].startswith("VERTEX"):
+            verts[int(tok[1])] = [float(v) for v in tok[2:]]
+        elif tok and tok[0].startswith(("EDGE_SE2", "EDGE_SE3")):
+            pairs.append([int(tok[1]), int(tok[2])])
+            rows.append([float(v) for v in tok[3:]])
+    E = _np.array(rows)                                         # ragged when a landmark row came in: ValueError
+    d = 2 if E.shape[1] == 9 else 3
+    nz, k = (3, 3) if d == 2 else (7, 6)
+    pairs = _np.array(pairs)
+    ids = _np.array(sorted(set(verts) | set(pairs.ravel().tolist())))
+    Z = _pg._pose_from_g2o(E[:, :nz], d)
+    known = {i: _pg._pose_from_g2o(_np.array([v]), d)[0] for i, v in verts.items()}
+    T = chain_odometry(ids, known, pairs, Z)[0]
+    info = _pg._info_from_upper(E[:, nz:], k)
+    if d == 3:
+        info = info[:, [3, 4, 5, 0, 1, 2]][:, :, [3, 4, 5, 0, 1, 2]]
+    return {"ids": ids, "T": T, "edges": _np.searchsorted(ids, pairs), "Z": Z, "info": info}
+
+
 # 6.9 between_residuals
 
 
@@ -249,6 +310,10 @@ MUTANTS += [
     ("6.8", "SE(3) information left in g2o's order", read_info_not_permuted, "permute rows and columns"),
     ("6.8", "vertex ids used as rows", read_ids_as_rows, "vertex ids are names"),
     ("6.8", "quaternion read w first", read_quaternion_w_first, None),
+    ("6.8", "VERTEX lines required (no odometry chain)", read_vertices_only, "no VERTEX lines"),
+    ("6.8", "poses without VERTEX lines left at the identity", read_edge_only_poses_at_identity,
+     "left at the identity"),
+    ("6.8", "tags matched by prefix (landmark lines read as poses)", read_tags_by_prefix, "compare the whole tag"),
     ("6.9", "J_r^-1 taken as I", between_jr_identity, "small-residual approximation"),
     ("6.9", "J_i with the wrong sign", between_ji_sign, "opposite way"),
     ("6.9", "residual of T_j^-1 T_i", between_swapped, "T_j^-1 T_i"),
