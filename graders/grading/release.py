@@ -6,7 +6,9 @@
 The student edition holds the chosen chapters' notebooks (untouched stubs, no outputs), the `graders`
 package with only those chapters, the data manifest, docs, README, environment and Makefile: the two
 README commands work in it, and it has no `solutions/` (a test installs it in a fresh venv, runs every
-notebook and greps it for reference code).
+notebook and greps it for reference code). Its CONCEPT/DESIGN questions are sealed (graders.grading.seal):
+checked locally against salted hashes, with no answer in its files; graded mode judges them from the
+instructor's repository.
 
 The autograder follows Gradescope's contract: `setup.sh` installs the pinned environment; the bundle
 carries the datasets its chapter grades on (`course_data/`, checked against data/manifest.json; the
@@ -29,6 +31,7 @@ import zipfile
 from pathlib import Path
 
 from graders.core.chapters import READY, by_number
+from graders.grading.seal import seal_questions
 
 ROOT = Path(__file__).resolve().parents[2]
 SHARED = ("__init__.py", "__main__.py", "cli.py", "datasets.py", "layers.py")   # graders/*.py
@@ -112,6 +115,7 @@ def student_release(out: str | Path, numbers: list[int] | None = None) -> Path:
     shutil.copytree(ROOT / "data", out / "data", ignore=_ignore)
     shutil.copytree(ROOT / "docs", out / "docs", ignore=_ignore)
     (out / "pyproject.toml").write_text(_pyproject())
+    seal_questions(out, numbers)      # last: it reads which names the release's other files and notebooks use
     return out
 
 
