@@ -64,6 +64,10 @@ def _pyproject() -> str:
 
 
 STUDENT_SECTIONS = ("Two commands", "Chapters", "Checking your work", "Real data")   # the rest is the instructor's
+SEALED_NOTE = ("CONCEPT and DESIGN answers are sealed in this edition (no file holds them): a check still tells a "
+               "right answer from a wrong one (choices one by one; numbers against a band around the answer, a "
+               "little wider than the graded tolerance) and opens the model answer once yours is right. Your grade "
+               "comes from the course staff's grader, which judges every answer exactly.")
 
 
 def student_readme(numbers: list[int]) -> str:
@@ -87,6 +91,8 @@ def student_readme(numbers: list[int]) -> str:
                 continue                      # the instructor repo's generator marker
             lines.append(line.replace("run the whole test suite (pytest + every notebook via nbval)",
                                       "run every notebook of this edition top to bottom (nbval)"))
+        if title.strip() == "Checking your work":
+            lines += ["", SEALED_NOTE]
         keep.append(f"## {title}\n" + "\n".join(lines).rstrip() + "\n")
     chapters = ", ".join(str(n) for n in sorted(numbers))
     keep.insert(1, f"This edition holds chapter{'s' if len(numbers) > 1 else ''} {chapters}: the notebooks, the "
