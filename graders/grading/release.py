@@ -32,6 +32,7 @@ from pathlib import Path
 
 from graders.core.chapters import READY, by_number
 from graders.grading.seal import seal_questions
+from graders.grading.standins import swap_twins
 
 ROOT = Path(__file__).resolve().parents[2]
 SHARED = ("__init__.py", "__main__.py", "cli.py", "datasets.py", "layers.py")   # graders/*.py
@@ -121,6 +122,7 @@ def student_release(out: str | Path, numbers: list[int] | None = None) -> Path:
     shutil.copytree(ROOT / "data", out / "data", ignore=_ignore)
     shutil.copytree(ROOT / "docs", out / "docs", ignore=_ignore)
     (out / "pyproject.toml").write_text(_pyproject())
+    swap_twins(out)                   # stand-ins that are a solution -> their library twin (graders.grading.standins)
     seal_questions(out, numbers)      # last: it reads which names the release's other files and notebooks use
     return out
 
