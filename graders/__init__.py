@@ -72,4 +72,5 @@ def answer_key(exercise_id: str) -> str:
     """The model answer of an exercise, shown only once it has been checked in this session."""
     if exercise_id not in _last or _last[exercise_id].status == "not_attempted":
         return f"Attempt {exercise_id} and run its check first; the model answer appears after that."
-    return get(exercise_id).explanation
+    ex = get(exercise_id)
+    return ex.explanation or _last[exercise_id].explanation or (ex.reveal(None) if ex.reveal else "")

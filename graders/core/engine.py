@@ -27,6 +27,7 @@ from graders.core.convert import OutputError, as_array, as_mask, as_points, as_p
 from graders.core.report import CaseResult, ExerciseResult
 from graders.core.memo import val
 from graders.core.sandbox import safe_call
+from graders.core.sealed import SealedChoice, SealedNumber
 
 KINDS = ("concept", "code", "debug", "design", "frontier")
 LIBRARIES = ("cv2", "pycolmap", "kornia")    # what graded mode watches (graders.grading.policy, .learner)
@@ -151,6 +152,9 @@ class Exercise:
     target_minutes: float = 0.0
     stub: str = ""
     topics: tuple[str, ...] = ()
+    # A question of the student release, whose model answer is sealed (graders.core.sealed): value -> the
+    # explanation if that answer is right, else a note saying it is sealed. None: `explanation` is shown.
+    reveal: Callable[[Any], str] | None = None
 
     def __post_init__(self):
         assert self.kind in KINDS, f"{self.id}: kind {self.kind!r} is not one of {KINDS}"
@@ -166,7 +170,17 @@ def numeric_question(id: str, title: str, name: str, kind: str, expected: Any, t
     """A CONCEPT/DESIGN question answered by a number or an array (the learner assigns `name`).
 
     expected: the answer, computed in the grader from the seed lesson's numbers (never pasted);
-    metric(answer, expected) -> error in `unit`, passed if <= tol; shape: the answer's shape."""
+    metric(answer, expected) -> error in `unit`, passed if <= tol; shape: the answer's shape.
+    In the student release `expected` is a SealedNumber (graders.core.sealed): a coarse local check."""
+    if isinstance(expected, SealedNumber):
+        sealed_metric = expected.metric(metric, tol)
+
+        def cases(rng: np.random.Generator) -> list[Case]:
+            return [Case("your answer (a coarse local check: graded mode judges it exactly)", (), expected, sealed_metric,
+                         0.0, "entries outside", shape=shape)]
+        return Exercise(id=id, title=title, name=name, kind=kind, points=points, value=True, cases=cases,
+                        hints=list(hints), explanation="", reveal=expected.reveal)
+
     def cases(rng: np.random.Generator) -> list[Case]:
         return [Case("your answer", (), np.asarray(expected, float), metric, tol, unit, shape=shape)]
 
@@ -187,7 +201,8 @@ def choice_question(id: str, title: str, name: str, kind: str, answers: Sequence
 
     answers: the right choice for each scenario; options: the allowed choices; hints: scenario index ->
     the hint shown when that scenario is answered wrongly. Scored by the number of wrong answers (0 to pass)."""
-    answers = [a.strip().lower() for a in answers]
+    sealed = answers if isinstance(answers, SealedChoice) else None    # the student release's (graders.core.sealed)
+    answers = sealed or [a.strip().lower() for a in answers]
     allowed = {o.strip().lower() for o in options}
     listed = ", ".join(f'"{o}"' for o in options)
 
@@ -211,7 +226,8 @@ def choice_question(id: str, title: str, name: str, kind: str, answers: Sequence
     return Exercise(id=id, title=title, name=name, kind=kind, points=points, value=True,
                     cases=lambda rng: [Case(f"{len(answers)} scenarios", (), answers, n_wrong, 0, "wrong",
                                             convert=convert)],
-                    hints=[hint(i, text) for i, text in (hints or {}).items()], explanation=explanation)
+                    hints=[hint(i, text) for i, text in (hints or {}).items()],
+                    explanation="" if sealed else explanation, reveal=sealed.reveal if sealed else None)
 
 
 # ---------------------------------------------------------------- shared case builders
@@ -379,6 +395,8 @@ def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None, hidden: bool 
                      else "failed" if result.score == 0 else "partial")
     if ex.explanation:
         result.explanation = ex.explanation
+    elif ex.reveal is not None and ex.value:
+        result.explanation = ex.reveal(fn_or_value)
     return result
 
 

@@ -6,7 +6,9 @@
 The student edition holds the chosen chapters' notebooks (untouched stubs, no outputs), the `graders`
 package with only those chapters, the data manifest, docs, README, environment and Makefile: the two
 README commands work in it, and it has no `solutions/` (a test installs it in a fresh venv, runs every
-notebook and greps it for reference code).
+notebook and greps it for reference code). Its CONCEPT/DESIGN questions are sealed (graders.grading.seal):
+checked locally against salted hashes, with no answer in its files; graded mode judges them from the
+instructor's repository.
 
 The autograder follows Gradescope's contract: `setup.sh` installs the pinned environment; the bundle
 carries the datasets its chapter grades on (`course_data/`, checked against data/manifest.json; the
@@ -29,6 +31,8 @@ import zipfile
 from pathlib import Path
 
 from graders.core.chapters import READY, by_number
+from graders.grading.seal import seal_questions
+from graders.grading.standins import swap_twins
 
 ROOT = Path(__file__).resolve().parents[2]
 SHARED = ("__init__.py", "__main__.py", "cli.py", "datasets.py", "layers.py")   # graders/*.py
@@ -61,6 +65,10 @@ def _pyproject() -> str:
 
 
 STUDENT_SECTIONS = ("Two commands", "Chapters", "Checking your work", "Real data")   # the rest is the instructor's
+SEALED_NOTE = ("CONCEPT and DESIGN answers are sealed in this edition (no file holds them): a check still tells a "
+               "right answer from a wrong one (choices one by one; numbers against a band around the answer, a "
+               "little wider than the graded tolerance) and opens the model answer once yours is right. Your grade "
+               "comes from the course staff's grader, which judges every answer exactly.")
 
 
 def student_readme(numbers: list[int]) -> str:
@@ -84,6 +92,8 @@ def student_readme(numbers: list[int]) -> str:
                 continue                      # the instructor repo's generator marker
             lines.append(line.replace("run the whole test suite (pytest + every notebook via nbval)",
                                       "run every notebook of this edition top to bottom (nbval)"))
+        if title.strip() == "Checking your work":
+            lines += ["", SEALED_NOTE]
         keep.append(f"## {title}\n" + "\n".join(lines).rstrip() + "\n")
     chapters = ", ".join(str(n) for n in sorted(numbers))
     keep.insert(1, f"This edition holds chapter{'s' if len(numbers) > 1 else ''} {chapters}: the notebooks, the "
@@ -112,6 +122,8 @@ def student_release(out: str | Path, numbers: list[int] | None = None) -> Path:
     shutil.copytree(ROOT / "data", out / "data", ignore=_ignore)
     shutil.copytree(ROOT / "docs", out / "docs", ignore=_ignore)
     (out / "pyproject.toml").write_text(_pyproject())
+    swap_twins(out)                   # stand-ins that are a solution -> their library twin (graders.grading.standins)
+    seal_questions(out, numbers)      # last: it reads which names the release's other files and notebooks use
     return out
 
 
