@@ -15,6 +15,18 @@ SEEDS = [0, 1, 2]
 MUTANTS = _PART_A + _PART_B
 
 
+def cv_flow_tools_devkit(flo, flow, I, flow_gt):
+    """9.9 from OpenCV (.flo read/write, remap: ch9.cv_flow_tools) with EPE and Fl written as KITTI 2015's devkit
+    computes them (flow_error: E = |f - f_gt|, outlier if E > 3 px and E / |f_gt| > 5 %), not by the grader's
+    gt_epe / gt_fl, which produce the cases' expected values."""
+    out = ch9.cv_flow_tools(flo, flow, I, flow_gt)
+    E = np.sqrt(np.sum((np.asarray(flow, float) - flow_gt) ** 2, axis=-1))
+    F_mag = np.sqrt(np.sum(np.asarray(flow_gt, float) ** 2, axis=-1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        outlier = (E > 3) & (E / F_mag > 0.05)
+    return {**out, "epe": float(E.mean()), "fl": float(outlier.mean())}
+
+
 def scipy_occlusion_mask(w_f, w_b, alpha=0.01, beta=0.5):
     """9.14 with scipy's bilinear interpolation (map_coordinates, order 1) in place of the course's."""
     H, W = w_f.shape[:2]
@@ -71,7 +83,7 @@ def scipy_corr_lookup(corr, coords, radius):
     return Lookup.apply(corr)
 
 
-LIBRARY = [Library("9.9", "cv_flow_tools", ch9.cv_flow_tools),
+LIBRARY = [Library("9.9", "cv_flow_tools + KITTI devkit EPE/Fl", cv_flow_tools_devkit),
            Library("9.10", "cv_lucas_kanade", ch9.cv_lucas_kanade),
            Library("9.11", "cv_pyramidal_lk", ch9.cv_pyramidal_lk),
            Library("9.13", "cv_dense_flow", ch9.cv_dense_flow),
