@@ -123,9 +123,11 @@ PLANE_SIZE = (192, 144)          # (W, H): a 2-8 px motion needs 3 pyramid level
 GRADED_CHAIRS = ("0000003", "0000004")
 
 
-def gt_best_translation(flow: np.ndarray, valid: np.ndarray, iters: int = 100) -> tuple[np.ndarray, float]:
+def gt_best_translation(flow: np.ndarray, valid: np.ndarray, iters: int = 30) -> tuple[np.ndarray, float]:
     """The constant flow t (2,) of least mean EPE over the valid pixels, and that EPE: the geometric median of the
-    flow vectors (Weiszfeld's iteration from the coordinate-wise median)."""
+    flow vectors (Weiszfeld's iteration from the coordinate-wise median). 30 iterations: on the planes the EPE is
+    then within 1e-13 px of 300 iterations'; on FlyingChairs 3/4 of the pixels share the background's vector, the
+    median starts on it and stays (Nelder-Mead on the mean EPE from 0.3 px away finds the same t to 1e-6 px)."""
     X = np.asarray(flow, float)[valid].reshape(-1, 2)
     t = np.median(X, 0)
     for _ in range(iters):
