@@ -1,10 +1,12 @@
-"""9.24's CPU experiment: RAFT's iterative lookup, with a hand-made update in place of the learned GRU.
+"""9.24's CPU experiment: RAFT's iterative lookup, with a hand-made update in place of the learned GRU (no
+training, no model: the name says which idea it shows, not that a RAFT is built here).
 
 Features: each pixel's 5 x 5 patch, normalised (zero mean, unit norm), at full resolution of a 40 x 40
 pair; all-pairs correlation once; then k iterations of: look up the (2r + 1)² correlations around where
 the current flow points (the learner's `corr_lookup`, r = 2) and step to their soft-argmax. One iteration
-sees only ±r px, so large motions need several — RAFT's reason for iterating, shown without training
-(a trained GRU learns a far better step, and RAFT trains one in hours on a GPU, not seconds on a CPU).
+sees only ±r px, so large motions need several — RAFT's reason for iterating, shown without training.
+Nothing here is trained and there is no model: RAFT learns the step (a GRU with context features) on FlyingChairs then
+FlyingThings3D, on GPUs (Teed & Deng, ECCV 2020, §4); this module only iterates the learner's lookup.
 Data: random smooth textures warped by random smooth flows, exact by construction (I1(x) = T(x + w(x)),
 I2 = T). Compared by EPE with the zero flow and OpenCV's Farneback on the same pairs.
 """

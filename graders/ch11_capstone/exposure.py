@@ -19,7 +19,10 @@ import numpy as np
 from graders.kit import corridor
 from graders.core.engine import Case, Exercise, Hint, register
 
+from .draws import memo_draw
 
+
+@memo_draw()
 def exposure_problem(rng: np.random.Generator, n: int = 3) -> dict:
     """before / now: n left images (uint8, 240 x 320) of the same frames, clean and after the firmware change;
     truth (gain, L)."""

@@ -19,9 +19,12 @@ from graders.kit import corridor
 from graders.core.engine import Case, Exercise, Hint, like, register
 from graders.oracles.features import cv_fast
 
+from .draws import memo_draw
+
 W, H, CELL = 320, 240, 16
 
 
+@memo_draw()
 def smudge_problem(rng: np.random.Generator, n: int = 5, min_hidden: float = 0.05) -> dict:
     """before / now: lists of n (N, 2) keypoint arrays (x, y) of the same frames, clean and smudged; truth
     (cx, cy, r) px; the smudge lies inside the image (r 40-80 px, 8 px from every border) and hides at least

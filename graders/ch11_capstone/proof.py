@@ -87,6 +87,13 @@ def baseline(seed: int = 0) -> dict:
     return {name: (max if bad > 0 else min)(r[name] for r in runs) for _, name, _, bad in METRICS}
 
 
+@lru_cache(maxsize=16)
+def _faulty(exercise_id: str, seed: int) -> dict:
+    """The faulted route's medians: the same for every fix of this row and seed, so computed once (prove_fix hands
+    out copies: a caller that edits its table cannot change another proof's)."""
+    return medians(run_pipeline(sequence(exercise_id, seed), None, FRAMES))
+
+
 def medians(run: dict) -> dict:
     """{metric: median over FRAMES} of a run_pipeline result (NaN where nothing was measured)."""
     a, b = FRAMES
@@ -127,11 +134,12 @@ def debug_inputs(exercise_id: str, seed: int = 0) -> tuple:
         clean = _clean(seed)[0]
         return ([cv_fast(f["left"], 20, True) for f in clean["frames"][a:b]],
                 [cv_fast(f["left"], 20, True) for f in seq["frames"][a:b]], (seq["height"], seq["width"]))
+    # Copies: the sequences are memoised, and a function that edits its images in place must not change the runs.
     if exercise_id == "11.12":
-        return ([f["left"] for f in seq["frames"][a:a + 3]],)
+        return ([f["left"].copy() for f in seq["frames"][a:a + 3]],)
     if exercise_id == "11.13":
         clean = _clean(seed)[0]
-        return [f["left"] for f in clean["frames"][a:a + 3]], [f["left"] for f in seq["frames"][a:a + 3]]
+        return [f["left"].copy() for f in clean["frames"][a:a + 3]], [f["left"].copy() for f in seq["frames"][a:a + 3]]
     raise KeyError(f"no proof for {exercise_id!r}; DEBUG rows: {', '.join(FAULT_OF)}")
 
 
@@ -201,8 +209,7 @@ def prove_fix(exercise_id: str, fix, seed: int = 0, how: str = "settings") -> di
     "out": {run: [metrics out of range]}}."""
     if callable(fix):
         fix = fix(*debug_inputs(exercise_id, seed))
-    clean = _clean(seed)[1]
-    runs = {"clean": clean, "faulty": medians(run_pipeline(sequence(exercise_id, seed), None, FRAMES)),
+    runs = {"clean": dict(_clean(seed)[1]), "faulty": dict(_faulty(exercise_id, seed)),
             "fixed": medians(_fixed_run(exercise_id, fix, seed, how))}
     line = baseline(seed)
     out = {k: [name for _, name, _, _ in METRICS if out_of_range(name, runs[k][name], line[name])]

@@ -70,3 +70,23 @@ def test_fault_runs_amplify_downstream(seed):
          for s in d["stages"]}
     assert max(z, key=z.get) != "calibration"
     assert ch11.gt_first_faulty_stage(d["stages"], d["observed"], d["baseline"]) == "calibration"
+
+
+def test_a_memoised_draw_is_the_fresh_draw_and_cannot_be_poisoned():
+    # graders/ch11_capstone/draws.py: 11.11's and 11.13's problems are drawn once per rng state and process; a hit
+    # must equal a fresh draw, leave the rng where the fresh draw leaves it, and hand out a copy.
+    from graders.ch11_capstone.draws import memo_draw
+
+    @memo_draw(maxsize=2)
+    def problem(rng, n=3):
+        return {"x": rng.normal(size=n), "k": int(rng.integers(10))}
+
+    first_rng, again_rng = np.random.default_rng(7), np.random.default_rng(7)
+    first = problem(first_rng)
+    first["x"][:] = 1e9                                   # a caller that edits its problem in place
+    again = problem(again_rng)
+    fresh_rng = np.random.default_rng(7)
+    fresh = problem.__wrapped__(fresh_rng)
+    assert np.array_equal(again["x"], fresh["x"]) and again["k"] == fresh["k"]
+    assert again_rng.random() == fresh_rng.random()       # the rng moved on exactly as a fresh draw moves it
+    assert len(problem.cache) == 1
