@@ -18,8 +18,8 @@ import numpy as np
 
 from graders.kit import corridor
 from graders.core.engine import Case, Exercise, Hint, register
+from graders.core.memo import memo_draw
 
-from .draws import memo_draw
 
 
 @memo_draw()

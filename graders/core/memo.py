@@ -9,8 +9,10 @@ their oracles; every grade gets deep copies, so a learner's function cannot chan
 from __future__ import annotations
 
 import copy
+import functools
 import hashlib
 import os
+from collections import OrderedDict
 from typing import Any, Callable, Iterator
 
 import numpy as np
@@ -87,3 +89,30 @@ def cached(cases_fn: Callable) -> Callable:
     cases.__doc__ = cases_fn.__doc__
     cases.__wrapped__ = cases_fn
     return cases
+
+
+def memo_draw(maxsize: int = 12) -> Callable[[Callable], Callable]:
+    """Memoise a problem generator `problem(rng, *args, **kwargs)` whose result depends only on the rng's state
+    and its arguments (finer than `cached`: one problem of a draw, e.g. 11.11's corridor route rendered twice per
+    case). The cache holds its own deep copy and hands out deep copies, so a caller that edits its problem (a
+    learner's function editing its arguments in place) cannot change another grade's; the rng is left where a
+    fresh draw leaves it."""
+    def decorate(problem: Callable) -> Callable:
+        cache: OrderedDict = OrderedDict()
+
+        @functools.wraps(problem)
+        def draw(rng: np.random.Generator, *args, **kwargs):
+            key = (repr(rng.bit_generator.state), args, tuple(sorted(kwargs.items())))
+            if key in cache:
+                cache.move_to_end(key)
+                out, state = cache[key]
+                rng.bit_generator.state = state
+                return copy.deepcopy(out)
+            out = problem(rng, *args, **kwargs)
+            cache[key] = (copy.deepcopy(out), rng.bit_generator.state)
+            while len(cache) > maxsize:
+                cache.popitem(last=False)
+            return out
+        draw.cache = cache               # for tests
+        return draw
+    return decorate

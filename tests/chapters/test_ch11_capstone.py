@@ -75,7 +75,7 @@ def test_fault_runs_amplify_downstream(seed):
 def test_a_memoised_draw_is_the_fresh_draw_and_cannot_be_poisoned():
     # graders/ch11_capstone/draws.py: 11.11's and 11.13's problems are drawn once per rng state and process; a hit
     # must equal a fresh draw, leave the rng where the fresh draw leaves it, and hand out a copy.
-    from graders.ch11_capstone.draws import memo_draw
+    from graders.core.memo import memo_draw
 
     @memo_draw(maxsize=2)
     def problem(rng, n=3):
