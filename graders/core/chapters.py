@@ -82,9 +82,9 @@ CHAPTERS: tuple[Chapter, ...] = (
             "projection, tiled compositing and a differentiable splatting fit"),
     Chapter(9, "flow", "Optical flow and tracking",
             "flow tools (.flo, warping, EPE/Fl), vectorised Lucas-Kanade with the eigenvalue test, pyramidal LK "
-            "(against OpenCV), Horn-Schunck, a coarse-to-fine dense flow graded on FlyingChairs against Farneback, "
-            "occlusion by forward-backward consistency, joint point tracking, scene flow, RAFT's correlation lookup "
-            "(iterated by a hand-made update)"),
+            "(against OpenCV), Horn-Schunck, a coarse-to-fine dense flow graded on FlyingChairs against Farneback "
+            "and the best single translation, occlusion by forward-backward consistency, joint point tracking, "
+            "scene flow, RAFT's correlation lookup (iterated by a hand-made update)"),
     Chapter(10, "large_scale", "Large-scale and learned 3D",
             "a vocabulary tree with tf-idf and an inverted file (against brute-force matching), Sim(3) RANSAC (beside "
             "pycolmap), merging sub-reconstructions, DUSt3R-style global alignment of pointmaps, a Dask map/reduce "
