@@ -229,7 +229,8 @@ def nerf_rows(repeat: int = 3, steps: int = 400) -> list[dict]:
     sc = nerf_scene(np.random.default_rng(0))
     O, D, _ = sc["test"]
     rows = []
-    samples = {"8.13 tiny NeRF, ours (through volume_render)": "12 coarse samples, then 24 (coarse + 12 fine) in the fine pass",
+    samples = {"8.13 tiny NeRF, ours (through volume_render)":
+               "12 coarse samples, then 24 (coarse + 12 fine) in the fine pass",
                "plain-torch baseline (grader's stand-in)": "24 samples (one pass)"}
     for name, trainer in (("8.13 tiny NeRF, ours (through volume_render)", train_tiny_nerf),
                           ("plain-torch baseline (grader's stand-in)", gt_train_tiny_nerf)):

@@ -187,7 +187,8 @@ def gt_train_tiny_nerf(rays_o, rays_d, rgb, near, far, steps=STEPS, seed=0, L=4,
         return s.numpy(), col.numpy()
 
     def render(rays_o, rays_d, t, u):    # the fine pass of the trained field (this stand-in trains the coarse only)
-        return fine_render(field, *(np.asarray(a, float) for a in (rays_o, rays_d, t)), float(far), np.asarray(u, float))
+        o, d, t, u = (np.asarray(a, float) for a in (rays_o, rays_d, t, u))
+        return fine_render(field, o, d, t, float(far), u)
     return field, render
 
 
@@ -210,7 +211,8 @@ def _convert(out, case):
     except Exception as exc:
         raise OutputError(f"render(rays_o, rays_d, t, u) failed: {type(exc).__name__}: {exc}") from None
     if fine.shape != (len(fo), 3) or not np.isfinite(fine).all():
-        raise OutputError(f"render(rays_o, rays_d, t, u) returned {fine.shape} (or non-finite); expected ({len(fo)}, 3)")
+        raise OutputError(f"render(rays_o, rays_d, t, u) returned {fine.shape} (or non-finite); "
+                          f"expected ({len(fo)}, 3)")
     O, D, _ = i["test"]
     V, R = O.shape[:2]
     img = render_field(out, O.reshape(-1, 3), D.reshape(-1, 3), i["near"], i["far"]).reshape(V, i["W"], i["W"], 3)
@@ -237,8 +239,9 @@ def _tiny_nerf_cases(rng: np.random.Generator):
     # the fine pass is judged on 200 held-out rays at the grader's stratified coarse depths and quantiles
     k = rng.choice(O.shape[0] * O.shape[1], 200, replace=False)
     edges = np.linspace(sc["near"], sc["far"], N_COARSE + 1)
-    fine_rays = (O.reshape(-1, 3)[k], D.reshape(-1, 3)[k], edges[:-1] + rng.uniform(0, 1, (200, N_COARSE)) * np.diff(edges),
-                 (np.arange(N_FINE) + rng.uniform(0, 1, (200, N_FINE))) / N_FINE)
+    t_coarse = edges[:-1] + rng.uniform(0, 1, (200, N_COARSE)) * np.diff(edges)
+    u = (np.arange(N_FINE) + rng.uniform(0, 1, (200, N_FINE))) / N_FINE
+    fine_rays = (O.reshape(-1, 3)[k], D.reshape(-1, 3)[k], t_coarse, u)
     info = dict(sc, sharp_gt=_sharpness(GT), box=rng.uniform(-1.5, 1.5, (4000, 3)), probe=n,
                 probe_gt=0.5 + 0.45 * np.sin(n @ sc["omega"].T + sc["phi"]), fine_rays=fine_rays)
 
@@ -291,6 +294,9 @@ TINY_NERF_HINTS = [
     Hint("your fine pass uses the union of t and t_fine unsorted: sort the depths before rendering (δ_i = t_{i+1} − t_i "
          "must be ≥ 0, and T_i is a product over the samples in front).",
          lambda c, o: c.key == "fine" and _fine_error(o, c.info, "unsorted") <= FINE_TOL),
+    Hint("your fine pass does not match the grader's on your own field: check its quadrature (T_i = Π_{j<i} (1 − α_j) "
+         "is exclusive (T_0 = 1), α_i = 1 − exp(−σ_i δ_i), the last δ ends at far) and its inverse CDF (8.12's "
+         "t_fine at the quantiles u, the coarse weights as the PDF).", lambda c, o: c.key == "fine"),
     Hint("σ is negative somewhere: the density head needs a ReLU or softplus (a negative σ gives α < 0 and T > 1, "
          "light created from nothing).", lambda c, o: c.key == "density" or np.any(o["sigma_box"] < 0)),
     Hint(lambda c, o: f"the held-out views are blurred (mean gradient {_sharpness(o['images']):.3f} vs the truth's "
