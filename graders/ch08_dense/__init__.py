@@ -21,7 +21,7 @@ __all__: list[str] = ["CAUSES", "broken_mvs", "debug_case", "debug_truth", "fusi
                       "sweep_region", "cost_volume", "cv_block_matching", "cv_sgbm", "gt_block_matching", "gt_sgm", "judged_region",
                       "motorcycle", "motorcycle_crop", "stereo_scores", "synthetic_pair", "wta_lr"]
 
-# neural (8.4-8.7, 8.12-8.16, 8.18-8.23, 8.25)
+# neural (8.4-8.7, 8.12-8.16, 8.18-8.23)
 from . import nerf  # noqa: F401,E402 (register 8.12)
 from .nerf import analytic_render, gt_volume_render, ray_batch  # noqa: E402
 __all__ += ["analytic_render", "gt_volume_render", "ray_batch"]

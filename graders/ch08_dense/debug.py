@@ -61,16 +61,21 @@ def debug_holes(rng: np.random.Generator) -> tuple[dict, dict]:
         s = mvs.mvs_scene(rng, n_views=3, blank=True)
         region = mvs.sweep_region(s["K_ref"], s["Ks"], s["Rs"], s["ts"], s["depths"], s["I_ref"].shape, 2)
         centre = _blank_centre(s)
-        if centre.sum() >= 150 and (centre & region).sum() >= 0.95 * centre.sum():
+        if centre.sum() < 150 or (centre & region).sum() < 0.95 * centre.sum():
+            continue
+        blank = centre & region
+        case = {k: s[k] for k in ("I_ref", "K_ref", "images", "Ks", "Rs", "ts", "depths")}
+        run = broken_mvs(case)
+        case.update({"depth": run["depth"], "log": run["log"], "metrics": run["metrics"],
+                     "settings": {"r": 2, "uniqueness": 1.05}, "causes": dict(CAUSES)})
+        gt_share = _share(gt_fill(case), s["Z_gt"], blank)
+        # ... and those whose frame the sweep itself got wrong: the grader's own fill from it reaches < 80 % (fairness
+        # seed 2054643047: 8 % and 58 %, the reference 8 % and 27 %; no fill from the rim can do better there)
+        if gt_share >= 0.8:
             break
-    blank = centre & region
-    case = {k: s[k] for k in ("I_ref", "K_ref", "images", "Ks", "Rs", "ts", "depths")}
-    run = broken_mvs(case)
-    case.update({"depth": run["depth"], "log": run["log"], "metrics": run["metrics"],
-                 "settings": {"r": 2, "uniqueness": 1.05}, "causes": dict(CAUSES)})
     truth = {"cause": "textureless", "Z_gt": s["Z_gt"], "region": region, "blank": blank,
              "broken_textured": _share(run["depth"], s["Z_gt"], region & ~blank)}
-    truth["bar"] = min(0.8, _share(gt_fill(case), s["Z_gt"], blank) - 0.15)
+    truth["bar"] = min(0.8, gt_share - 0.15)
     return case, truth
 
 

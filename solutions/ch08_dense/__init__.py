@@ -18,7 +18,7 @@ __all__ = list(_questions) + ["block_matching", "census_volume", "sad_volume", "
                               "bilinear", "plane_homography", "plane_sweep", "sweep_volume", "fuse_depth_maps",
                               "fill_holes_with_planes", "fix_textureless_holes"]
 
-# neural (8.4-8.7, 8.12-8.16, 8.18-8.23, 8.25)
+# neural (8.4-8.7, 8.12-8.16, 8.18-8.23)
 from .nerf import positional_encoding, train_tiny_nerf, volume_render  # noqa: E402
 __all__ += ["volume_render", "positional_encoding", "train_tiny_nerf"]
 from .splat import project_gaussians, quat_to_R, rasterize  # noqa: E402

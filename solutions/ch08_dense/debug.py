@@ -23,13 +23,16 @@ def _robust_plane(u, v, w, rng=None, rounds=5):
 def fill_holes_with_planes(Z: np.ndarray, valid: np.ndarray, holes: np.ndarray, rim: int = 4,
                            seed: int = 0) -> np.ndarray:
     """Fill each connected region of `holes` with the plane fitted robustly, in inverse depth, to the `valid`
-    pixels on its rim (`rim` px wide). Regions with too few rim pixels take their rim's median depth."""
+    pixels on its rim (a square band `rim` px wide). Regions with too few rim pixels take their rim's median depth."""
     rng = np.random.default_rng(seed)
     out = np.where(holes, np.nan, Z)
     labels, n = ndimage.label(holes)
     for k in range(1, n + 1):
         hole = labels == k
-        ring = valid & ndimage.binary_dilation(hole, iterations=rim)
+        # a square band `rim` px wide (3x3 steps): a diamond of the same width (cross steps) drops the rim's corners,
+        # and on a poster whose frame is weakly textured (fairness seed 2523382945) filled 64 % of the blank centre
+        # where the square band fills 90 %
+        ring = valid & ndimage.binary_dilation(hole, structure=np.ones((3, 3), bool), iterations=rim)
         v, u = np.nonzero(ring)
         if len(u) < 10:
             out[hole] = np.median(Z[ring]) if len(u) else np.nan

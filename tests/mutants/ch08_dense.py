@@ -313,7 +313,7 @@ MUTANTS += [
     ("8.17", "blur everything", holes_blur_everything, None),
 ]
 
-# neural (8.4-8.7, 8.12-8.16, 8.18-8.23, 8.25)
+# neural (8.4-8.7, 8.12-8.16, 8.18-8.23)
 
 # ----------------------------------------------------------------- 8.12 volume rendering + inverse CDF
 # One small numpy renderer written here (product form of T, searchsorted inverse CDF), one mistake each.

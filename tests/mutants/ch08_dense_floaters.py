@@ -1,7 +1,8 @@
 """Chapter 8 mutants of 8.19 (3DGS floaters), appended to ch08_dense.MUTANTS.
 
 Each is a standalone wrong repair (none uses the grader's renderer, which produces the expected images): the
-wrong diagnosis, a knob turned too little or too far, or the classic "prune the large ones" rule.
+wrong diagnosis, a knob turned too little, too far, or just far enough for a scene whose floaters are all fainter
+than its surface (o < 0.5: here it deletes the semi-transparent pane too), or the classic "prune the large ones" rule.
 """
 from __future__ import annotations
 
@@ -45,6 +46,12 @@ def floaters_prune_high(case):
     return _keep(case, case["gaussians"]["opacity"] >= 0.9)
 
 
+def floaters_prune_half(case):
+    """The knob: raises the pruning threshold to o < 0.5. On a scene whose floaters are all fainter than its
+    surface this removes exactly them; here it deletes the semi-transparent glass pane with them."""
+    return _keep(case, case["gaussians"]["opacity"] >= 0.5)
+
+
 def floaters_unchanged(case):
     """Right cause, the colleague's Gaussians handed back."""
     return {"cause": "floaters", "gaussians": case["gaussians"]}
@@ -55,5 +62,6 @@ MUTANTS: list[tuple] = [
     ("8.19", "default pruning only", floaters_default_prune, "floaters remain"),
     ("8.19", "prunes large Gaussians", floaters_prune_large, "floaters remain"),
     ("8.19", "prunes at 0.9", floaters_prune_high, "removed surface Gaussians"),
+    ("8.19", "prunes at 0.5 (the knob)", floaters_prune_half, "removed surface Gaussians"),
     ("8.19", "unchanged", floaters_unchanged, "floaters remain"),
 ]

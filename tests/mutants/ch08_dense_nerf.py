@@ -1,19 +1,60 @@
 """Chapter 8 mutants of 8.13 (the tiny NeRF), appended to ch08_dense.MUTANTS.
 
-One small trainer written here (an MLP on γ(X), its own quadrature in product form), one mistake each;
-the no-encoding mutant is the course's reference with L = 0 (the grader's stand-in is a separate trainer).
+One small trainer written here (an MLP on γ(X), its own quadrature in product form, its own inverse CDF for the
+hierarchical pass), one mistake each; the no-encoding mutant is the course's reference with L = 0 (the grader's
+stand-in is a separate trainer, and the fine pass that judges is the grader's own numpy code). The three fine-pass
+mistakes train through their wrong pass and hand it back as `render`: the fine samples computed and thrown away
+(what the course's own reference once did), the fine samples rendered alone, the union left unsorted.
 """
 from __future__ import annotations
 
 import numpy as np
 
 
+def _render(sigma, col, t, far, transmittance="exclusive"):
+    """Product-form quadrature: (weights (B, S), colour (B, 3)); the last interval ends at far."""
+    import torch
+    delta = torch.diff(torch.cat([t, torch.full_like(t[:, :1], float(far))], 1), dim=1)
+    a = 1 - torch.exp(-sigma * delta)
+    if transmittance == "inclusive":
+        T = torch.cumprod(1 - a, 1)
+    else:
+        T = torch.cumprod(torch.cat([torch.ones_like(a[:, :1]), 1 - a[:, :-1]], 1), 1)
+    return T * a, ((T * a)[..., None] * col).sum(1)
+
+
+def _inverse_cdf(w, t, far, u):
+    """Depths at quantiles u of the piecewise-constant density w / Σw on the intervals [t_i, t_{i+1}]."""
+    import torch
+    edges = torch.cat([t, torch.full_like(t[:, :1], float(far))], 1)
+    w = w.detach() + 1e-12
+    cdf = torch.cat([torch.zeros_like(w[:, :1]), torch.cumsum(w, 1) / w.sum(1, keepdim=True)], 1)
+    j = torch.clamp(torch.searchsorted(cdf.contiguous(), u.contiguous(), right=True) - 1, 0, w.shape[1] - 1)
+    c0, c1 = torch.gather(cdf, 1, j), torch.gather(cdf, 1, j + 1)
+    e0, e1 = torch.gather(edges, 1, j), torch.gather(edges, 1, j + 1)
+    return e0 + (u - c0) / torch.clamp(c1 - c0, min=1e-12) * (e1 - e0)
+
+
+def _passes(F, o, d, t, far, u, fine="union", transmittance="exclusive"):
+    """(C_coarse, C_fine) of rays o, d; `fine` says which depths the fine pass renders."""
+    import torch
+    sigma, col = F(o[:, None] + t[..., None] * d[:, None])
+    w, C_c = _render(sigma, col, t, far, transmittance)
+    if fine == "coarse":                    # the fine samples thrown away
+        return C_c, C_c
+    tf = _inverse_cdf(w, t, far, u)
+    ts = {"union": torch.sort(torch.cat([t, tf], 1), 1).values, "fine": torch.sort(tf, 1).values,
+          "unsorted": torch.cat([t, tf], 1)}[fine]
+    sigma, col = F(o[:, None] + ts[..., None] * d[:, None])
+    return C_c, _render(sigma, col, ts, far, transmittance)[1]
+
+
 def _train(rays_o, rays_d, rgb, near, far, steps, seed, *, density="softplus", transmittance="exclusive",
-           train_steps=None):
+           train_steps=None, fine="union"):
     import torch
     torch.manual_seed(int(seed))
     o, d, c = (torch.as_tensor(np.asarray(a), dtype=torch.float32) for a in (rays_o, rays_d, rgb))
-    L, S, B = 4, 24, 128
+    L, Nc, Nf, B = 4, 12, 12, 128
     net = torch.nn.Sequential(torch.nn.Linear(3 + 6 * L, 48), torch.nn.ReLU(), torch.nn.Linear(48, 48),
                               torch.nn.ReLU(), torch.nn.Linear(48, 4))
     with torch.no_grad():
@@ -27,21 +68,16 @@ def _train(rays_o, rays_d, rgb, near, far, steps, seed, *, density="softplus", t
         return sigma, torch.sigmoid(h[..., 1:])
 
     opt = torch.optim.Adam(net.parameters(), lr=1e-2)
-    bins = torch.linspace(float(near), float(far), S + 1)
+    bins = torch.linspace(float(near), float(far), Nc + 1)
     n = int(steps if train_steps is None else train_steps)
     for k in range(n):
         for group in opt.param_groups:      # the spec's schedule: 1e-2, annealed to 1e-3 over the last quarter
             group["lr"] = 1e-2 * (1.0 - 0.9 * max(0.0, (k - 0.75 * n) / (0.25 * n)))
         i = torch.randint(0, len(o), (B,))
-        t = bins[:-1] + torch.rand(B, S) * (bins[1] - bins[0])
-        sigma, col = F(o[i, None] + t[..., None] * d[i, None])
-        delta = torch.diff(torch.cat([t, torch.full_like(t[:, :1], float(far))], 1), dim=1)
-        a = 1 - torch.exp(-sigma * delta)
-        if transmittance == "inclusive":
-            T = torch.cumprod(1 - a, 1)
-        else:
-            T = torch.cumprod(torch.cat([torch.ones_like(a[:, :1]), 1 - a[:, :-1]], 1), 1)
-        loss = ((((T * a)[..., None] * col).sum(1) - c[i]) ** 2).mean()
+        t = bins[:-1] + torch.rand(B, Nc) * (bins[1] - bins[0])
+        u = (torch.arange(Nf) + torch.rand(B, Nf)) / Nf
+        C_c, C_f = _passes(F, o[i], d[i], t, far, u, fine, transmittance)
+        loss = ((C_c - c[i]) ** 2).mean() + ((C_f - c[i]) ** 2).mean()      # NeRF's eq. 6: both passes
         opt.zero_grad()
         loss.backward()
         opt.step()
@@ -50,7 +86,12 @@ def _train(rays_o, rays_d, rgb, near, far, steps, seed, *, density="softplus", t
         with torch.no_grad():
             s, col = F(torch.as_tensor(np.asarray(X), dtype=torch.float32))
         return s.numpy(), col.numpy()
-    return field
+
+    def render(rays_o, rays_d, t, u):
+        with torch.no_grad():
+            o_, d_, t_, u_ = (torch.as_tensor(np.asarray(a), dtype=torch.float32) for a in (rays_o, rays_d, t, u))
+            return _passes(F, o_, d_, t_, far, u_, fine, transmittance)[1].numpy()
+    return field, render
 
 
 def nerf_no_encoding(rays_o, rays_d, rgb, near, far, steps=400, seed=0):
@@ -74,9 +115,27 @@ def nerf_few_steps(rays_o, rays_d, rgb, near, far, steps=400, seed=0):
     return _train(rays_o, rays_d, rgb, near, far, steps, seed, train_steps=25)
 
 
+def nerf_fine_thrown_away(rays_o, rays_d, rgb, near, far, steps=400, seed=0):
+    """The fine samples computed and thrown away: the 'fine' pass is the coarse render."""
+    return _train(rays_o, rays_d, rgb, near, far, steps, seed, fine="coarse")
+
+
+def nerf_fine_only(rays_o, rays_d, rgb, near, far, steps=400, seed=0):
+    """The fine pass renders the inverse-CDF samples alone, not their union with the coarse ones."""
+    return _train(rays_o, rays_d, rgb, near, far, steps, seed, fine="fine")
+
+
+def nerf_fine_unsorted(rays_o, rays_d, rgb, near, far, steps=400, seed=0):
+    """The fine pass concatenates the coarse and fine depths without sorting them."""
+    return _train(rays_o, rays_d, rgb, near, far, steps, seed, fine="unsorted")
+
+
 MUTANTS: list[tuple] = [
     ("8.13", "no positional encoding", nerf_no_encoding, "positional encoding"),
     ("8.13", "sigma without softplus", nerf_raw_sigma, "needs a ReLU or softplus"),
     ("8.13", "T_i includes sample i", nerf_inclusive_T, "exclusive (T_0 = 1)"),
     ("8.13", "25 steps only", nerf_few_steps, None),
+    ("8.13", "fine samples thrown away", nerf_fine_thrown_away, "thrown away"),
+    ("8.13", "fine samples rendered alone", nerf_fine_only, "fine samples alone"),
+    ("8.13", "union of samples unsorted", nerf_fine_unsorted, "unsorted"),
 ]
