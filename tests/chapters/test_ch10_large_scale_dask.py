@@ -38,21 +38,21 @@ run_pipeline(paths, pairs, ch10.PipelineStages(latency_s=0.3), sys.argv[4], addr
 def test_reference_pipeline_on_a_multi_process_cluster(tmp_path):
     address, scheduler, workers = start_cluster(tmp_path, 2)
     try:
-        # Two runs at once on one scheduler, different images: each gets its own rows.
+        # Two runs at once on one scheduler, different images, from two client processes (as two users would run
+        # them; two clients in threads of one process share dask's default-client state): each gets its own rows.
+        import json
         problems = [_problem(seed, tmp_path / f"run{seed}", 6) for seed in (1, 2)]
-        rows = [None, None]
-
-        def one(k):
-            paths, pairs, _ = problems[k]
-            rows[k] = run_pipeline(paths, pairs, ch10.PipelineStages(latency_s=0.05), str(tmp_path / f"run{k + 1}.json"),
-                                   address=address, batch_size=2)
-        threads = [threading.Thread(target=one, args=(k,)) for k in (0, 1)]
-        for t in threads:
-            t.start()
-        for t in threads:
-            t.join(600)
+        outs = [str(tmp_path / f"run{k + 1}.json") for k in (0, 1)]
+        clients = [subprocess.Popen([sys.executable, "-c", CLIENT, address, json.dumps(paths), json.dumps(pairs), out],
+                                    cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)), start_new_session=True,
+                                    stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                   for (paths, pairs, _), out in zip(problems, outs)]
+        for client in clients:
+            _, err = client.communicate(timeout=600)
+            assert client.returncode == 0, err.decode()[-2000:]
         for k in (0, 1):
-            assert np.array_equal(rows[k], problems[k][2]), k
+            with open(outs[k]) as f:
+                assert np.array_equal(np.asarray(json.load(f)["pairs"]), problems[k][2]), k
 
         # A worker killed while it runs a batch of pairs: the scheduler reruns the batch on the other one.
         paths, pairs, expected = _problem(3, tmp_path / "kill", 7)
@@ -69,7 +69,6 @@ def test_reference_pipeline_on_a_multi_process_cluster(tmp_path):
 
         # A client killed once it has checkpointed a batch; run again, it verifies only what is left.
         out = str(tmp_path / "crash.json")
-        import json
         client = subprocess.Popen([sys.executable, "-c", CLIENT, address, json.dumps(paths), json.dumps(pairs), out],
                                   cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)), start_new_session=True,
                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
