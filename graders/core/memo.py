@@ -61,7 +61,7 @@ def cached(cases_fn: Callable) -> Callable:
         memo: dict = {}          # one deepcopy memo per grade: cases of one draw keep their shared objects
         i = 0
         while True:
-            made, rest, end = cache[key]
+            made, rest, _ = cache[key]
             if i == len(made):
                 case = next(rest, None) if rest is not None else None
                 if case is None:

@@ -6,8 +6,8 @@ right answer.
 The assertions are `grader_checks`'s; the data is each chapter's `tests/mutants/chNN_<stem>_contract.py`:
 MUTANTS (the whole chapter's catalogue), LIBRARY (`grader_checks.Library` rows), SEEDS (the fixed seeds, [0, 1, 2]
 unless the chapter says otherwise), SEEDS_FOR (fewer seeds for the slow exercises) and SEED_FREE (exercise id ->
-which of its rows do not depend on the seed, e.g. real photos: judged with the first seed only). References come from the
-chapter's `solutions` package. Seeds are fixed so a failure here is reproducible; the graders draw fresh seeds
+which of its rows do not depend on the seed, e.g. real photos: judged with the first seed only). References come
+from the chapter's `solutions` package. Seeds are fixed so a failure here is reproducible; the graders draw fresh seeds
 for learners. Select one chapter with `-k ch07`, one exercise with `-k "ch07 and 7.8-"`.
 """
 from __future__ import annotations
@@ -45,6 +45,12 @@ def _exercise(exercise_id: str):
     return EXERCISES[exercise_id.split(".")[0]][exercise_id]
 
 
+def _exercise_for(exercise_id: str, seed: int):
+    """The exercise as graded with `seed`: after the first seed, without its seed-free rows (judged once)."""
+    first = seed == _seeds(exercise_id.split(".")[0], exercise_id)[0]
+    return _exercise(exercise_id) if first else checks.without(_exercise(exercise_id), _seed_free(exercise_id))
+
+
 def _reference(ex) -> object:
     ch = next(c for c in READY if c.key == ex.id.split(".")[0])
     return checks.reference(ex, (importlib.import_module(ch.solutions),))
@@ -62,18 +68,15 @@ VALUE_CASES = [pytest.param(i, id=f"{TAG[k]}-{i}") for k in EXERCISES for i, ex 
 
 @pytest.mark.parametrize("exercise_id, seed", REFERENCE_CASES)
 def test_reference_gets_full_marks(exercise_id, seed):
-    ex = _exercise(exercise_id)
-    first = seed == _seeds(exercise_id.split(".")[0], exercise_id)[0]   # seed-free rows: judged with the first seed
-    checks.assert_full_marks(ex if first else checks.without(ex, _seed_free(exercise_id)), _reference(ex), seed)
+    checks.assert_full_marks(_exercise_for(exercise_id, seed), _reference(_exercise(exercise_id)), seed)
 
 
 @pytest.mark.parametrize("lib, seed", LIBRARY_CASES)
 def test_library_backed_implementation_passes(lib, seed):
     ex = _exercise(lib.exercise_id)
     cannot = checks.cannot_by_name(ex, seed, lib.cannot) if lib.cannot_must_fail else dict(lib.cannot)
-    if seed != _seeds(lib.exercise_id.split(".")[0], lib.exercise_id)[0]:     # seed-free rows: the first seed only
-        ex = checks.without(ex, _seed_free(lib.exercise_id))
-    checks.assert_library_passes(ex, lib.fn, seed, cannot, cannot_must_fail=lib.cannot_must_fail)
+    checks.assert_library_passes(_exercise_for(lib.exercise_id, seed), lib.fn, seed, cannot,
+                                 cannot_must_fail=lib.cannot_must_fail)
 
 
 @pytest.mark.parametrize("exercise_id", FALLBACK_CASES)
