@@ -31,7 +31,8 @@ def show_dog_stack(s: int = 3, sigma0: float = 1.6, octaves: int = 2, size: int 
     img = scene.texture("astronaut", (2 * size, 2 * size))[size // 2:size // 2 + size, size // 2:size // 2 + size]
     k = 2 ** (1 / s)
     n_g = s + 3
-    fig, axes = plt.subplots(2 * octaves, n_g, figsize=(1.45 * n_g, 1.55 * 2 * octaves))
+    fig, axes = plt.subplots(2 * octaves, n_g, figsize=(1.45 * n_g, 1.55 * 2 * octaves),
+                             layout="none")   # fixed spacing below: a layout engine is slow on 24 axes
     base = ndimage.gaussian_filter(img, np.sqrt(sigma0 ** 2 - 0.5 ** 2))
     for o in range(octaves):
         G = [base]
@@ -41,13 +42,13 @@ def show_dog_stack(s: int = 3, sigma0: float = 1.6, octaves: int = 2, size: int 
         for i, g in enumerate(G):
             ax = axes[2 * o, i]
             ax.imshow(g, cmap="gray", vmin=0, vmax=1)
-            ax.set_title(f"o{o} G{i}: σ={sigma0 * k ** i * 2 ** o:.2f}", fontsize=7,
+            ax.set_title(f"o{o} G{i}: σ={sigma0 * k ** i * 2 ** o:.2f}", fontsize=8,
                          color="C3" if i == s else "k")
         for i, d in enumerate(D):
             ax = axes[2 * o + 1, i]
             ax.imshow(d, cmap="RdBu", vmin=-0.08, vmax=0.08)
             searched = 1 <= i <= s
-            ax.set_title(f"DoG{i}" + (" (searched)" if searched else ""), fontsize=7, color="C0" if searched else "0.4")
+            ax.set_title(f"DoG{i}" + (" (searched)" if searched else ""), fontsize=8, color="C0" if searched else "0.4")
             if o == 0 and i in (1, 2, 3):   # one 3x3x3 block: the same 3x3 window in DoG1, DoG2, DoG3
                 cy, cx = size // 2, size // 2
                 ax.add_patch(Rectangle((cx - 1.5, cy - 1.5), 3, 3, fill=False, ec="lime", lw=1.5))
@@ -72,9 +73,9 @@ def _draw_neighbourhood(ax, label: bool):
                 ax.add_patch(Rectangle((dx + i * 0.55, dy + j * 0.55), 0.5, 0.5, fc="C3" if centre else "0.85",
                                        ec="k", lw=0.5))
         if label:
-            ax.text(dx + 1.7, dy + 0.7, ["DoG i-1", "DoG i", "DoG i+1"][level], fontsize=6)
+            ax.text(dx + 1.7, dy + 0.7, ["DoG i-1", "DoG i", "DoG i+1"][level], fontsize=8)
     ax.set(xlim=(-0.2, 5.2), ylim=(-0.2, 4.2), aspect="equal")
-    ax.set_title("3×3×3: 26 neighbours", fontsize=7)
+    ax.set_title("3×3×3: 26 neighbours", fontsize=8)
     ax.axis("off")
 
 
@@ -117,7 +118,6 @@ def show_sift_grid(seed: int = 0):
                 t = (k + 0.5) * np.pi / 4
                 r = hist[cy, cx, k] * scale
                 b.plot([cx + 0.5, cx + 0.5 + r * np.cos(t)], [cy + 0.5, cy + 0.5 + r * np.sin(t)], color="C1", lw=2)
-    fig.tight_layout()
     return fig
 
 
@@ -144,11 +144,10 @@ def show_fast_circle(pattern: str = "ddsssssbbbbbbbbb"):
         in_arc = n in run
         b.add_patch(Circle((np.cos(t[n]), np.sin(t[n])), 0.13, fc=colours[c], ec="C3" if in_arc else "k",
                            lw=2.5 if in_arc else 0.5))
-        b.text(1.3 * np.cos(t[n]), 1.3 * np.sin(t[n]), str(n + 1), ha="center", va="center", fontsize=7)
+        b.text(1.3 * np.cos(t[n]), 1.3 * np.sin(t[n]), str(n + 1), ha="center", va="center", fontsize=8)
     b.set(xlim=(-1.6, 1.6), ylim=(1.6, -1.6), aspect="equal", xticks=[], yticks=[],
           title=f"{pattern}: longest arc {len(run)} × '{best}' (red; it may\nwrap from 16 to 1) → "
                 f"{'a corner' if len(run) >= 9 else 'not a corner'} for FAST-9")
-    fig.tight_layout()
     return fig
 
 

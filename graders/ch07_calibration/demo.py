@@ -20,16 +20,21 @@ def distorted_grid(k1: float, n: int = 11, extent: float = 0.6, samples: int = 6
 
 
 def draw_coverage(ax, uv: np.ndarray, X, K, dist, Rs, ts, size=SIZE) -> np.ndarray:
-    """Every view's corners over the image, coloured by that view's reprojection RMS; returns the RMS (V,)."""
+    """Every view's board outline and corners over the image, coloured by that view's reprojection RMS
+    (a colorbar in px beside `ax`), axes in pixels; returns the RMS (V,)."""
     import matplotlib.pyplot as plt
+    from matplotlib.colors import Normalize
 
     err = per_view_rms(X, uv, K, dist, Rs, ts)
+    norm = Normalize(0.0, max(err.max(), 1e-9))
     cmap = plt.get_cmap("viridis")
-    top = max(err.max(), 1e-9)
     for u, e in zip(uv, err):
-        ax.plot(*u[[0, 8, 53, 45, 0]].T, color=cmap(e / top), lw=1)
-        ax.scatter(*u.T, s=4, color=cmap(e / top))
+        ax.plot(*u[[0, 8, 53, 45, 0]].T, color=cmap(norm(e)), lw=1)
+        ax.scatter(*u.T, s=4, color=cmap(norm(e)))
+    ax.plot([], [], color="0.4", lw=1, label=f"a view's board outline and corners ({len(uv)} views)")
     ax.set_xlim(0, size[0])
     ax.set_ylim(size[1], 0)
     ax.set_aspect("equal")
+    ax.set(xlabel="u (px)", ylabel="v (px)")
+    ax.figure.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, label="view's RMS reprojection error (px)")
     return err

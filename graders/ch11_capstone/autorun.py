@@ -163,9 +163,9 @@ def _fault_spans(lanes, axes, run: dict, upto: int) -> None:
             ax.axvspan(a, b, color="0.88", zorder=0, lw=0)
         y = len(sched) - 1 - i
         lanes.barh(y, b - a, left=a, height=0.8, color="0.6" if seg["start"] <= upto else "0.85")
-        lanes.text(a + 0.3, y, seg["kind"].replace("_", " "), va="center", fontsize=7)
+        lanes.text(a + 0.3, y, seg["kind"].replace("_", " "), va="center", fontsize=8)
     lanes.set(yticks=[], ylim=(-0.6, max(len(sched), 1) - 0.4))
-    lanes.set_ylabel("faults", fontsize=7, rotation=0, ha="right", va="center")
+    lanes.set_ylabel("faults", fontsize=8, rotation=0, ha="right", va="center")
 
 
 def _trace(ax, run: dict, j: int, scale: str, floor, upto: int) -> None:
@@ -185,7 +185,7 @@ def _trace(ax, run: dict, j: int, scale: str, floor, upto: int) -> None:
             ax.plot(t[f], y[f], "v" if a == "clear" else "^", color="g" if a == "clear" else "r", ms=7)
     ax.set_yscale(scale)
     ax.set_ylim(lo, hi)
-    ax.set_ylabel(row["metric"] + TRACE_NOTES.get(row["metric"], ""), fontsize=7, rotation=0, ha="right", va="center")
+    ax.set_ylabel(row["metric"] + TRACE_NOTES.get(row["metric"], ""), fontsize=8, rotation=0, ha="right", va="center")
 
 
 def _mode_band(ax, run: dict, upto: int) -> None:
@@ -197,7 +197,7 @@ def _mode_band(ax, run: dict, upto: int) -> None:
     ax.imshow(idx[None], aspect="auto", cmap=ListedColormap(MODE_COLOURS), vmin=-0.5, vmax=len(names) - 0.5,
               extent=(t[0] - 0.5, t[-1] + 0.5, 0, 1), interpolation="nearest")
     ax.set(yticks=[], xlabel="frame")
-    ax.set_ylabel("mode", fontsize=7, rotation=0, ha="right", va="center")
+    ax.set_ylabel("mode", fontsize=8, rotation=0, ha="right", va="center")
 
 
 def _mode_key(ax, mode: str) -> None:
@@ -207,7 +207,7 @@ def _mode_key(ax, mode: str) -> None:
     for i, (m, need) in enumerate(MODES):
         y = 1 - (i + 1) / (len(MODES) + 1)
         ax.add_patch(Rectangle((0.02, y - 0.06), 0.08, 0.12, color=MODE_COLOURS[i], transform=ax.transAxes))
-        ax.text(0.13, y, f"{m} ({', '.join(sorted(need)) or 'nothing'})", va="center", fontsize=7,
+        ax.text(0.13, y, f"{m} ({', '.join(sorted(need)) or 'nothing'})", va="center", fontsize=8,
                 transform=ax.transAxes, weight="bold" if m == mode else "normal")
     ax.set_title("odometry mode (needs healthy)", fontsize=8, loc="left")
 
@@ -244,11 +244,11 @@ def draw_drive_run(fig, run: dict, upto: int | None = None) -> None:
     d, ax = run["metrics"][UNMONITORED[0]], axes[n - 2]
     ax.plot(t[t <= upto], d[t <= upto], color="0.4", lw=1, marker=".", ms=3)
     ax.set_ylim(0, max(5.0, np.nanmax(d) * 1.2) if np.isfinite(d).any() else 5.0)
-    ax.set_ylabel("depth_err_pct\n(not monitored)", fontsize=7, rotation=0, ha="right", va="center")
+    ax.set_ylabel("depth_err_pct\n(not monitored)", fontsize=8, rotation=0, ha="right", va="center")
     _mode_band(axes[-1], run, upto)
     for ax in axes:
         ax.axvline(upto, color="C0", lw=1.2)
-        ax.tick_params(labelsize=7)
+        ax.tick_params(labelsize=8)
         ax.label_outer()
     axes[0].set_xlim(t[0] - 0.5, t[-1] + 0.5)
     img = fig.add_subplot(gs[:3, 1])

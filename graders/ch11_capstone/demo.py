@@ -106,8 +106,8 @@ def _change_bars(ax, rows: list[dict], colours: list) -> None:
     for yi, c, r in zip(y, change, rows):
         if abs(c) > 0.05 or not np.isfinite(r["faulty"]):
             ax.text(min(max(c, 0), 3.2) + 0.08, yi, f"{r['clean']:.3g} -> {r['faulty']:.3g}", va="center",
-                    fontsize=6)
-    ax.set_yticks(y, [f"{r['stage']}: {r['metric']}" for r in rows], fontsize=7)
+                    fontsize=8)
+    ax.set_yticks(y, [f"{r['stage']}: {r['metric']}" for r in rows], fontsize=8)
     ax.axvline(0.25, color="k", ls=":", lw=1)
     ax.set(xlim=(-1, 5), xlabel="change vs clean in the bad direction (x clean, clipped at 5)")
 

@@ -106,7 +106,7 @@ def _show_matplotlib(points, cameras, ghost_points, ghost_cameras, labels, size,
     for (R, t), label in zip(cameras, labels):
         ax.plot(*v(frustum_wireframe(R, t, size)), color="teal", lw=1.2)
         C = -np.asarray(R).T @ np.asarray(t).reshape(3)
-        ax.text(C[0], C[2], -C[1], label, color="teal", fontsize=7)
+        ax.text(C[0], C[2], -C[1], label, color="teal", fontsize=8)
     ax.set(xlabel="x", ylabel="z", zlabel="−y", title=title)
     ax.set_aspect("equal")
     ax.view_init(elev=25, azim=-70)
