@@ -122,6 +122,19 @@ def available(dataset: str) -> bool:
     return where(dataset) is not None
 
 
+def announce(dataset: str, real: str, stand_in: str) -> bool:
+    """Print one line a notebook's reader sees: which data its demos and checks use. `real` names the
+    real set, `stand_in` what replaces it when the set is missing (then the line gives the fetch command).
+    Returns available(dataset)."""
+    root = where(dataset)
+    if root is not None:
+        print(f"Data: {real} ({root / info(dataset)['folder']}).")
+    else:
+        print(f"Data: {real} not found, so this notebook uses {stand_in}. For the real set: "
+              f"`python -m graders.datasets fetch {dataset}` (or `make fetch-data` for all), then restart the kernel.")
+    return root is not None
+
+
 def sha256(file: Path) -> str:
     """Hex sha256 of a file, read in 1 MiB blocks."""
     h = hashlib.sha256()

@@ -105,6 +105,21 @@ def test_missing_dataset_says_how_to_get_it(empty_env):
     assert datasets.data_root() == empty_env / "course_data"
 
 
+def test_announce_says_in_one_line_what_a_notebook_falls_back_to(empty_env, capsys):
+    assert datasets.announce("flow", "the five FlyingChairs pairs", "a synthetic pair") is False
+    line = capsys.readouterr().out
+    assert line.count("\n") == 1
+    for needed in ("FlyingChairs", "not found", "a synthetic pair", "python -m graders.datasets fetch flow", "make fetch-data"):
+        assert needed in line, needed
+
+
+def test_announce_names_the_folder_when_found(shared, monkeypatch, capsys):
+    monkeypatch.setenv("COURSE_DATA", str(shared))
+    assert datasets.announce("flow", "the five FlyingChairs pairs", "a synthetic pair") is True
+    line = capsys.readouterr().out
+    assert line.count("\n") == 1 and str(shared / "flow") in line and "synthetic" not in line
+
+
 def test_data_root_falls_back_to_the_cache(empty_env, monkeypatch):
     monkeypatch.delenv("COURSE_DATA")
     assert datasets.data_root() is None  # the cache folder does not exist yet
