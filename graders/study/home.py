@@ -74,17 +74,33 @@ def plot_progress(ax=None, events: list[dict] | None = None, totals: dict | None
     data = np.ma.masked_invalid(np.array(grid, float).T)
     if ax is None:
         _, ax = plt.subplots(figsize=(1 + 0.6 * len(chapters), 3))
-    cmap = plt.get_cmap("Greens").copy()
-    cmap.set_bad("0.9")
+    cmap = plt.get_cmap("Greens").with_extremes(bad="0.9")
     im = ax.imshow(data, cmap=cmap, vmin=0, vmax=1, aspect="auto")
     ax.set_xticks(range(len(chapters)), [f"ch {c}" for c in chapters])
     ax.set_yticks(range(len(kinds)), [k.upper() for k in kinds])
     for (k, c), value in np.ndenumerate(data.filled(np.nan)):
         if np.isfinite(value) and value > 0:
             ax.text(c, k, f"{value:.0%}", ha="center", va="center", fontsize=8)
-    ax.set_title("your points per chapter and dimension (fraction earned)")
-    ax.figure.colorbar(im, ax=ax, fraction=0.03)
+    if not np.any(data.filled(0) > 0):      # say why the picture is empty instead of showing a blank grid
+        ax.text(0.5, 0.5, "no points yet: run a check(...) in any chapter, or a drill", transform=ax.transAxes,
+                ha="center", va="center", fontsize=11, bbox={"facecolor": "white", "edgecolor": "0.6"})
+    ax.set_xlabel("chapter"); ax.set_ylabel("dimension")
+    ax.set_title("your points per chapter and dimension")
+    ax.figure.colorbar(im, ax=ax, fraction=0.03, label="fraction of the points earned")
     return ax
+
+
+def progress_details(totals: dict | None = None) -> str:
+    """The progress table as HTML, folded under a <details> toggle (the figure above is the summary), with
+    where the file is and how to start afresh."""
+    import html
+    from graders.study.progress import progress_file, table
+    path = html.escape(str(progress_file()))
+    return (f"<details><summary>The table behind the picture: attempts, passes and points per chapter and "
+            f"dimension (click to open)</summary><pre>{html.escape(table(totals=totals))}</pre></details>"
+            f"<p>Your progress file: <code>{path}</code> (one line per check or drill; <code>python -m graders progress "
+            f"--where</code> prints it). To start afresh, move or delete that file; to keep separate records, "
+            f"set <code>CV3D_PROGRESS</code> to another folder before starting JupyterLab.</p>")
 
 
 def learner_note(note: str) -> str:

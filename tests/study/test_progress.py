@@ -132,3 +132,32 @@ def test_the_shell_grader_does_not_write_progress(store, tmp_path):
                          capture_output=True, text=True, timeout=300, env=dict(os.environ))
     assert out.returncode == 0 and "[1.3]" in out.stdout, out.stderr
     assert not (store / progress.FILE).exists()
+
+
+def test_the_home_page_folds_the_table_and_says_where_the_file_is(store):
+    from graders.study import home
+    details = home.progress_details(progress.chapter_totals())
+    assert details.startswith("<details>") and "</details>" in details      # the table is behind a toggle
+    assert str(progress.progress_file()) in details and "CV3D_PROGRESS" in details and "afresh" in details
+    assert "no attempts recorded yet" not in details                          # totals list every chapter
+
+
+def test_an_empty_progress_picture_says_why(store):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from graders.study import home
+    ax = home.plot_progress(events=[], totals=progress.chapter_totals())
+    assert any("no points yet" in t.get_text() for t in ax.texts)
+    assert ax.figure.axes[-1].get_ylabel() == "fraction of the points earned"   # the colorbar says what it counts
+    plt.close(ax.figure)
+
+
+def test_the_home_notebook_routes_every_user():
+    import nbformat
+    nb = nbformat.read(ROOT / "notebooks" / "00_start_here.ipynb", as_version=4)
+    text = "\n".join(c.source for c in nb.cells if c.cell_type == "markdown")
+    for needed in ("learning on your own", "submitting coursework", "instructor", "interview", "make fetch-data",
+                   "COURSE_DATA_URL", "-m graders check my-notebooks/", "graders release", "graders batch",
+                   "graders gradescope", "drill check"):
+        assert needed in text, needed
