@@ -26,3 +26,4 @@ def draw_tracks(ax, seq: dict, tracks: np.ndarray, visible: np.ndarray, t: int, 
         if not gv[t, i]:
             ax.plot(*gt[t, i], "x", color="0.5", ms=4)
     ax.set_title(title or f"frame {t}")
+    ax.set(xlabel="x (px)", ylabel="y (px)")

@@ -21,6 +21,7 @@ import ast
 import json
 import random
 import re
+import textwrap
 import time
 from pathlib import Path
 
@@ -84,6 +85,34 @@ def _notebook_parts(ex: Exercise) -> tuple[list[str], str]:
     return imports, stub
 
 
+def statement(ex: Exercise) -> str:
+    """The exercise's problem statement as the chapter notebook gives it (its "### Exercise N.M" cell, without
+    the folded <details> parts), or '' when the notebook has none."""
+    try:
+        path = ROOT / by_number(ex.id.split(".")[0]).notebook
+        cells = [c for c in json.loads(path.read_text(encoding="utf-8"))["cells"] if c.get("cell_type") == "markdown"]
+    except (OSError, ValueError, KeyError):
+        return ""
+    chap, num = ex.id.split(".")[0], int(ex.id.split(".")[1])
+    c = re.escape(chap)
+    head = re.compile(rf"^#+\s*Exercises?\s+{c}\.(\d+)(?:\s*(?:[–-]|and)\s*{c}\.(\d+))?\b", re.M)
+    for cell in cells:
+        src = "".join(cell["source"]) if isinstance(cell["source"], list) else cell["source"]
+        for m in head.finditer(src):     # "Exercise 2.10" or a shared "Exercises 2.5–2.7"
+            if int(m[1]) <= num <= int(m[2] or m[1]):
+                return re.sub(r"<details>.*?(</details>|$)", "", src[m.start():], flags=re.S).strip()
+    return ""
+
+
+def _as_comment(text: str, width: int = 100) -> str:
+    """Markdown as a block of `# ` comment lines, paragraphs kept, long lines wrapped."""
+    out = []
+    for line in text.splitlines():
+        wrapped = textwrap.wrap(line, width - 2, break_long_words=False, break_on_hyphens=False) or [""]
+        out += [("# " + w).rstrip() for w in wrapped]
+    return "\n".join(out) + "\n"
+
+
 def _display_only(node: ast.Import | ast.ImportFrom) -> bool:
     """Imports a drill file does not need: widgets, plotting, the notebook's check/use."""
     module = node.module if isinstance(node, ast.ImportFrom) else node.names[0].name
@@ -121,6 +150,9 @@ def stub_text(ex: Exercise) -> str:
               f"# difficulty: {DIFFICULTY[difficulty(ex)]} · target: {target_minutes(ex):g} min · "
               f"started {time.strftime('%Y-%m-%d %H:%M')}\n"
               "# Implement the function, then:  python -m graders drill check  (this file, the latest drill)\n")
+    text = statement(ex)
+    if text:
+        header += "#\n" + _as_comment(text)
     body = "\n".join(imports or ["import numpy as np"])
     return f"{header}\n{body}\n\n\n{stub.rstrip()}\n"
 

@@ -47,6 +47,9 @@ def test_every_code_exercise_gets_a_stub_with_its_signature_and_docstring():
         documented = [n for n in tree.body if isinstance(n, ast.FunctionDef) and ast.get_docstring(n)]
         assert documented or re.search(r"^\s+#\s*\S", text, re.M), f"{ex.id}: the stub says nothing"
         assert drill.target_minutes(ex) > 0 and drill.difficulty(ex) in (1, 2, 3)
+        # the file opens with the notebook's problem statement (inputs, outputs, shapes, what the check does)
+        opening = re.search(r"^# #+ Exercises? ", text, re.M)
+        assert opening and opening.start() < text.index(f"def {ex.name}("), f"{ex.id}: no problem statement"
 
 
 def test_a_drill_stub_imports_no_course_helper_it_does_not_name():
