@@ -80,7 +80,8 @@ def plot_progress(ax=None, events: list[dict] | None = None, totals: dict | None
     ax.set_yticks(range(len(kinds)), [k.upper() for k in kinds])
     for (k, c), value in np.ndenumerate(data.filled(np.nan)):
         if np.isfinite(value) and value > 0:
-            ax.text(c, k, f"{value:.0%}", ha="center", va="center", fontsize=8)
+            ax.text(c, k, f"{value:.0%}", ha="center", va="center", fontsize=8,
+                    color="white" if value > 0.6 else "black")   # readable on the dark greens
     if not np.any(data.filled(0) > 0):      # say why the picture is empty instead of showing a blank grid
         ax.text(0.5, 0.5, "no points yet: run a check(...) in any chapter, or a drill", transform=ax.transAxes,
                 ha="center", va="center", fontsize=11, bbox={"facecolor": "white", "edgecolor": "0.6"})
