@@ -24,9 +24,9 @@ COURSE_STYLE: dict[str, Any] = {
 }
 
 
-def use_course_style() -> dict[str, Any]:
-    """Apply COURSE_STYLE to matplotlib's rcParams (for the rest of the kernel); returns the style."""
+def use_course_style() -> None:
+    """Apply COURSE_STYLE to matplotlib's rcParams (for the rest of the kernel). Returns None, so a set-up cell
+    that ends with the call shows nothing."""
     import matplotlib.pyplot as plt   # here, not at import: the judges import graders.kit without a display
 
     plt.rcParams.update(COURSE_STYLE)
-    return COURSE_STYLE

@@ -27,7 +27,7 @@ def test_use_course_style_sets_matplotlib(monkeypatch):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     with plt.rc_context():
-        use_course_style()
+        assert use_course_style() is None          # a set-up cell ending with the call prints nothing
         assert all(plt.rcParams[k] == v for k, v in COURSE_STYLE.items())
 
 
