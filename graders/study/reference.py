@@ -242,6 +242,20 @@ CORRECTIONS: dict[tuple[str, int, int], Correction] = {
         "why the fix keeps only points with ≥ 3 observations (or a large enough triangulation angle); and with "
         "nothing fixing the gauge the whole reconstruction drifts while they move",
         "chapter 5, DEBUG 5.18, notebooks/05_bundle_adjustment.ipynb"),
+    ("symptoms_10", 1, 1): Correction(
+        "A domain gap: scenes unlike its training mix, and its confidence stays high out of that domain",
+        "DUSt3R's training mix is not mostly indoor: it samples eight datasets, outdoor MegaDepth, BlendedMVS and "
+        "Waymo among them (DUSt3R, Wang et al. CVPR 2024, §4 'Training data'); and its confidence, learned by a "
+        "confidence-weighted regression loss (eq. 4), estimates the error on data like the training data — it is no "
+        "out-of-domain detector, so check the result against independent evidence (classical verification)",
+        "chapter 10, DEBUG 10.12, notebooks/10_large_scale.ipynb"),
+    ("symptoms_10", 2, 1): Correction(
+        "Activations that grow with the N·T tokens (about linearly: memory-efficient attention never stores the "
+        "all-pairs scores); the limit is the GPU's memory, not a number of views",
+        "VGGT's README measures its aggregator on one H100 (FlashAttention 3) at 5.58 GB for 20 frames, 21.15 GB "
+        "for 100 and 40.63 GB for 200 — about linear, ~0.2 GB a frame; only the compute grows quadratically "
+        "(0.31 s to 8.75 s)",
+        "chapter 10, DEBUG 10.13 and Question 10.16, notebooks/10_large_scale.ipynb"),
     ("scaling", 1, 1): Correction("Retrieval (top-50)", _exhaustive_1k(),
                                   "chapter 10, Question 10.14, notebooks/10_large_scale.ipynb"),
 }
