@@ -93,7 +93,7 @@ register(
     COLMAP_THRESHOLDS,
     numeric_question("4.3", "How many pairs?", "exhaustive_pairs", "concept", [100 * 99 / 2, 10_000 * 9_999 / 2], 1e-9, "rel.",
        (2,), relative,
-       "N(N − 1)/2: 100 images → 4,950 pairs (the seed's '5K'); 10,000 → 49,995,000 (50 M). Quadratic: 100x "
+       "N(N − 1)/2: 100 images → 4,950 pairs (the '~5K' often quoted); 10,000 → 49,995,000 (50 M). Quadratic: 100x "
        "more images, 10,000x more pairs.",
        [value_hint([100 * 99, 10_000 * 9_999], "each unordered pair once: divide by 2."),
         value_hint([100 * 100 / 2, 10_000 * 10_000 / 2], "an image is not matched with itself: N(N − 1)/2.")]),

@@ -67,7 +67,7 @@ register(
         metric=max_abs,
         explanation="Δ = −(JᵀJ + λI)⁻¹ g = −(2/5, −1/2) = (−0.4, 0.5). Predicted decrease ½Δᵀ(λΔ − g) = ½(0.96 + 0.75) = 0.855, so "
             "ρ = 0.6 / 0.855 = 0.702 > 0: accept, and λ ← λ·max(1/3, 1 − (2ρ − 1)³) = 0.934 (Nielsen: a good but not "
-            "perfect model lowers λ only a little; the seed's ÷10 rule would be far more aggressive).",
+            "perfect model lowers λ only a little; a fixed ÷10 rule would drop it to 0.1, far more aggressively).",
         hints=[Hint("the step must go downhill: Δ = −(JᵀJ + λI)⁻¹ g.", lambda c, out: out[0] > 0 and out[1] < 0),
              Hint("ρ is actual over predicted decrease (0.6 / 0.855), not the inverse.",
                   lambda c, out: abs(out[2] - 1 / LM_ANSWER[2]) < 2e-3),

@@ -140,14 +140,14 @@ register(
     numeric_question(
         id="9.22", title="The budget at 30 Hz", name="budget_30hz", kind="design",
         expected=budget(), tol=0.02, unit="rel.", shape=(3,), metric=relative,
-        explanation="At 30 Hz a frame has 1000 / 30 = 33.3 ms for everything. RAFT at ~100 ms per 1080p frame (12 "
-            "iterations, GPU) may take half of it, 16.7 ms per frame on average: run it on every 6th frame "
-            "(100 / 16.7 = 6) and carry the points in between with LK — whose own calls must then fit in the little "
-            "that is left, since RAFT's average already fills the half. LK alone, at ~1 ms per call, would fit 16 "
-            "calls in the half (e.g. forward-backward checks or several cameras). Mind the latency as well as the "
-            "average: a 100 ms RAFT run on a frame finishes 3 frames (100 / 33.3) after that frame was taken, so it "
-            "runs asynchronously, and its result must be carried forward to the current frame by LK before it is used. "
-            "CoTracker (50 points, ~15 Hz) likewise runs on every second frame at best.",
+        explanation="At 30 Hz a frame has 1000 / 30 = 33.3 ms for everything. RAFT at ~100 ms a 1088 × 436 "
+            "frame (10 fps on a GTX 1080Ti, Teed & Deng 2020) may take half of it, 16.7 ms per frame on average: run "
+            "it on every 6th frame (100 / 16.7 = 6). That fills the whole half, so the LK calls that carry the points "
+            "in between must come out of the other half, or RAFT runs on every 7th frame (14.3 ms on average, leaving "
+            "2.4 ms: two LK calls). LK alone, at ~1 ms per call, would fit 16 calls in the half (e.g. forward-backward "
+            "checks or several cameras). Mind the latency as well as the average: a 100 ms RAFT run on a frame "
+            "finishes 3 frames (100 / 33.3) after that frame was taken, so it runs asynchronously, and its result "
+            "must be carried forward to the current frame by LK before it is used.",
         hints=[value_hint([1e3 / RATE, RAFT_MS / (1e3 / RATE), math.floor(1e3 / RATE / LK_MS)],
                           "only half of the frame's budget is RAFT's (or LK's): 0.5 × 33.3 ms."),
                value_hint([1 / RATE, math.ceil(RAFT_MS / (SHARE * 1e3 / RATE)), math.floor(SHARE * 1e3 / RATE / LK_MS)],

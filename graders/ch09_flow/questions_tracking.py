@@ -70,7 +70,7 @@ register(
             "ones. (b) Points that leave and come back much later: TAPIR's first stage matches each query against "
             "every frame on its own, so it re-finds a point after any gap; a refinement stage then smooths the "
             "track and predicts visibility (an occlusion logit and an uncertainty). (c) A 200 Hz servo loop on "
-            "corners: pyramidal LK (~1 ms, sub-pixel on good corners); the neural trackers run at 10-15 Hz. (d) "
+            "corners: pyramidal LK (~1 ms, sub-pixel on good corners); the neural trackers need a GPU and run far below 200 Hz. (d) "
             "When every neighbour is hidden too, joint tracking has nothing to lean on: per-frame re-detection "
             "(TAPIR) finds the point when it reappears. Note: CoTracker is not limited to short videos (it slides a "
             "window of 8-16 frames, so its cost grows linearly with the length); its joint attention grows with "

@@ -19,7 +19,8 @@ slowly: a component that flickers back for a few frames must not make the robot 
 
 The lesson lists the ladder as a sequence (features fail -> direct VO -> stereo fails -> mono + IMU ->
 ...); read literally, one step down per failure, it sends a robot whose stereo failed first to direct
-VO, which needs stereo. The modes are chosen by what is healthy, not by counting failures.
+VO, which here needs stereo (the rung is stereo direct odometry, as Stereo DSO, Wang et al. ICCV 2017; monocular
+DSO needs no stereo but has no scale). The modes are chosen by what is healthy, not by counting failures.
 """
 from __future__ import annotations
 
@@ -162,8 +163,9 @@ DEGRADATION_HINTS = [
          "been available for `hold` consecutive frames (a flickering sync cable must not re-initialise VIO)."),
     like(_model(upgrade=False), "the machine never comes back: when the failed component has been healthy for "
          "`hold` frames, return to the better mode."),
-    like(_model(direct_needs_nothing=True), "direct VO needs stereo (it is photometric stereo odometry): when "
-         "stereo fails, fall to mono + IMU, not to direct VO."),
+    like(_model(direct_needs_nothing=True), "this ladder's direct VO needs stereo (its rung is stereo direct "
+         "odometry, as Stereo DSO; monocular DSO would be a rung of its own, without scale): when stereo fails, fall to "
+         "mono + IMU, not to direct VO."),
     like(_model(symptoms_fail_features=True), "VO error, loop closures and Gaussian counts are downstream "
          "symptoms: they do not make a component unhealthy."),
 ]

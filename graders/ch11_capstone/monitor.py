@@ -148,7 +148,7 @@ def _cases(rng: np.random.Generator) -> list[Case]:
                     s = rng.uniform(0.6, 0.9) if row["bad"] == "high" else rng.uniform(1.1, 1.5)
                     row["normal"], row["alert"] = row["normal"] * s, row["alert"] * s
         stream = metric_streams(rng, k, table)
-        name = ["the lesson's table, k = 3", "the lesson's table, k = 5", "a stricter table, k = 4"][i]
+        name = ["the chapter's table, k = 3", "the chapter's table, k = 5", "a stricter table, k = 4"][i]
         # Exact: events are integers and strings defined by the rule.
         cases.append(Case(f"{len(stream)} frames, {name}", (stream, table, k), gt_health_monitor(stream, table, k),
                           _mismatched, 0, "events wrong", convert=_canonical, key=f"stream-{i + 1}"))

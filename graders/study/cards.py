@@ -8,8 +8,9 @@ A `Card` is data: a prompt, an answer and how to grade it —
 - `choice`: one of `options`, matched exactly (case and surrounding spaces ignored);
 - `text`: free text, shown beside the model answer and rated by the learner (1 again … 4 easy).
 
-Every card cites its `source` in the lesson; where the lesson's number is wrong or dated, `note`
-says what is right and why (the card's `answer` is the right one). The deck is the course's shared
+Every card cites a `source` the learner can read (a paper, a book, the course's own table and chapter); its
+`origin` records, for the tests only, the line of the course's source notes it was transcribed from. Where that
+figure is wrong or dated, `note` says what is right and why (the card's `answer` is the right one). The deck is the course's shared
 reference tables (`graders.study.reference`) plus any `CARDS` a chapter's grader package exports: a later
 chapter adds cards by adding data to its own package, no code here.
 """
@@ -33,20 +34,21 @@ class Card:
     unit: str = ""
     tol: float = 0.0                 # numeric: relative; magnitude: decades (log10)
     options: tuple[str, ...] = ()
-    source: str = ""                 # where in the lesson the answer comes from
-    note: str = ""                   # where the lesson is wrong or dated: what is right and why
+    source: str = ""                 # what the learner is shown as the answer's source
+    note: str = ""                   # where a quoted figure is wrong or dated: what is right and why
     explain: str = ""                # context shown after answering
     chapter: int | None = None       # None: cross-chapter
     dimension: str = "concept"       # concept | design | code | debug | frontier
     table: str = ""                  # provenance for the tests: the reference table and row it comes from
     row: int = -1
+    origin: str = ""                 # provenance for the tests (the course's source notes and line), never shown
 
     def __post_init__(self):
         assert self.kind in CARD_KINDS, f"{self.id}: kind {self.kind!r}"
         assert self.kind != "choice" or self.answer in self.options, f"{self.id}: answer not among the options"
 
     def back(self) -> str:
-        """The answer side: the answer, what the lesson said if it was wrong, context, the source."""
+        """The answer side: the answer, the correction of a figure often quoted wrong, context, the source."""
         ans = f"{_fmt(self.answer)} {self.unit}".strip() if self.kind in ("numeric", "magnitude") else str(self.answer)
         parts = [ans]
         if self.note:

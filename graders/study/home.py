@@ -104,17 +104,10 @@ def progress_details(totals: dict | None = None) -> str:
             f"set <code>CV3D_PROGRESS</code> to another folder before starting JupyterLab.</p>")
 
 
-def learner_note(note: str) -> str:
-    """A reference card's note as the learner reads it: the cards record what their transcribed source printed
-    ("the lesson prints …"); the learner never saw that source, so it is named as the figure often quoted."""
-    return note.replace("the lesson prints", "often quoted as").replace("the lesson's", "the quoted") \
-        .replace("the lesson says", "the quoted figure is")
-
-
 def reference_markdown(key: str) -> str:
     """One of the reference tables, readable. Cells the chapters refute are shown corrected, with a note of the
-    figure often quoted instead; the RANSAC counts and times are the formula's own values (the learner never sees
-    the transcribed source, so it is not cited to them)."""
+    figure they replace and why ("not “…”: why (where)"); the RANSAC counts and times are the formula's own values
+    (the learner never sees the transcribed source, so it is not cited to them)."""
     from graders.study.reference import TABLES, corrected_row, ransac_iterations
     t = TABLES[key]
     header, rows, notes = list(t.header), [], []
@@ -122,7 +115,7 @@ def reference_markdown(key: str) -> str:
         row, fixes = corrected_row(key, i)
         rows.append(list(row))
         for j, note in fixes.items():
-            notes.append(learner_note(note))
+            notes.append(note)
             rows[-1][j] += f" [{len(notes)}]"
     title = f"**{t.title}**"
     if key == "ransac":

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import replace
 from typing import NamedTuple
 
 from graders.study.cards import Card
@@ -241,6 +242,20 @@ CORRECTIONS: dict[tuple[str, int, int], Correction] = {
         "why the fix keeps only points with ≥ 3 observations (or a large enough triangulation angle); and with "
         "nothing fixing the gauge the whole reconstruction drifts while they move",
         "chapter 5, DEBUG 5.18, notebooks/05_bundle_adjustment.ipynb"),
+    ("symptoms_10", 1, 1): Correction(
+        "A domain gap: scenes unlike its training mix, and its confidence stays high out of that domain",
+        "DUSt3R's training mix is not mostly indoor: it samples eight datasets, outdoor MegaDepth, BlendedMVS and "
+        "Waymo among them (DUSt3R, Wang et al. CVPR 2024, §4 'Training data'); and its confidence, learned by a "
+        "confidence-weighted regression loss (eq. 4), estimates the error on data like the training data — it is no "
+        "out-of-domain detector, so check the result against independent evidence (classical verification)",
+        "chapter 10, DEBUG 10.12, notebooks/10_large_scale.ipynb"),
+    ("symptoms_10", 2, 1): Correction(
+        "Activations that grow with the N·T tokens (about linearly: memory-efficient attention never stores the "
+        "all-pairs scores); the limit is the GPU's memory, not a number of views",
+        "VGGT's README measures its aggregator on one H100 (FlashAttention 3) at 5.58 GB for 20 frames, 21.15 GB "
+        "for 100 and 40.63 GB for 200 — about linear, ~0.2 GB a frame; only the compute grows quadratically "
+        "(0.31 s to 8.75 s)",
+        "chapter 10, DEBUG 10.13 and Question 10.16, notebooks/10_large_scale.ipynb"),
     ("scaling", 1, 1): Correction("Retrieval (top-50)", _exhaustive_1k(),
                                   "chapter 10, Question 10.14, notebooks/10_large_scale.ipynb"),
 }
@@ -254,7 +269,7 @@ def corrected_row(key: str, i: int) -> tuple[tuple[str, ...], dict[int, str]]:
     for j, cell in enumerate(t.rows[i]):
         fix = CORRECTIONS.get((key, i, j))
         if fix is not None:
-            notes[j] = f"the lesson prints “{cell}” ({t.header[j].lower()}); {fix.why} ({fix.where})"
+            notes[j] = f"not “{cell}” ({t.header[j].lower()}): {fix.why} ({fix.where})"
             row[j] = fix.right
     return tuple(row), notes
 
@@ -290,7 +305,7 @@ def _conventions() -> list[Card]:
     t, axes = TABLES["conventions"], ("+X", "-X", "+Y", "-Y", "+Z", "-Z")
     return [Card(id=f"frame-{_slug(row[0])}-{t.header[j].lower()}", kind="choice", answer=row[j], options=axes,
                  prompt=f"In the {row[0]} camera convention ({row[4]}), which axis points {t.header[j].lower()}?",
-                 source=_src("conventions", i), chapter=1, dimension="concept", table="conventions", row=i)
+                 origin=_src("conventions", i), chapter=1, dimension="concept", table="conventions", row=i)
             for i, row in enumerate(t.rows) for j in (1, 2, 3)]
 
 
@@ -304,7 +319,7 @@ def _symptoms() -> list[Card]:
             cards.append(Card(id=f"symptom-{t.chapter}-{_slug(row[0])}", dimension="debug", chapter=t.chapter,
                               prompt=f"Chapter {t.chapter} symptom: “{row[0]}”. What is the diagnosis, and the fix?",
                               answer=f"Diagnosis: {row[1]}.\nFix: {row[2]}.", note="; ".join(notes.values()),
-                              source=_src(key, i), table=key, row=i))
+                              origin=_src(key, i), table=key, row=i))
     return cards
 
 
@@ -323,30 +338,31 @@ def _ransac() -> list[Card]:
         for j, s in ((1, 5), (2, 8)):
             k, printed = ransac_iterations(w, s), lesson_number(row[j])
             note = "" if abs(printed - k) <= 0.02 * k else (
-                f"the lesson prints {row[j]}; log(0.01)/log(1 - {w:g}^{s}) = "
+                f"not {row[j]}: log(0.01)/log(1 - {w:g}^{s}) = "
                 f"{math.log(0.01) / math.log(1 - w ** s):.1f}, so {k:,}")
             cards.append(Card(id=f"ransac-w{round(w * 100)}-s{s}", kind="numeric", answer=k, unit="iterations",
                               tol=0.02, prompt=f"RANSAC with a {s}-point solver, inlier ratio {w:.0%}: how many "
                               "iterations for 99% probability of one all-inlier sample?", note=note,
-                              explain="k = log(1 - p) / log(1 - w^s), rounded up. (The lesson's table fits no "
-                              f"single confidence level: its counts imply p from {lo:.2f} to {hi:.2f}.)",
-                              source=_src("ransac", i),
+                              explain="k = log(1 - p) / log(1 - w^s), rounded up, p = 0.99. (Tables that round these counts loosely "
+                              f"fit no single confidence level: the one this deck checks implies p from {lo:.2f} to "
+                              f"{hi:.2f}.)",
+                              origin=_src("ransac", i),
                               chapter=2, dimension="design", table="ransac", row=i))
         k8, printed = ransac_iterations(w, 8), lesson_number(row[3])
         note = "" if abs(printed - k8) <= 0.05 * k8 else (
-            f"the lesson prints {row[3]} (its 8-point count at 1 ms); with {k8:,} iterations it is "
+            f"not {row[3]}: with {k8:,} iterations at 1 ms it is "
             + (f"{k8 / 1e3:.3g} s" if k8 < 120e3 else f"{k8 / 60e3:.0f} min"))
         cards.append(Card(id=f"ransac-time-w{round(w * 100)}", kind="magnitude", answer=k8 * 1e-3, unit="s", tol=0.3,
                           prompt=f"8-point RANSAC at 1 ms per iteration, inlier ratio {w:.0%}, 99% confidence: "
-                          "how long (seconds, order of magnitude)?", note=note, source=_src("ransac", i),
+                          "how long (seconds, order of magnitude)?", note=note, origin=_src("ransac", i),
                           chapter=2, dimension="design", table="ransac", row=i))
     for w, printed in RANSAC_PROSE["claims"].items():
         k = ransac_iterations(w, 5)
         note = "" if abs(printed - k) <= 0.02 * k else (
-            f"the lesson's paragraph says {printed:,}; log(0.01)/log(1 - {w:g}^5) gives {k:,}")
+            f"not {printed:,}: log(0.01)/log(1 - {w:g}^5) gives {k:,}")
         cards.append(Card(id=f"ransac-prose-w{round(w * 100)}", kind="numeric", answer=k, unit="iterations", tol=0.02,
                           prompt=f"5-point RANSAC, {w:.0%} inliers, 99% confidence: iterations?", note=note,
-                          source=f"{LESSON}, line {RANSAC_PROSE['line']} (RANSAC paragraph)", chapter=2,
+                          origin=f"{LESSON}, line {RANSAC_PROSE['line']} (RANSAC paragraph)", chapter=2,
                           dimension="design", table="ransac_prose"))
     return cards
 
@@ -362,18 +378,18 @@ def _scaling() -> list[Card]:
         cards += [
             Card(id=f"scale-{_slug(size)}-matching", kind="choice", answer=row[1], options=tuple(strategies),
                  prompt=f"SfM on {row[0]}: which matching strategy?", note=notes.get(1, ""),
-                 source=_src("scaling", i), chapter=10, dimension="design", table="scaling", row=i),
+                 origin=_src("scaling", i), chapter=10, dimension="design", table="scaling", row=i),
             Card(id=f"scale-{_slug(size)}-sfm", kind="choice", answer=row[2], options=tuple(approaches),
-                 prompt=f"SfM on {row[0]}: which SfM approach?", note=notes.get(2, ""), source=_src("scaling", i),
+                 prompt=f"SfM on {row[0]}: which SfM approach?", note=notes.get(2, ""), origin=_src("scaling", i),
                  chapter=10, dimension="design", table="scaling", row=i),
             Card(id=f"scale-{_slug(size)}-time", kind="magnitude", answer=lesson_number(row[3]) / 3600, unit="hours",
                  tol=0.5, prompt=f"SfM on {row[0]} ({row[2].lower()}): expected time, in hours (order of magnitude)?",
-                 explain=f"Expected output quality: {row[4]}.", note=notes.get(3, ""), source=_src("scaling", i),
+                 explain=f"Expected output quality: {row[4]}.", note=notes.get(3, ""), origin=_src("scaling", i),
                  chapter=10, dimension="design", table="scaling", row=i)]
     n = int(lesson_number(t.rows[0][0]))
     cards.append(Card(id="scale-exhaustive-pairs-100", kind="numeric", answer=n * (n - 1) // 2, unit="pairs",
                       tol=0.02, prompt=f"Exhaustive matching of {n} images: how many image pairs?",
-                      explain="n(n-1)/2; the table rounds it to 5K.", source=_src("scaling", 0), chapter=10,
+                      explain="n(n-1)/2; the table rounds it to 5K.", origin=_src("scaling", 0), chapter=10,
                       dimension="design", table="scaling", row=0))
     return cards
 
@@ -385,7 +401,7 @@ def _monitoring() -> list[Card]:
         slug = _slug(row[0])
         cards.append(Card(id=f"monitor-{slug}-action", kind="choice", answer=row[3], options=actions,
                           prompt=f"Monitoring: {row[0].lower()} crosses its alert threshold ({row[2]}). Action?",
-                          source=_src("monitoring", i), chapter=11, dimension="design", table="monitoring", row=i))
+                          origin=_src("monitoring", i), chapter=11, dimension="design", table="monitoring", row=i))
         if re.fullmatch(r"[<>] [\d.]+(%|°/frame)?", row[1]) and re.fullmatch(r"[<>] [\d.]+(%|°/frame)?", row[2]):
             unit = "%" if "%" in row[1] else "°/frame" if "°" in row[1] else row[0].split("(")[-1].rstrip(")") \
                 if "(" in row[0] else ""
@@ -393,12 +409,12 @@ def _monitoring() -> list[Card]:
                 cards.append(Card(id=f"monitor-{slug}-{'normal' if j == 1 else 'alert'}", kind="numeric",
                                   answer=lesson_number(row[j]), unit=unit, tol=0.0,
                                   prompt=f"Monitoring {row[0].lower()}: the {what} ({row[j][0]} …)?",
-                                  source=_src("monitoring", i), chapter=11, dimension="design",
+                                  origin=_src("monitoring", i), chapter=11, dimension="design",
                                   table="monitoring", row=i))
         else:
             cards.append(Card(id=f"monitor-{slug}-range", prompt=f"Monitoring {row[0].lower()}: normal range and "
                               "alert threshold?", answer=f"Normal: {row[1]}. Alert: {row[2]}.",
-                              source=_src("monitoring", i), chapter=11, dimension="design", table="monitoring", row=i))
+                              origin=_src("monitoring", i), chapter=11, dimension="design", table="monitoring", row=i))
     return cards
 
 
@@ -412,7 +428,7 @@ def _timing() -> list[Card]:
                               answer=lesson_number(row[j]) * 1e3, unit="ms", tol=0.5,
                               prompt=f"{where} time of {row[0]} ({row[3]}): order of magnitude, in ms?",
                               explain="Order of magnitude (within ~3x): timings depend on hardware and resolution.",
-                              source=_src("timing", i), dimension="design", table="timing", row=i))
+                              origin=_src("timing", i), dimension="design", table="timing", row=i))
     return cards
 
 
@@ -420,23 +436,23 @@ def _text_tables() -> list[Card]:
     cards = []
     for i, row in enumerate(TABLES["misconceptions"].rows):
         cards.append(Card(id=f"myth-{_slug(row[0])}", prompt=f"True or false, and why: {row[0]}",
-                          answer=f"False. {row[1]} Why it matters: {row[2]}.", source=_src("misconceptions", i),
+                          answer=f"False. {row[1]} Why it matters: {row[2]}.", origin=_src("misconceptions", i),
                           dimension="concept", table="misconceptions", row=i))
     for i, row in enumerate(TABLES["cheat_sheet"].rows):
         cards.append(Card(id=f"concept-{_slug(row[0])}", prompt=f"{row[0]} in 30 seconds: the idea, the key "
                           "equation, the tool, a classic and a modern paper.",
                           answer=f"{row[1]}. Key equation: {row[2]}. Tool: {row[3]}. Classic: {row[4]}. "
-                          f"Modern: {row[5]}.", source=_src("cheat_sheet", i), dimension="concept",
+                          f"Modern: {row[5]}.", origin=_src("cheat_sheet", i), dimension="concept",
                           table="cheat_sheet", row=i))
     for i, row in enumerate(TABLES["classical_vs_learned"].rows):
         cards.append(Card(id=f"cvl-{_slug(row[0])}", prompt=f"{row[0]}: the classical and the learned choice, "
                           "and when to use which?", answer=f"Classical: {row[1]}. Learned: {row[2]}. {row[3]}.",
-                          source=_src("classical_vs_learned", i), dimension="frontier",
+                          origin=_src("classical_vs_learned", i), dimension="frontier",
                           table="classical_vs_learned", row=i))
     for i, row in enumerate(TABLES["cascade"].rows):
         cards.append(Card(id=f"cascade-{_slug(row[0])}", prompt=f"Root cause: {row[0]}. First symptom, cascade, "
                           "and how to isolate it?", answer=f"First symptom: {row[1]}. Cascade: {row[2]}. "
-                          f"Isolate: {row[3]}.", source=_src("cascade", i), chapter=11, dimension="debug",
+                          f"Isolate: {row[3]}.", origin=_src("cascade", i), chapter=11, dimension="debug",
                           table="cascade", row=i))
     return cards
 
@@ -476,21 +492,37 @@ def _computed() -> list[Card]:
         prompt, unit = COMPUTED_PROMPTS[key]
         printed = PIPELINE["claims"][key]
         note = "" if abs(printed - value) <= 0.01 * value else (
-            f"the lesson says {printed:g}, from rounding a frame to 3.7 MB first; 1280·960·3 B × 6 × 30 = {value:.4g}")
+            f"not {printed:g} (a frame rounded to 3.7 MB first): 1280·960·3 B × 6 × 30 = {value:.4g}")
         cards.append(Card(id=f"pipeline-{_slug(key)}", kind="numeric", answer=value, unit=unit, tol=0.02,
-                          prompt=prompt, note=note, source=f"{LESSON}, line {PIPELINE['line']} (pipeline data flow)",
+                          prompt=prompt, note=note, origin=f"{LESSON}, line {PIPELINE['line']} (pipeline data flow)",
                           dimension="design", table="pipeline"))
     cards.append(Card(id="rolling-shutter-skew", kind="numeric", answer=rolling_shutter_skew_px(), unit="px", tol=0.05,
                       prompt="Rolling shutter, 33 ms readout, robot turning at 90°/s, f = 800 px: skew between top "
                       "and bottom rows, in pixels?", explain="f · tan(ω · t_readout) = 800 · tan(2.97°).",
-                      source=f"{LESSON}, line {ROLLING_SHUTTER['line']} (rolling vs global shutter)", chapter=1,
+                      origin=f"{LESSON}, line {ROLLING_SHUTTER['line']} (rolling vs global shutter)", chapter=1,
                       dimension="concept", table="rolling_shutter"))
     cards.append(Card(id="triangulation-error-5m", kind="numeric", answer=triangulation_sigma_m(), unit="m", tol=0.05,
                       prompt="Stereo with f = 800 px, baseline 0.2 m, calibration off by 2 px: depth error at 5 m, "
                       "in metres?", explain="σ_Z ≈ Z² σ / (f B) = 25 · 2 / 160.",
-                      source=f"{LESSON}, line {TRIANGULATION['line']} (error propagation)", chapter=11,
+                      origin=f"{LESSON}, line {TRIANGULATION['line']} (error propagation)", chapter=11,
                       dimension="design", table="triangulation"))
     return cards
+
+
+RANSAC_SOURCE = "Fischler & Bolles, CACM 1981; Hartley & Zisserman, 2nd ed., §4.7.1"
+SHOWN_IN_START_HERE = ("ransac", "timing", "monitoring", "scaling", "classical_vs_learned", "misconceptions",
+                       "cheat_sheet", "cascade", "conventions")
+
+
+def shown_source(c: Card) -> str:
+    """What the learner reads as a card's source: the primary source where the answer is a formula's, else the
+    course's own table (the course's source notes, which `origin` cites for the tests, are not the learner's)."""
+    if c.table in ("ransac", "ransac_prose"):
+        return RANSAC_SOURCE
+    if c.table in TABLES:
+        where = "notebooks/00_start_here.ipynb" if c.table in SHOWN_IN_START_HERE else f"chapter {TABLES[c.table].chapter}"
+        return f"the course's table “{TABLES[c.table].title}” ({where})"
+    return "the course's reference cards, computed from their inputs (graders/study/reference.py)"
 
 
 def reference_cards() -> list[Card]:
@@ -502,4 +534,4 @@ def reference_cards() -> list[Card]:
         cell = TABLES[key].rows[i][j]
         if not any(c.table == key and c.row == i and f"“{cell}”" in c.note for c in cards):
             raise ValueError(f"the correction of table {key!r}, row {i}, column {j} is carried by no card")
-    return cards
+    return [replace(c, source=shown_source(c)) for c in cards]

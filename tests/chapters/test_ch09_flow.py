@@ -1,6 +1,7 @@
 """Chapter 9 beyond the contract suite (tests/chapters/test_contract.py, data in
 tests/mutants/ch09_flow_contract.py): .flo bytes against OpenCV, 9.15's premise (joint tracking beats independent
-tracking) and 9.14's mask against the exactly known occlusion.
+tracking), 9.14's mask against the exactly known occlusion, and the DEBUG split of 9.17-9.20 (the right cause
+with the colleague's unrepaired output earns the cause's half only).
 """
 from __future__ import annotations
 
@@ -38,3 +39,19 @@ def test_true_occlusion_is_what_the_check_finds():
         d = ch9.occlusion_pair(np.random.default_rng(seed))
         m = ch9.gt_occlusion_mask(d["w_f"], d["w_b"])
         assert (m & d["occluded"]).sum() / (m | d["occluded"]).sum() > 0.8
+
+
+def test_the_right_cause_with_the_unrepaired_output_earns_the_cause_s_half_only():
+    # ENGINE.md's DEBUG split: the named cause is half the points, the repair the other half. The colleague's own
+    # output with the right cause earned 1.33-1.67 / 2 on 9.18-9.20 when the repair rows were several and some
+    # of them held for the broken output too.
+    from graders import grade
+    from graders.core.engine import get
+    from mutants.ch09_flow import drift_unchanged, motion_unchanged
+    from mutants.ch09_flow_tracking import lost_unchanged, noisy_unsmoothed
+    for exercise_id, unrepaired in [("9.17", drift_unchanged), ("9.18", motion_unchanged), ("9.19", lost_unchanged),
+                                    ("9.20", noisy_unsmoothed)]:
+        ex = get(exercise_id)
+        result = grade(ex, unrepaired, seed=0)
+        assert [row.passed for row in result.cases if row.key == "cause"] == [True], exercise_id
+        assert result.score <= ex.points / 2 + 1e-9, (exercise_id, result.score)

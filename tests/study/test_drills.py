@@ -259,7 +259,7 @@ def test_every_card_answer_matches_its_source_table():
     cards = deck()
     assert len(cards) > 100 and len({c.id for c in cards}) == len(cards)
     for c in reference_cards():
-        assert re.search(r"seed lesson.*line", c.source), c.id
+        assert re.search(r"seed lesson.*line", c.origin), c.id
         _check_card_against_source(c)
 
 
@@ -280,6 +280,12 @@ def test_wrong_lesson_numbers_are_corrected_and_said_so():
 # carries, the chapter exercise that shows it). Written out here, apart from graders.study.reference.CORRECTIONS, so a
 # regeneration of the tables or the cards cannot drop one of these corrections without this test failing.
 CHAPTER_CORRECTIONS = {
+    # 10_large_scale 10.12: DUSt3R's eight training sets include outdoor ones; its confidence is no OOD detector
+    "symptom-10-dust3r-fails-on-outdoor-scenes": ("Trained mostly on indoor data; domain gap", "a domain gap",
+                                                  "DEBUG 10.12"),
+    # 10_large_scale 10.13/10.16: VGGT's README: 41 GB at 200 frames on an H100, about linear in N
+    "symptom-10-vggt-runs-out-of-memory-on-n-20-images": ("Quadratic attention on large sets",
+                                                          "grow with the n·t tokens", "DEBUG 10.13"),
     # 02_epipolar, section 3: "'about 1' is not what normalisation achieves; single digits to a few tens is"
     "symptom-2-f-estimation-gives-garbage": ("Always normalize; condition number of A should be ~1", "σ1/σ8",
                                              "DEBUG 2.17"),
@@ -307,8 +313,8 @@ def test_lesson_advice_the_chapters_refute_is_corrected_on_its_card():
         c = by_id[card_id]
         assert lesson_cell in TABLES[c.table].rows[c.row], card_id      # the source row stays as the lesson printed it
         assert lesson_cell not in str(c.answer) and right.lower() in str(c.answer).lower(), (card_id, c.answer)
-        assert f"the lesson prints “{lesson_cell}”" in c.note and where in c.note, (card_id, c.note)
-        assert "Correction: the lesson prints" in c.back()
+        assert f"not “{lesson_cell}”" in c.note and where in c.note, (card_id, c.note)
+        assert f"Correction: not “{lesson_cell}”" in c.back()
     refuted = [cell for cell, _, _ in CHAPTER_CORRECTIONS.values()]
     for c in reference_cards():                                     # no other card teaches a refuted cell either
         assert not any(cell in str(c.answer) or cell in c.explain for cell in refuted), c.id
@@ -388,7 +394,7 @@ def test_home_notebook_helpers_show_progress_and_the_tables():
     assert "lesson" not in ransac and "seed" not in ransac    # the learner never saw the transcribed source
     shelving = home.reference_markdown("symptoms_3")    # a refuted cell is shown corrected, the lesson's in a note
     assert "Tighten ratio test to 0.6" not in shelving.split("[1] Corrected")[0]
-    assert "Corrected: often quoted as “Tighten ratio test to 0.6" in shelving and "lesson" not in shelving
+    assert "Corrected: not “Tighten ratio test to 0.6" in shelving and "lesson" not in shelving
     from graders.core.chapters import CHAPTERS
     assert all(c.title in home.course_map() for c in CHAPTERS)
 
@@ -411,3 +417,12 @@ def test_ransac_explanation_states_the_confidence_the_lessons_counts_imply():
     card = next(c for c in reference_cards() if c.id == "ransac-w20-s8")
     # 717K iterations at w = 0.2, s = 8: 1 - (1 - 0.2^8)^717000 = 0.84; 57 at w = 0.6, s = 5: 0.99
     assert "from 0.84 to 0.99" in card.explain
+
+
+def test_no_card_shows_the_learner_the_course_source_notes():
+    # The learner never saw the notes the tables were transcribed from: a card cites a paper, a book or the
+    # course's own table, and says what is wrong in a figure without pointing at a text they cannot read.
+    for c in deck():
+        shown = " ".join((c.prompt, str(c.answer), c.note, c.explain, c.source, c.back()))
+        assert not re.search(r"(?i)\bseed\b|\blesson", shown), (c.id, shown[:200])
+        assert c.source, c.id

@@ -395,7 +395,7 @@ MUTANTS += [
     ("6.19", "every loop closure dropped", jumps_drop_all_loops, "drifts like the odometry"),
     ("6.21", "plain least squares", inconsistent_plain_l2, "robust kernel"),
     ("6.21", "every loop closure dropped", inconsistent_drop_all_loops, "drifts like the odometry"),
-    ("6.21", "the most trusted loop closures dropped, no kernel", inconsistent_drop_most_trusted, None),
+    ("6.21", "the most trusted loop closures dropped, no kernel", inconsistent_drop_most_trusted, "robust kernel"),
     ("6.21", "duplicated pose pairs dropped, no kernel", inconsistent_drop_duplicate_pairs, "robust kernel"),
     ("6.21", "right cause, the colleague's output returned", inconsistent_unrepaired, "odometry chain you were given"),
 ]
