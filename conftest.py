@@ -7,6 +7,7 @@ longer than NOTEBOOK_BUDGET_S on this machine (2 cores in CI).
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import tempfile
 from collections import defaultdict
@@ -48,9 +49,12 @@ def pytest_ignore_collect(collection_path, config):
     return True if collection_path.name in planned else None
 
 
-# Long items start first, so that under pytest-xdist (make test: 2 workers) no worker is left with a long
-# test at the end while the other idles. Matched on the node id; the rest keep their collection order.
-LONG_FIRST = ("test_notebooks.py", "test_graded.py", "test_hostile.py")
+# Long work starts first, so that under pytest-xdist (make test: 2 workers) no worker is left with a long group at
+# the end while the other idles: the scheduler sends groups in this order (then the rest in collection order), not
+# xdist's largest-group-first, which would put the long single tests (a graded chapter, a solved notebook) last.
+# Matched on the node id, roughly longest first (docs/TEST_TIME.md has the measured times).
+LONG_FIRST = ("test_release.py", "test_coursework.py", "test_graded.py", "test_notebooks.py", "test_hostile.py",
+              "test_ch04_sfm.py", ".ipynb", "test_ch11_capstone", "test_cluster.py")
 
 
 def pytest_collection_modifyitems(config, items):
@@ -59,42 +63,51 @@ def pytest_collection_modifyitems(config, items):
     items.sort(key=lambda item: rank[id(item)])
 
 
-# Tests that share an expensive module-scoped fixture (a student release, a pipeline's fault table, a drive
-# run, one draw of 4.14's photo cases) run on one worker, which builds it once: file -> test names (None: all).
-ONE_WORKER = {
-    "tests/grading/test_release.py": None,
-    "tests/chapters/test_ch11_capstone_demo.py": None,
-    "tests/chapters/test_ch11_capstone_pipeline.py": None,
-    "tests/chapters/test_ch04_sfm.py": ("test_real_photo_rows_pass_for_reference_and_stand_in",
-                                        "test_self_consistent_but_wrong_models_fail_the_photos",
-                                        "test_focal_never_refined_fails_the_real_photos"),
+CONTRACT = "tests/chapters/test_contract.py"
+_EXERCISE_ID = re.compile(r"\[ch\d\d-(\d+\.\d+)")
+
+# Files whose tests share an expensive module-scoped fixture (a student release, a pipeline's fault table, a drive
+# run) run on one worker, which builds it once.
+ONE_WORKER = ("tests/grading/test_release.py", "tests/chapters/test_ch11_capstone_demo.py",
+              "tests/chapters/test_ch11_capstone_pipeline.py")
+# Chapter tests that grade what a contract row grades (the same implementation, exercise and seed, through
+# `grader_checks.graded`) join that exercise's contract group, so the grade (a reconstruction from photos) is made
+# once: test -> exercise id.
+WITH_EXERCISE = {
+    "tests/chapters/test_ch04_sfm.py::test_real_photo_rows_pass_for_reference_and_stand_in": "4.14",
+    "tests/chapters/test_ch04_sfm.py::test_self_consistent_but_wrong_models_fail_the_photos": "4.14",
+    "tests/chapters/test_ch04_sfm.py::test_focal_never_refined_fails_the_real_photos": "4.14",
+    "tests/chapters/test_ch04_sfm.py::test_unrefined_ransac_pose_fails_the_refinement_row": "4.10",
 }
 
 
 def worker_group(nodeid: str) -> str:
     """The unit pytest-xdist schedules: a notebook (its cells run in order in one kernel), a ONE_WORKER group,
-    else the test itself."""
+    one exercise's contract tests (its reference, library rows and mutants grade the same seeds: on one worker,
+    `graders.core.memo.cached` draws each seed's problems and oracles once for all of them), else the test itself."""
     path, _, name = nodeid.partition("::")
     if path.endswith(".ipynb"):
         return path
+    if path == CONTRACT and (m := _EXERCISE_ID.search(name)):
+        return f"{CONTRACT}::{m.group(1)}"
     if path in ONE_WORKER:
-        names = ONE_WORKER[path]
-        if names is None or name.split("[")[0] in names:
-            return path
+        return path
+    if (exercise := WITH_EXERCISE.get(f"{path}::{name.split('[')[0]}")) is not None:
+        return f"{CONTRACT}::{exercise}"
     return nodeid
 
 
 def pytest_xdist_make_scheduler(config, log):
     """Under pytest-xdist (make test: 2 workers) each `worker_group` goes whole to one worker. (xdist's own
     `--dist loadgroup` reads `xdist_group` marks by renaming `Node._nodeid`, which pytest 9 no longer reads,
-    so its groups are silently ignored.) Larger groups are sent first (xdist's default), so the notebooks
-    start early."""
+    so its groups are silently ignored.) Groups are sent in collection order, which LONG_FIRST sorted."""
     from xdist.scheduler import LoadScopeScheduling
 
     class GroupScheduling(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
             return worker_group(nodeid)
 
+    config.option.loadscopereorder = False     # keep LONG_FIRST's order (pytest_collection_modifyitems)
     return GroupScheduling(config, log)
 
 

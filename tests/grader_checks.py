@@ -30,6 +30,24 @@ class Library(NamedTuple):
     cannot_must_fail: bool = False
 
 
+_GRADES: dict[tuple, tuple] = {}     # (exercise id, row filter, fn, seed) -> (fn, result): see `graded`
+MAX_GRADES = 512
+
+
+def graded(ex: Exercise, fn: Any, seed: int):
+    """`grade(ex, fn, seed=seed)`, once per test process: the contract's rows and a chapter's own tests grade the same
+    implementation on the same seed (4.14's reference, library row and mutants on its photo sets, minutes each), and
+    conftest.py's `worker_group` puts such tests on one worker. Exercises are told apart by id and row filter
+    (`without`); the learner's code is not seeded by the engine, so a second grade could only differ by its own
+    randomness, which these tests do not measure."""
+    key = (ex.id, getattr(ex.cases, "rows_left_out", None), id(fn), seed)
+    if key not in _GRADES:
+        if len(_GRADES) >= MAX_GRADES:
+            _GRADES.pop(next(iter(_GRADES)))
+        _GRADES[key] = (fn, grade(ex, fn, seed=seed))     # fn kept alive: its id stays its own
+    return _GRADES[key][1]
+
+
 def show(result) -> str:
     return f"\n{result}"
 
@@ -43,7 +61,7 @@ def reference(ex: Exercise, modules: Sequence[ModuleType]) -> Any:
 
 
 def assert_full_marks(ex: Exercise, answer: Any, seed: int) -> None:
-    result = grade(ex, answer, seed=seed)
+    result = graded(ex, answer, seed)
     assert result.passed and result.score == ex.points, show(result)
 
 
@@ -51,7 +69,7 @@ def assert_library_passes(ex: Exercise, fn: Callable, seed: int, cannot: dict[st
                           cannot_must_fail: bool = False) -> None:
     """A library-backed implementation passes every case except those in `cannot` (case name ->
     why the library cannot answer it); with `cannot_must_fail` those must fail, documenting the limit."""
-    assert_passes_but(grade(ex, fn, seed=seed), cannot, cannot_must_fail)
+    assert_passes_but(graded(ex, fn, seed), cannot, cannot_must_fail)
 
 
 def assert_passes_but(result, cannot: Mapping[str, str] | None = None, cannot_must_fail: bool = False) -> None:
@@ -86,14 +104,18 @@ def without(ex: Exercise, rows: Callable[[Case], bool] | None) -> Exercise:
     """`ex` without the cases for which `rows(case)` is True (None: `ex` itself)."""
     if rows is None:
         return ex
-    return dataclasses.replace(ex, cases=lambda rng: (c for c in ex.cases(rng) if not rows(c)))
+
+    def cases(rng):
+        return (c for c in ex.cases(rng) if not rows(c))
+    cases.rows_left_out = id(rows)     # tells `graded` this exercise from `ex`
+    return dataclasses.replace(ex, cases=cases)
 
 
 def grade_seeds(ex: Exercise, fn: Any, seeds: Sequence[int], seed_free: Callable[[Case], bool] | None = None) -> list:
     """The grades of `fn` on each seed. Rows for which `seed_free(case)` is True (real data whose input does not
     depend on the seed: 4.14's photo sets) are judged with the first seed only: on every later seed they would
     repeat the same computation on the same input (the engine does not seed the learner's randomness)."""
-    return [grade(ex if k == 0 else without(ex, seed_free), fn, seed=seed) for k, seed in enumerate(seeds)]
+    return [graded(ex if k == 0 else without(ex, seed_free), fn, seed) for k, seed in enumerate(seeds)]
 
 
 def assert_mutant_caught(ex: Exercise, name: str, mutant: Callable, hint: str | None, seeds: Sequence[int],

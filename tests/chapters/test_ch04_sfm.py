@@ -210,7 +210,8 @@ def _rows_tagged(result, ex, seed, tag):
     return [r for r in result.cases if r.key in keys]
 
 
-# The tests that read 4.14's photo rows share the draw above: one worker of a parallel run (conftest.py, ONE_WORKER).
+# The tests that read 4.14's photo rows share the draw below and their grades with the contract's 4.14 rows: one
+# worker of a parallel run (conftest.py, WITH_EXERCISE).
 
 
 @functools.lru_cache(maxsize=None)
@@ -230,7 +231,7 @@ def test_real_photo_rows_pass_for_reference_and_stand_in():
     _need_sacre_coeur()
     ex = EXERCISES["4.14"]
     for fn in (reference(ex), ch4.cv_incremental_sfm):
-        result = grade(ex, fn, seed=0)
+        result = checks.graded(ex, fn, 0)       # the contract's 4.14 rows reuse these grades (conftest.py)
         rows = _rows_tagged(result, ex, 0, "photos")
         assert len(rows) == _n_photo_rows() and all(r.passed for r in rows), checks.show(result)
 
@@ -266,7 +267,7 @@ def test_self_consistent_but_wrong_models_fail_the_photos(name, mutant):
     # with the hint that names the symptom.
     _need_sacre_coeur()
     ex = EXERCISES["4.14"]
-    result = grade(ex, mutant, seed=0)
+    result = checks.graded(ex, mutant, 0)
     rows = _rows_tagged(result, ex, 0, "photos")
     failed = [r for r in rows if not r.passed]
     assert failed, checks.show(result)
@@ -280,7 +281,7 @@ def test_focal_never_refined_fails_the_real_photos():
     # removed: Sacré-Cœur median 2.6°, worst pair 10.4°; Sceaux Castle median 2.0°, worst 4.6°; without the gate
     # the Sacré-Cœur was at 7.0° and 19°), one of the four may pass, and every photo row it fails names the
     # focal refinement
-    result = grade(EXERCISES["4.14"], sfm_focal_never_refined, seed=0)
+    result = checks.graded(EXERCISES["4.14"], sfm_focal_never_refined, 0)
     rows = _rows_tagged(result, EXERCISES["4.14"], 0, "rotations")
     assert rows and sum(not r.passed for r in rows) >= len(rows) - 1, checks.show(result)
     failed = [r for r in _rows_tagged(result, EXERCISES["4.14"], 0, "photos") if not r.passed]
@@ -348,7 +349,8 @@ def test_unrefined_ransac_pose_fails_the_refinement_row():
     # Issue 29: RANSAC without the final refinement scored 0.168 <= 0.306 px on the held-out row. The refinement
     # row catches it on every draw: a converged refinement moves an unrefined pose by >= 0.297 px (260 draws).
     from mutants.ch04_sfm import ransac_no_refinement
-    result = grade(EXERCISES["4.10"], ransac_no_refinement, seed=0)
+    result = checks.graded(EXERCISES["4.10"], ransac_no_refinement, 0)     # the contract's rows reuse these grades
     row = next(r for r in result.cases if r.key == "refined")
     assert not row.passed and row.error > 0.2 and "not the minimum of the reprojection" in row.hint
-    assert next(r for r in grade(EXERCISES["4.10"], REF.pnp_ransac, seed=0).cases if r.key == "refined").error < 1e-6
+    reference = checks.graded(EXERCISES["4.10"], REF.pnp_ransac, 0)
+    assert next(r for r in reference.cases if r.key == "refined").error < 1e-6
