@@ -288,17 +288,25 @@ def epnp_returns_centre(X, x, K):
 
 # ----------------------------------------------------------------- 4.10 PnP RANSAC
 
-def _ransac(X, x, K, thresh_px=4.0, seed=0, iters=None, refine=True, squared=False):
+def _p3p(X3, x3, K):
+    """The minimal solver of the RANSAC mutants: OpenCV's P3P (0.1 ms; the reference's numpy one takes 6 ms, and a
+    mutant that shrinks its inlier set runs to 10,000 samples), independent of 4.10's oracle (pycolmap)."""
+    n, rvecs, tvecs = cv2.solveP3P(X3.reshape(-1, 1, 3), x3.reshape(-1, 1, 2), K, None, flags=cv2.SOLVEPNP_P3P)
+    return [(cv2.Rodrigues(r)[0], t.ravel()) for r, t in zip(rvecs[:n], tvecs[:n])]
+
+
+def _ransac(X, x, K, thresh_px=4.0, seed=0, iters=None, refine=True, squared=False, max_samples=10_000):
     rng = np.random.default_rng(seed)
     n = len(X)
-    best, best_cnt, k, i = None, -1, 10_000, 0
-    limit = iters if iters is not None else 10_000
+    best, best_cnt, k, i = None, -1, max_samples, 0
+    limit = iters if iters is not None else max_samples
     while i < (limit if iters is not None else min(k, limit)):
         i += 1
         idx = rng.choice(n, 3, replace=False)
-        for R, t in ref.p3p(X[idx], x[idx], K):
-            uv, z = _project(X, K, R, t)
-            r = np.linalg.norm(uv - x, axis=1)
+        for R, t in _p3p(X[idx], x[idx], K):
+            Xc = X @ R.T + t
+            z = Xc[:, 2]
+            r = np.hypot(*(Xc[:, :2] / z[:, None] * K[[0, 1], [0, 1]] + K[:2, 2] - x).T)
             inl = (z > 0) & ((r ** 2 if squared else r) < thresh_px)
             if inl.sum() > best_cnt:
                 best, best_cnt = (R, t), int(inl.sum())
@@ -326,7 +334,9 @@ def ransac_no_refinement(X, x, K, thresh_px=4.0, seed=0):
 
 
 def ransac_squared_threshold(X, x, K, thresh_px=4.0, seed=0):
-    return _ransac(X, x, K, thresh_px, seed, squared=True)        # r² < 4 means r < 2 px
+    # r² < 4 means r < 2 px. Its inlier ratio never reaches the one its sample count needs, so it runs to its cap on
+    # every draw: 2,000 samples here (a common cap) rather than 10,000 costs the test a fifth, not the bug.
+    return _ransac(X, x, K, thresh_px, seed, squared=True, max_samples=2_000)
 
 
 # ----------------------------------------------------------------- 4.11 tracks
