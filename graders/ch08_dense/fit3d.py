@@ -88,7 +88,8 @@ def splat_fit_scene(rng: np.random.Generator) -> tuple[dict, dict, dict]:
     n0 = len(truth["mu"]) // 3
     pick = rng.choice(len(truth["mu"]), n0, replace=False)
     m = 4
-    init = {"mu": np.r_[truth["mu"][pick] + rng.normal(0, 0.15, (n0, 3)), rng.uniform([-2, -1.5, -2.5], [2, 1.5, 0.5], (m, 3))],
+    stray = rng.uniform([-2, -1.5, -2.5], [2, 1.5, 0.5], (m, 3))
+    init = {"mu": np.r_[truth["mu"][pick] + rng.normal(0, 0.15, (n0, 3)), stray],
             "q": np.tile([1.0, 0.0, 0.0, 0.0], (n0 + m, 1)), "s": np.full((n0 + m, 3), 0.2),
             "color": np.full((n0 + m, 3), 0.5), "opacity": np.r_[np.full(n0, 0.5), np.full(m, 0.002)]}
     train = [c for i, c in enumerate(cams) if i not in held_idx]

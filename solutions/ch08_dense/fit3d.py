@@ -3,8 +3,9 @@
 Parameters in unconstrained form, as 3DGS optimises them (Kerbl et al. 2023, Sec. 5): means μ (N, 3),
 quaternions q (N, 4), log scales (N, 3), logit colours (N, 3), logit opacities (N,). Each step renders one
 training view (in turn, as 3DGS samples one per iteration) with `project_gaussians` and `rasterize`, and Adam
-updates every parameter on its mean squared error; every `every` steps the Gaussians with the largest accumulated screen-space
-position gradient are densified (split if large, cloned if small, Sec. 5.2) and those below o = 0.005 pruned.
+updates every parameter on its mean squared error; every `every` steps the Gaussians with the largest
+accumulated screen-space position gradient are densified (split if large, cloned if small, Sec. 5.2) and
+those below o = 0.005 pruned.
 """
 from __future__ import annotations
 
