@@ -10,7 +10,8 @@ transparent stray points (o = 0.002) that only pruning removes.
 The learner fits every parameter with Adam through their own `project_gaussians` (8.14) and `rasterize`
 (8.15), densifying and pruning, and returns the Gaussians; the grader renders them with its own renderer at the
 held-out cameras, whose images never reach the learner. Judged: (1) the held-out views' PSNR against a bar
-that the initialisation misses by ~14 dB and a fit without densification by ~2-3 dB, (2) the budget, (3) pruning.
+that the initialisation misses by ~10 dB, (2) densification (more Gaussians than the start), (3) the
+budget, (4) pruning; (2)-(4) count only with (1) met.
 """
 from __future__ import annotations
 
@@ -34,12 +35,15 @@ FOCAL = 30.0
 N_TRAIN, N_HELD = 5, 2
 O_PRUNE = 0.005
 STEPS, BUDGET = 100, 72
-# The bar: a held-out PSNR of at least 28.5 dB (the initialisation renders them at 12-18 dB). Measured on seeds
+# The bar: a held-out PSNR of at least 26 dB (the initialisation renders them at 12-18 dB). Measured on seeds
 # 5-13 (100 steps, budget 72): the reference reaches 30.4-32.2 dB; without densification 24.5-26.8 dB; positions
-# frozen (shapes and colours fitted) 25.4-28.5 dB (it can reach the bar on an easy scene: not a catalogued mutant);
-# colours and opacities only 0.4-1.8 dB above the initialisation.
-# An absolute bar separates them better than a share of the initialisation's error (which varies 3x by scene).
-PSNR_BAR = 28.5
+# frozen (shapes and colours fitted) 25.4-28.5 dB; colours and opacities only 0.4-1.8 dB above the initialisation.
+# Fairness at a 28.5 dB bar: 7 of 400 fresh seeds fell short, the reference's worst at 26.57 dB (seed 3057265601),
+# so the bar sits 0.57 dB below it. That bar overlaps a fit without densification's range, so densification has
+# its own row (more Gaussians than the SfM start), like the budget and pruning rows: each counts only with the
+# held-out views fitted. An absolute bar separates the fits better than a share of the initialisation's error
+# (which varies 3x by scene).
+PSNR_BAR = 26.0
 
 
 def _camera(az_deg: float, el_deg: float, dist: float = 4.0):
@@ -155,11 +159,14 @@ def _fit3d_cases(rng: np.random.Generator):
             return fn(copy.deepcopy(views), copy.deepcopy(init), STEPS, BUDGET)
     run = shared_run(learner)
     held = lambda o, e: max(0.0, PSNR_BAR - _held_psnr(o, info))       # dB short of the bar
-    # 28.5 dB: see PSNR_BAR's measurement. The rows below are guards the initialisation meets: they count only
+    # 26 dB: see PSNR_BAR's measurement. The rows below are guards the initialisation meets: they count only
     # with a fit that passes the held-out bar (99 otherwise), so returning init earns nothing.
     yield Case(f"held-out views: PSNR ≥ {PSNR_BAR} dB (grader's renderer; the initialisation's: "
                f"{_psnr(info['mse_held_init']):.1f} dB)", args, PSNR_BAR, held, 0.0, "dB short",
                convert=_convert, call=run, info=info, key="held-out", weight=2.0)
+    yield Case(f"densified: more Gaussians than the {info['n_init']} SfM points, with the held-out views fitted", args,
+               info["n_init"], lambda o, e: float(max(0, e + 1 - len(o["mu"]))) if held(o, e) <= 0.0 else 99.0, 0,
+               "missing (99: held-out not fitted)", convert=_convert, call=run, info=info, key="densified")
     yield Case(f"at most {BUDGET} Gaussians, with the held-out views fitted", args, BUDGET,
                lambda o, e: float(len(o["mu"]) - e) if held(o, e) <= 0.0 else 99.0, 0, "(99: held-out not fitted)",
                convert=_convert, call=run, info=info, key="budget")
@@ -177,7 +184,7 @@ FIT3D_HINTS = [
     Hint(lambda c, o: f"the fit ended with {len(o['mu'])} Gaussians, no more than the {c.info['n_init']} SfM points it "
          "started from: densify — every few dozen steps split (large) or clone (small) the Gaussians with the largest "
          "accumulated screen-space position gradient, within the budget.",
-         lambda c, o: c.key == "held-out" and len(o["mu"]) <= c.info["n_init"]),
+         lambda c, o: c.key in ("held-out", "densified") and len(o["mu"]) <= c.info["n_init"]),
     Hint("the training views are fitted but the held-out ones are not: the Gaussians explain each view from the wrong "
          "place. Let the positions move (their learning rate in metres per step, a scene is ~2 m across), fit every "
          "training view, and densify where the 2D position gradient is large.",
