@@ -5,7 +5,8 @@ Oracles: the real Middlebury motorcycle pair with its ground-truth disparity (sc
 rectified pairs with exact disparity, and multi-view scenes of textured planes rendered by
 `graders.kit.scene` with exact depth (plane-sweep MVS and depth-map fusion are judged on it).
 
-Geometry modules: `stereo` (8.8-8.9), `mvs` (8.10), `fusion` (8.11), `debug` (8.17), `questions` (8.1-8.3, 8.24). Importing the package registers the
+Geometry modules: `stereo` (8.8-8.9), `mvs` (8.10), `fusion` (8.11), `debug` (8.17), `questions` (8.1-8.3, 8.24); the
+FRONTIER fit (8.25) in `fit3d`. Importing the package registers the
 chapter; the names below are the API of the notebook, the tests and the benchmark.
 """
 from __future__ import annotations
@@ -46,3 +47,6 @@ from .neural_debug import debug_blurry, neural_debug_case  # noqa: E402
 from . import reflect  # noqa: F401,E402 (register 8.18)
 from .reflect import reflect_case, reflect_scene  # noqa: E402
 __all__ += ["debug_blurry", "debug_diverging", "debug_floaters", "neural_debug_case", "render_gaussians", "reflect_case", "reflect_scene"]
+from . import fit3d  # noqa: F401,E402 (register 8.25, the FRONTIER fit)
+from .fit3d import render_gaussians_at, splat_fit_scene  # noqa: E402
+__all__ += ["render_gaussians_at", "splat_fit_scene"]

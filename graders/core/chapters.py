@@ -79,7 +79,7 @@ CHAPTERS: tuple[Chapter, ...] = (
             "disparity and matching costs, block matching with sub-pixel refinement and left-right check, "
             "semi-global matching (graded on the Middlebury motorcycle pair against OpenCV), plane-sweep MVS, "
             "depth-map fusion with geometric consistency, NeRF volume rendering and sampling, 3D Gaussian "
-            "projection, tiled compositing and a differentiable splatting fit"),
+            "projection, tiled compositing, a differentiable splatting fit and a 3D Gaussian fit judged on held-out views"),
     Chapter(9, "flow", "Optical flow and tracking",
             "flow tools (.flo, warping, EPE/Fl), vectorised Lucas-Kanade with the eigenvalue test, pyramidal LK "
             "(against OpenCV), Horn-Schunck, a coarse-to-fine dense flow graded on FlyingChairs against Farneback "

@@ -32,3 +32,5 @@ from .neural_debug import fix_blurry_splats, fix_diverging_splats, fix_floaters 
 __all__ += ["fix_blurry_splats", "fix_diverging_splats", "fix_floaters"]
 from .reflect import fix_reflections  # noqa: E402
 __all__ += ["fix_reflections"]
+from .fit3d import fit_gaussians_3d  # noqa: E402
+__all__ += ["fit_gaussians_3d"]

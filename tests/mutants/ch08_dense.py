@@ -617,3 +617,7 @@ MUTANTS += _FLOATER_MUTANTS
 # 8.18 (NeRF on a reflective surface) lives in its own file like 8.19
 from mutants.ch08_dense_reflect import MUTANTS as _REFLECT_MUTANTS  # noqa: E402
 MUTANTS += _REFLECT_MUTANTS
+
+# ----------------------------------------------------------------- 8.25 FRONTIER 3D Gaussian fit (its own file)
+from mutants.ch08_dense_fit3d import MUTANTS as _FIT3D_MUTANTS  # noqa: E402
+MUTANTS += _FIT3D_MUTANTS

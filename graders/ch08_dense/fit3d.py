@@ -1,0 +1,201 @@
+"""8.25 (FRONTIER) — a small 3D Gaussian splatting fit on CPU, through the learner's own 8.14 and 8.15.
+
+Ground truth: a synthetic scene of flat 3D Gaussians (a textured wall and a smaller panel 0.6-0.9 m in front of
+it, so views from different angles see parallax and occlusion), rendered by the grader's 3DGS renderer (8.14's
+and 8.15's oracles) at 5 training cameras and 2 held-out cameras between them (azimuths interleaved, so the
+held-out views interpolate). The initialisation is what SfM would hand over: a third as many points as the
+truth has Gaussians, at surface points displaced by ~15 cm (σ per axis), large and grey, half transparent, plus 4 nearly
+transparent stray points (o = 0.002) that only pruning removes.
+
+The learner fits every parameter with Adam through their own `project_gaussians` (8.14) and `rasterize`
+(8.15), densifying and pruning, and returns the Gaussians; the grader renders them with its own renderer at the
+held-out cameras, whose images never reach the learner. Judged: (1) the held-out views' PSNR against a bar
+that the initialisation misses by ~10 dB, (2) densification (more Gaussians than the start), (3) the
+budget, (4) pruning; (2)-(4) count only with (1) met.
+"""
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from graders.core.convert import OutputError
+from graders.core.engine import Case, Exercise, Hint, register, shared_run
+from graders.core.memo import cached
+from graders.kit.scene import look_at
+from graders.kit.threads import torch_threads
+
+from .nerf import to_numpy
+from .raster import gt_rasterize
+from .splat import gt_project
+
+W = H = 24
+FOCAL = 30.0
+N_TRAIN, N_HELD = 5, 2
+O_PRUNE = 0.005
+STEPS, BUDGET = 100, 72
+# The bar: a held-out PSNR of at least 26 dB (the initialisation renders them at 12-18 dB). Measured on seeds
+# 5-13 (100 steps, budget 72): the reference reaches 30.4-32.2 dB; without densification 24.5-26.8 dB; positions
+# frozen (shapes and colours fitted) 25.4-28.5 dB; colours and opacities only 0.4-1.8 dB above the initialisation.
+# Fairness at a 28.5 dB bar: 7 of 400 fresh seeds fell short, the reference's worst at 26.57 dB (seed 3057265601),
+# so the bar sits 0.57 dB below it. That bar overlaps a fit without densification's range, so densification has
+# its own row (more Gaussians than the SfM start), like the budget and pruning rows: each counts only with the
+# held-out views fitted. An absolute bar separates the fits better than a share of the initialisation's error
+# (which varies 3x by scene).
+PSNR_BAR = 26.0
+
+
+def _camera(az_deg: float, el_deg: float, dist: float = 4.0):
+    a, e = np.radians(az_deg), np.radians(el_deg)
+    C = dist * np.array([np.sin(a) * np.cos(e), np.sin(e), -np.cos(a) * np.cos(e)])
+    return look_at(C, np.zeros(3))
+
+
+def _plane(rng: np.random.Generator, n_side: int, half: float, z: float, size: tuple, base) -> dict:
+    g = np.linspace(-half, half, n_side)
+    x, y = np.meshgrid(g, g)
+    n = x.size
+    mu = np.stack([x.ravel(), y.ravel(), np.full(n, z)], 1) + np.c_[rng.uniform(-0.03, 0.03, (n, 2)), np.zeros(n)]
+    q = Rotation.from_euler("z", rng.uniform(0, np.pi, (n, 1))).as_quat()[:, [3, 0, 1, 2]]    # (w, x, y, z)
+    s = np.c_[rng.uniform(*size, (n, 2)), np.full(n, 0.01)]                                  # flat discs, m
+    ramp = (0.5 + 0.5 * x.ravel() / half)[:, None]
+    color = np.clip(base[0] + (base[1] - base[0]) * ramp + rng.normal(0, 0.15, (n, 3)), 0.02, 0.98)
+    return {"mu": mu, "q": q, "s": s, "color": color, "opacity": rng.uniform(0.7, 0.99, n)}
+
+
+def _join(*gs) -> dict:
+    return {k: np.concatenate([g[k] for g in gs]) for k in ("mu", "q", "s", "color", "opacity")}
+
+
+def render_gaussians_at(g: dict, K, R, t, W: int = W, H: int = H) -> np.ndarray:
+    """The grader's 3DGS render (8.14's and 8.15's oracles) of Gaussians g at one camera: (H, W, 3)."""
+    if len(g["mu"]) == 0:
+        return np.zeros((H, W, 3))
+    p = gt_project(g["mu"], g["q"], g["s"], R, t, K, W, H)
+    v = p["visible"]
+    img, _ = gt_rasterize(p["means2d"][v], p["conic"][v], g["color"][v], g["opacity"][v], p["depth"][v],
+                          p["radius"][v], W, H)
+    return img
+
+
+def splat_fit_scene(rng: np.random.Generator) -> tuple[dict, dict, dict]:
+    """(views, init, hidden): the training views (images, Ks, Rs, ts, W, H), the SfM-like initialisation, and the
+    grader's hidden part (the true Gaussians, the held-out cameras and their images)."""
+    K = np.array([[FOCAL, 0, W / 2], [0, FOCAL, H / 2], [0, 0, 1]])
+    az = np.linspace(-40, 40, N_TRAIN + N_HELD) + rng.uniform(-3, 3, N_TRAIN + N_HELD)
+    held_idx = np.array([2, 4])                      # interleaved with the training azimuths
+    cams = [(K, *_camera(a, rng.uniform(-10, 10))) for a in az]
+    colors = [rng.uniform(0.1, 0.9, (2, 3)) for _ in range(2)]
+    truth = _join(_plane(rng, 6, 0.9, 0.0, (0.1, 0.16), colors[0]),
+                  _plane(rng, 3, 0.3, -rng.uniform(0.6, 0.9), (0.08, 0.12), colors[1]))
+    n0 = len(truth["mu"]) // 3
+    pick = rng.choice(len(truth["mu"]), n0, replace=False)
+    m = 4
+    noise = rng.normal(0, 0.15, (n0, 3))                        # SfM's points are off the surface by ~15 cm
+    stray = rng.uniform([-2, -1.5, -2.5], [2, 1.5, 0.5], (m, 3))  # drawn in this order: the seeds' scenes stay put
+    init = {"mu": np.r_[truth["mu"][pick] + noise, stray],
+            "q": np.tile([1.0, 0.0, 0.0, 0.0], (n0 + m, 1)), "s": np.full((n0 + m, 3), 0.2),
+            "color": np.full((n0 + m, 3), 0.5), "opacity": np.r_[np.full(n0, 0.5), np.full(m, 0.002)]}
+    train = [c for i, c in enumerate(cams) if i not in held_idx]
+    held = [cams[i] for i in held_idx]
+    views = {"images": [render_gaussians_at(truth, *c) for c in train], "Ks": [c[0] for c in train],
+             "Rs": [c[1] for c in train], "ts": [c[2] for c in train], "W": W, "H": H}
+    hidden = {"truth": truth, "held": held, "held_images": [render_gaussians_at(truth, *c) for c in held]}
+    return views, init, hidden
+
+
+_FIELDS = {"mu": 3, "q": 4, "s": 3, "color": 3, "opacity": 0}
+MAX_RENDER = 2000      # the judge renders at most this many Gaussians (its brute-force renderer is (H·W, N))
+
+
+def _convert(out, case):
+    if not isinstance(out, dict) or set(_FIELDS) - set(out):
+        raise OutputError(f"expected a dict with {', '.join(_FIELDS)} (the fitted Gaussians, like init)")
+    arr = {k: np.asarray(to_numpy(out[k]), float) for k in _FIELDS}
+    N = len(arr["mu"])
+    for k, d in _FIELDS.items():
+        if arr[k].shape != ((N, d) if d else (N,)):
+            raise OutputError(f"{k} has shape {arr[k].shape}, expected {(N, d) if d else (N,)}")
+        if not np.isfinite(arr[k]).all():
+            raise OutputError(f"{k} has non-finite values (did the fit diverge?)")
+    if (arr["s"] <= 0).any() or (np.linalg.norm(arr["q"], axis=1) == 0).any():
+        raise OutputError("scales must be positive (standard deviations in m) and quaternions non-zero")
+    if N > MAX_RENDER:
+        raise OutputError(f"{N} Gaussians: more than {MAX_RENDER} are not rendered (the budget is {case.info['budget']})")
+    return arr
+
+
+def _mse(g: dict, cams, images) -> float:
+    return float(np.mean([(render_gaussians_at(g, *c) - im) ** 2 for c, im in zip(cams, images)]))
+
+
+def _psnr(mse: float) -> float:
+    return float(10 * np.log10(1.0 / max(mse, 1e-12)))
+
+
+def _held_psnr(o, info) -> float:
+    """The held-out views' PSNR (dB) of the fitted Gaussians, rendered by the grader."""
+    return _psnr(_mse(o, info["held"], info["held_images"]))
+
+
+def _train_share(o, info) -> float:
+    return _mse(o, info["train"], info["train_images"]) / info["mse_train_init"]
+
+
+@cached
+def _fit3d_cases(rng: np.random.Generator):
+    views, init, hidden = splat_fit_scene(rng)
+    seen = init["opacity"] >= O_PRUNE
+    init_kept = {k: v[seen] for k, v in init.items()}            # the baseline, strays removed (they draw nothing)
+    train = list(zip(views["Ks"], views["Rs"], views["ts"]))
+    info = {"held": hidden["held"], "held_images": hidden["held_images"], "train": train, "train_images": views["images"],
+            "mse_held_init": _mse(init_kept, hidden["held"], hidden["held_images"]),
+            "mse_train_init": _mse(init_kept, train, views["images"]), "n_init": int(seen.sum()), "budget": BUDGET}
+    args = (views, init, STEPS, BUDGET)
+
+    def learner(fn):
+        with torch_threads(1):
+            return fn(copy.deepcopy(views), copy.deepcopy(init), STEPS, BUDGET)
+    run = shared_run(learner)
+    held = lambda o, e: max(0.0, PSNR_BAR - _held_psnr(o, info))       # dB short of the bar
+    # 26 dB: see PSNR_BAR's measurement. The rows below are guards the initialisation meets: they count only
+    # with a fit that passes the held-out bar (99 otherwise), so returning init earns nothing.
+    yield Case(f"held-out views: PSNR ≥ {PSNR_BAR} dB (grader's renderer; the initialisation's: "
+               f"{_psnr(info['mse_held_init']):.1f} dB)", args, PSNR_BAR, held, 0.0, "dB short",
+               convert=_convert, call=run, info=info, key="held-out", weight=2.0)
+    yield Case(f"densified: more Gaussians than the {info['n_init']} SfM points, with the held-out views fitted", args,
+               info["n_init"], lambda o, e: float(max(0, e + 1 - len(o["mu"]))) if held(o, e) <= 0.0 else 99.0, 0,
+               "missing (99: held-out not fitted)", convert=_convert, call=run, info=info, key="densified")
+    yield Case(f"at most {BUDGET} Gaussians, with the held-out views fitted", args, BUDGET,
+               lambda o, e: float(len(o["mu"]) - e) if held(o, e) <= 0.0 else 99.0, 0, "(99: held-out not fitted)",
+               convert=_convert, call=run, info=info, key="budget")
+    yield Case(f"pruned: no Gaussian left with opacity < {O_PRUNE}, with the held-out views fitted", args, 0,
+               lambda o, e: float(np.sum(o["opacity"] < O_PRUNE)) if held(o, e) <= 0.0 else 99.0, 0,
+               "(99: held-out not fitted)", convert=_convert, call=run, info=info, key="pruned")
+
+
+FIT3D_HINTS = [
+    Hint(lambda c, o: f"the training views are not fitted either ({_train_share(o, c.info):.0%} of the initialisation's "
+         "error left): gradients must reach every parameter — μ, q, s, colour and opacity — through your "
+         "project_gaussians and rasterize. Is your 8.15 rasteriser differentiable in means2d, conic and opacity too (its "
+         "check only tested the colours)? Are the positions and scales optimised at all?",
+         lambda c, o: c.key == "held-out" and _train_share(o, c.info) > 0.3),
+    Hint(lambda c, o: f"the fit ended with {len(o['mu'])} Gaussians, no more than the {c.info['n_init']} SfM points it "
+         "started from: densify — every few dozen steps split (large) or clone (small) the Gaussians with the largest "
+         "accumulated screen-space position gradient, within the budget.",
+         lambda c, o: c.key in ("held-out", "densified") and len(o["mu"]) <= c.info["n_init"]),
+    Hint("the training views are fitted but the held-out ones are not: the Gaussians explain each view from the wrong "
+         "place. Let the positions move (their learning rate in metres per step, a scene is ~2 m across), fit every "
+         "training view, and densify where the 2D position gradient is large.",
+         lambda c, o: c.key == "held-out"),
+    Hint("Gaussians with opacity below 0.005 are left in: prune them (the initialisation holds 4 nearly transparent "
+         "strays).", lambda c, o: c.key == "pruned" and np.any(o["opacity"] < O_PRUNE)),
+    Hint("more Gaussians than the budget: cap densification at max_gaussians.",
+         lambda c, o: c.key == "budget" and len(o["mu"]) > c.info["budget"]),
+]
+
+register(Exercise(
+    id="8.25", title="A small 3D Gaussian splatting fit through your 8.14 and 8.15", name="fit_gaussians_3d",
+    kind="frontier", points=3, cases=_fit3d_cases, hints=FIT3D_HINTS, fallback=None, timeout=60.0,
+    arg_names=("views", "init", "steps", "max_gaussians")))

@@ -1,0 +1,46 @@
+"""Chapter 8 mutants of 8.25 (the FRONTIER 3D Gaussian fit), appended to ch08_dense.MUTANTS.
+
+The course's reference fit (solutions/ch08_dense/fit3d.py, through the reference 8.14 and 8.15) with one step
+switched off; the grader judges against renders of its synthetic ground truth, never against a fit of its own.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def _fit(*a, **kw):
+    from solutions.ch08_dense.fit3d import fit_gaussians_3d
+    return fit_gaussians_3d(*a, **kw)
+
+
+def fit3d_no_densify(views, init, steps=100, max_gaussians=72):
+    return _fit(views, init, steps, max_gaussians, densify_until=-1)
+
+
+def fit3d_no_prune(views, init, steps=100, max_gaussians=72):
+    return _fit(views, init, steps, max_gaussians, o_min=0.0)
+
+
+def fit3d_no_budget(views, init, steps=100, max_gaussians=72):
+    """Densifies every 10 steps and forgets the cap."""
+    return _fit(views, init, steps, 10 ** 6, every=10)
+
+
+def fit3d_colours_only(views, init, steps=100, max_gaussians=72):
+    """Fits the training views' colours and opacities with frozen positions, rotations and scales."""
+    return _fit(views, init, steps, max_gaussians, lr_mu=0.0, lr_shape=0.0)
+
+
+def fit3d_untrained(views, init, steps=100, max_gaussians=72):
+    """Returns the SfM initialisation with the strays dropped: no optimisation at all."""
+    keep = np.asarray(init["opacity"]) >= 0.005
+    return {k: np.asarray(v)[keep] for k, v in init.items()}
+
+
+MUTANTS: list[tuple] = [
+    ("8.25", "no densification", fit3d_no_densify, "no more than the"),
+    ("8.25", "no pruning", fit3d_no_prune, "prune them"),
+    ("8.25", "no budget", fit3d_no_budget, "cap densification"),
+    ("8.25", "colours only, frozen positions", fit3d_colours_only, "not fitted either"),
+    ("8.25", "untrained", fit3d_untrained, "not fitted either"),
+]
