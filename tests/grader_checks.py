@@ -90,9 +90,11 @@ def cannot_by_name(ex: Exercise, seed: int, cannot_keys: Mapping[str, str]) -> d
     return cannot
 
 
-def assert_fallback_passes(ex: Exercise, seed: int = 3) -> None:
-    # Demo cells run on the fallback until the learner's version passes, so it must be right.
-    result = grade(ex, ex.fallback, seed=seed)
+def assert_fallback_passes(ex: Exercise, seed: int) -> None:
+    # Demo cells run on the fallback until the learner's version passes, so it must be right. Graded through
+    # `graded`: where the fallback is also a library row (4.10's OpenCV RANSAC, 4.14's OpenCV SfM), on the same seed
+    # it is the same grade.
+    result = graded(ex, ex.fallback, seed)
     assert result.passed, show(result)
 
 
