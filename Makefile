@@ -28,7 +28,7 @@ lab: install
 	$(BIN)/python -m graders.study.lab $(LAB_ARGS)
 
 # Both cores (pytest-xdist); each notebook runs whole on one worker (conftest.py); the 25 slowest tests listed at the end.
-TEST_WORKERS ?= 2
+TEST_WORKERS ?= 3
 test: install
 	$(BIN)/python -m pytest -n $(TEST_WORKERS) --durations=25
 

@@ -31,9 +31,9 @@ def pytest_configure(config):
 
 
 def notebook_budget_s() -> float:
-    """NOTEBOOK_BUDGET_S as this test process can measure it. Under pytest-xdist (make test: 2 workers) a
+    """NOTEBOOK_BUDGET_S as this test process can measure it. Under pytest-xdist (make test: 3 workers) a
     notebook shares the machine with the other workers' tests, so it has cores / workers of them, not 2:
-    its wall-clock budget grows by 2 / (cores / workers) (x2 for 2 workers on 2 cores). Alone: 60 s."""
+    its wall-clock budget grows by 2 / (cores / workers) (x3 for 3 workers on 2 cores). Alone: 60 s."""
     workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT") or _WORKERS[0])
     return NOTEBOOK_BUDGET_S * max(1.0, 2.0 * workers / (os.cpu_count() or 2))
 _notebook_seconds: dict[str, float] = defaultdict(float)
@@ -49,7 +49,7 @@ def pytest_ignore_collect(collection_path, config):
     return True if collection_path.name in planned else None
 
 
-# Long work starts first, so that under pytest-xdist (make test: 2 workers) no worker is left with a long group at
+# Long work starts first, so that under pytest-xdist (make test: 3 workers) no worker is left with a long group at
 # the end while the other idles: the scheduler sends groups in this order (then the rest in collection order), not
 # xdist's largest-group-first, which would put the long single tests (a graded chapter, a solved notebook) last.
 # Matched on the node id, roughly longest first (docs/TEST_TIME.md has the measured times).
@@ -98,7 +98,7 @@ def worker_group(nodeid: str) -> str:
 
 
 def pytest_xdist_make_scheduler(config, log):
-    """Under pytest-xdist (make test: 2 workers) each `worker_group` goes whole to one worker. (xdist's own
+    """Under pytest-xdist (make test: 3 workers) each `worker_group` goes whole to one worker. (xdist's own
     `--dist loadgroup` reads `xdist_group` marks by renaming `Node._nodeid`, which pytest 9 no longer reads,
     so its groups are silently ignored.) Groups are sent in collection order, which LONG_FIRST sorted."""
     from xdist.scheduler import LoadScopeScheduling

@@ -15,6 +15,7 @@ from pathlib import Path
 import nbformat
 import pytest
 
+from conftest import notebook_budget_s
 from graders import chapter
 from graders.core.chapters import READY
 from notebook_stubs import ROOT, replace_stubs as _replace_stubs
@@ -70,6 +71,7 @@ def test_loop_in_every_stub_grades_quickly_and_cleanly(ch, tmp_path):
     assert "time limit" in outputs and "not run" in outputs, outputs[:3000]
     # The time-out budget bounds the grade: its time limits, loading, and the questions.
     print(f"{ch.prefix}: loop in every stub graded in {seconds:.0f} s")
-    assert seconds < 240, f"{seconds:.0f} s"
+    bound = max(240.0, 2 * notebook_budget_s())    # wall clock: the limits count CPU, a loaded worker gets less of it
+    assert seconds < bound, f"{seconds:.0f} s, bound {bound:.0f} s"
     assert not _alive(MARKER), _alive(MARKER)
     assert not list(scratch.iterdir()), list(scratch.iterdir())

@@ -247,7 +247,7 @@ def test_release_installs_in_a_fresh_venv_and_every_notebook_runs(release, tmp_p
               "    print('ran', path)\n")
     env = dict(os.environ, MPLBACKEND="Agg", COURSE_STATIC_PLOTS="1")
     out = subprocess.run([py, "-c", runner, *[str(release / c.notebook) for c in READY]], capture_output=True,
-                         text=True, timeout=900, cwd=tmp_path, env=env)
+                         text=True, timeout=1500, cwd=tmp_path, env=env)   # ~5 CPU min: a third of 2 cores under make test
     assert out.returncode == 0, out.stderr[-4000:]
     assert out.stdout.count("ran ") == len(READY)
 
