@@ -26,7 +26,7 @@ from graders.core.memo import cached
 from graders.kit.scene import look_at
 from graders.kit.threads import torch_threads
 
-from .nerf import to_numpy
+from .floaters import gaussians_array
 from .raster import gt_rasterize
 from .splat import gt_project
 
@@ -105,22 +105,12 @@ def splat_fit_scene(rng: np.random.Generator) -> tuple[dict, dict, dict]:
     return views, init, hidden
 
 
-_FIELDS = {"mu": 3, "q": 4, "s": 3, "color": 3, "opacity": 0}
 MAX_RENDER = 2000      # the judge renders at most this many Gaussians (its brute-force renderer is (H·W, N))
 
 
 def _convert(out, case):
-    if not isinstance(out, dict) or set(_FIELDS) - set(out):
-        raise OutputError(f"expected a dict with {', '.join(_FIELDS)} (the fitted Gaussians, like init)")
-    arr = {k: np.asarray(to_numpy(out[k]), float) for k in _FIELDS}
+    arr = gaussians_array(out)       # the fitted Gaussians, like init
     N = len(arr["mu"])
-    for k, d in _FIELDS.items():
-        if arr[k].shape != ((N, d) if d else (N,)):
-            raise OutputError(f"{k} has shape {arr[k].shape}, expected {(N, d) if d else (N,)}")
-        if not np.isfinite(arr[k]).all():
-            raise OutputError(f"{k} has non-finite values (did the fit diverge?)")
-    if (arr["s"] <= 0).any() or (np.linalg.norm(arr["q"], axis=1) == 0).any():
-        raise OutputError("scales must be positive (standard deviations in m) and quaternions non-zero")
     if N > MAX_RENDER:
         raise OutputError(f"{N} Gaussians: more than {MAX_RENDER} are not rendered (the budget is {case.info['budget']})")
     return arr

@@ -205,6 +205,23 @@ def debug_floaters(rng: np.random.Generator) -> tuple[dict, dict]:
 _FIELDS = {"mu": 3, "q": 4, "s": 3, "color": 3, "opacity": 0}
 
 
+def gaussians_array(g, where: str = "") -> dict[str, np.ndarray]:
+    """A learner's Gaussians {mu: (N, 3), q: (N, 4), s: (N, 3) m, color: (N, 3), opacity: (N,)} as float arrays,
+    checked (shapes, finite, positive scales, non-zero quaternions); `where` prefixes the messages."""
+    if not isinstance(g, dict) or set(_FIELDS) - set(g):
+        raise OutputError(f"{where}expected a dict with {', '.join(_FIELDS)}")
+    arr = {k: np.asarray(to_numpy(g[k]), float) for k in _FIELDS}
+    N = len(arr["mu"])
+    for k, d in _FIELDS.items():
+        if arr[k].shape != ((N, d) if d else (N,)):
+            raise OutputError(f"{where}{k} has shape {arr[k].shape}, expected {(N, d) if d else (N,)}")
+        if not np.isfinite(arr[k]).all():
+            raise OutputError(f"{where}{k} has non-finite values (did the fit diverge?)")
+    if (arr["s"] <= 0).any() or (np.linalg.norm(arr["q"], axis=1) == 0).any():
+        raise OutputError(f"{where}scales must be positive (standard deviations in m) and quaternions non-zero")
+    return arr
+
+
 def _convert(out, case):
     if not isinstance(out, dict) or not {"cause", "gaussians"} <= set(out):
         raise OutputError('expected a dict {"cause": one of CAUSES, "gaussians": dict like the case\'s (mu, q, s, '
@@ -212,18 +229,7 @@ def _convert(out, case):
     cause = str(out["cause"]).strip().lower()
     if cause not in CAUSES:
         raise OutputError(f'"cause" must be one of {", ".join(CAUSES)}; got {out["cause"]!r}')
-    g = out["gaussians"]
-    if not isinstance(g, dict) or set(_FIELDS) - set(g):
-        raise OutputError(f"gaussians: expected a dict with {', '.join(_FIELDS)}")
-    arr = {k: np.asarray(to_numpy(g[k]), float) for k in _FIELDS}
-    N = len(arr["mu"])
-    for k, d in _FIELDS.items():
-        if arr[k].shape != ((N, d) if d else (N,)):
-            raise OutputError(f"{k} has shape {arr[k].shape}, expected {(N, d) if d else (N,)}")
-        if not np.isfinite(arr[k]).all():
-            raise OutputError(f"{k} has non-finite values")
-    if (arr["s"] <= 0).any() or (np.linalg.norm(arr["q"], axis=1) == 0).any():
-        raise OutputError("scales must be positive and quaternions non-zero")
+    arr = gaussians_array(out["gaussians"], "gaussians: ")
     return {"cause": cause, "gaussians": arr}
 
 
