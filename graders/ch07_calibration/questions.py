@@ -7,8 +7,8 @@ import numpy as np
 from graders.core.compare import max_abs, relative
 from graders.core.engine import Hint, choice_question, numeric_question, register, value_hint
 
-# Synchronisation, worst case of each method (s): hardware trigger < 1 µs, PTP < 100 µs, NTP ~1 ms,
-# software timestamps 1-10 ms.
+# Synchronisation, worst case of each method (s): hardware trigger < 1 µs, PTP with software timestamping < 100 µs
+# (with hardware timestamping, sub-µs: linuxptp's documentation), NTP ~1 ms, software timestamps 1-10 ms.
 SYNC = {"hardware trigger": 1e-6, "PTP": 100e-6, "NTP": 1e-3, "software": 10e-3}
 
 
