@@ -165,6 +165,33 @@ def test_drill_ratings_follow_score_and_time():
     assert srs.drill_rating({"status": "passed", "seconds": 2000, "target_minutes": 20}) == 2
 
 
+def _drill(t, status="passed", seconds=900.0, target=20.0, id_="1.5"):
+    return {"event": "attempt", "source": "drill", "id": id_, "status": status, "seconds": seconds,
+            "target_minutes": target, "t": t.timestamp()}
+
+
+def test_a_first_drill_passed_on_time_is_good_and_due_in_days():
+    # fsrs 6.3.2 with learning_steps=() and its default parameters: first "good" -> 2 days, "hard" and
+    # "again" -> 1 day (fsrs/scheduler.py, Scheduler.review_card, State.Learning with no learning steps)
+    assert srs.reviews([_drill(T0)]) == [("drill:1.5", 3, T0.timestamp())]
+    assert srs.states([_drill(T0)])["drill:1.5"].due - T0 == timedelta(days=2)
+    assert srs.states([_drill(T0, seconds=1500)])["drill:1.5"].due - T0 == timedelta(days=1)      # late: hard
+    assert srs.states([_drill(T0, status="failed")])["drill:1.5"].due - T0 == timedelta(days=1)   # again
+    assert srs.states([_review("card:a", 3, T0)])["card:a"].due - T0 == timedelta(minutes=10)    # cards: steps
+
+
+def test_a_drill_is_reviewed_at_most_once_a_day():
+    once = srs.states([_drill(T0)])["drill:1.5"]
+    again = [_drill(T0), _drill(T0 + timedelta(minutes=5)), _drill(T0 + timedelta(minutes=9), seconds=100)]
+    assert srs.reviews(again) == srs.reviews([_drill(T0)])
+    assert srs.states(again)["drill:1.5"].due == once.due
+    # the day's first attempt is the one rated: failing, then passing after a fix, is "again"
+    fixed = [_drill(T0, status="failed"), _drill(T0 + timedelta(minutes=20))]
+    assert [r for _, r, _ in srs.reviews(fixed)] == [1]
+    # another day is another review
+    assert len(srs.reviews([_drill(T0), _drill(T0 + timedelta(days=2))])) == 2
+
+
 def test_reviewing_cards_records_ratings_and_today_shows_what_is_due(store, capsys):
     cards = reference_cards()[:3]            # frame conventions: choice cards
     answers = iter([cards[0].answer, "-Z" if cards[1].answer != "-Z" else "+Z", "q"])
