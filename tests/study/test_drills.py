@@ -220,6 +220,17 @@ def test_card_grading_by_kind():
     assert text.correct is None and text.rating is None and "model answer" in text.message
 
 
+def test_a_number_judged_wrong_is_rated_again_however_close():
+    num = Card(id="n", prompt="?", answer=448, kind="numeric", tol=0.02)
+    near = grade(num, "460")                    # 2.7 % off: within 3 tol, outside tol
+    assert near.correct is False and near.rating == 1 and "again" in near.message and "close" in near.message
+    mag = Card(id="m", prompt="?", answer=50.0, kind="magnitude", tol=0.5)
+    assert grade(mag, "300").correct is False and grade(mag, "300").rating == 1    # 0.78 decades off
+    for card, wrong in ((num, "460"), (mag, "300")):   # the terminal review records "again", asks no rating
+        asked = iter([wrong, "4"])
+        assert drill.ask_card(card, ask=lambda prompt: next(asked), say=lambda *a: None) == 1
+
+
 def _iterations(w: float, s: int) -> int:
     """The smallest k with (1 - w^s)^k <= 0.01, found by bracketing (not the closed form the cards use)."""
     q = 1 - w ** s
