@@ -4,7 +4,7 @@
     python -m graders drill check [FILE]                   # grade it on fresh hidden cases; score and time recorded
     python -m graders drill today                          # cards and drills due (FSRS), new cards for today
     python -m graders drill cards [--n 10]                 # review the due cards in the terminal
-    python -m graders drill export deck.apkg               # the reference cards as an Anki deck
+    python -m graders drill export deck.apkg               # the reference cards and the drills as an Anki deck
     python -m graders drill mock [--minutes 45]            # one CODE drill, a few cards, one DEBUG scenario
 
 In a notebook: `from graders.study import drill`, then `path = drill.start("1.5")`, edit the file,
@@ -179,6 +179,19 @@ def start(exercise_id: str | None = None, topic: str | None = None, weakest: boo
     print(f"Drill {ex.id}: {ex.title} — {DIFFICULTY[difficulty(ex)]}, target {target_minutes(ex):g} min.\n"
           f"Your stub: {path}\nWhen done: python -m graders drill check {path}")
     return path
+
+
+def drill_notes(exercises: list[Exercise] | None = None) -> list:
+    """The CODE drills (default: all) as Anki notes (`deck.DrillNote`), for `drill export`."""
+    from graders.study.deck import DrillNote
+    out = []
+    for ex in code_exercises() if exercises is None else exercises:
+        front = (f"Drill {ex.id}: {ex.title} ({DIFFICULTY[difficulty(ex)]}, target {target_minutes(ex):g} min)\n\n"
+                 + (statement(ex) or f"Implement {ex.name}."))
+        back = (f"Solve it timed on fresh hidden cases:\npython -m graders drill {ex.id}\n"
+                "then: python -m graders drill check")
+        out.append(DrillNote(ex.id, front, back, int(ex.id.split(".")[0])))
+    return out
 
 
 # ------------------------------------------------------------------ choosing a drill

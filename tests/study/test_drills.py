@@ -399,6 +399,23 @@ def test_anki_export_reads_back(tmp_path):
     assert "1893" in ransac and "Correction" in ransac
 
 
+def test_anki_export_has_the_drills_and_says_it_carries_no_review_history(tmp_path, monkeypatch, capsys):
+    from graders.core.engine import get
+    cards = reference_cards()[:2]
+    monkeypatch.setattr(commands, "deck", lambda: cards)
+    monkeypatch.setattr(drill, "code_exercises", lambda: [get("1.5")])
+    assert commands.main(["export", str(tmp_path / "deck.apkg")]) == 0
+    out = capsys.readouterr().out
+    assert "2 cards and 1 drills written" in out and "review history not included" in out
+    with zipfile.ZipFile(tmp_path / "deck.apkg") as z:
+        z.extract("collection.anki2", tmp_path)
+    db = sqlite3.connect(tmp_path / "collection.anki2")
+    notes = {flds.split("\x1f")[0]: (flds, tags) for flds, tags in db.execute("select flds, tags from notes")}
+    assert set(notes) == {c.id for c in cards} | {"drill:1.5"}
+    assert "python -m graders drill 1.5" in notes["drill:1.5"][0] and "drill" in notes["drill:1.5"][1].split()
+    assert db.execute("select count(*) from revlog").fetchone()[0] == 0      # genanki writes no history
+
+
 def test_mock_interview_runs_cards_a_debug_scenario_and_a_drill_then_reports(store):
     from graders.study.mock import mock_interview
 
