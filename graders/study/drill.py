@@ -137,7 +137,7 @@ def _hands_nothing(imports: list[str], stub: str) -> list[str]:
     return kept
 
 
-def stub_text(ex: Exercise) -> str:
+def stub_text(ex: Exercise, t0: float | None = None) -> str:
     """The drill's file: a header (what, how long, how to check), the imports, the stub."""
     imports, stub = _notebook_parts(ex)
     if ex.stub:
@@ -146,15 +146,22 @@ def stub_text(ex: Exercise) -> str:
     if not stub:
         args = ", ".join(ex.arg_names) if ex.arg_names else "*args"
         stub = f'def {ex.name}({args}):\n    """Exercise {ex.id}: {ex.title}."""\n    raise NotImplementedError\n'
+    now = time.time() if t0 is None else t0
     header = (f"# DRILL {ex.id} — {ex.title} (CODE, {ex.points:g} points)\n"
               f"# difficulty: {DIFFICULTY[difficulty(ex)]} · target: {target_minutes(ex):g} min · "
-              f"started {time.strftime('%Y-%m-%d %H:%M')}\n"
+              f"started {time.strftime('%Y-%m-%d %H:%M', time.localtime(now))} · "
+              f"finish by {_finish_by(now, target_minutes(ex))}\n"
               "# Implement the function, then:  python -m graders drill check  (this file, the latest drill)\n")
     text = statement(ex)
     if text:
         header += "#\n" + _as_comment(text)
     body = "\n".join(imports or ["import numpy as np"])
     return f"{header}\n{body}\n\n\n{stub.rstrip()}\n"
+
+
+def _finish_by(t0: float, minutes: float) -> str:
+    """The local clock time at which the target runs out, e.g. '14:35'."""
+    return time.strftime("%H:%M", time.localtime(t0 + 60 * minutes))
 
 
 def start(exercise_id: str | None = None, topic: str | None = None, weakest: bool = False,
@@ -173,10 +180,13 @@ def start(exercise_id: str | None = None, topic: str | None = None, weakest: boo
     while path.exists():
         n += 1
         path = path.with_name(f"{path.stem.rsplit('~', 1)[0]}~{n}.py")
-    path.write_text(stub_text(ex), encoding="utf-8")
-    progress.append({"event": "drill_start", "id": ex.id, "file": str(path), "difficulty": difficulty(ex),
+    t0 = round(time.time(), 3)      # one clock reading: the header's times and the recorded start agree
+    path.write_text(stub_text(ex, t0), encoding="utf-8")
+    progress.append({"t": t0, "event": "drill_start", "id": ex.id, "file": str(path), "difficulty": difficulty(ex),
                      "target_minutes": target_minutes(ex)})
     print(f"Drill {ex.id}: {ex.title} — {DIFFICULTY[difficulty(ex)]}, target {target_minutes(ex):g} min.\n"
+          f"The clock is running: finish by {_finish_by(t0, target_minutes(ex))} "
+          f"(`drill check` reports your time against the target).\n"
           f"Your stub: {path}\nWhen done: python -m graders drill check {path}")
     return path
 

@@ -7,6 +7,7 @@ import ast
 import math
 import re
 import sqlite3
+import time
 import zipfile
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
@@ -79,8 +80,11 @@ def test_stub_and_timing_come_from_exercise_data_when_given():
     assert drill.difficulty(custom) == 2 and drill.target_minutes(custom) == 7
 
 
-def test_a_drill_from_stub_to_graded_result_with_its_time_recorded(store):
+def test_a_drill_from_stub_to_graded_result_with_its_time_recorded(store, capsys):
     path = drill.start("1.5")
+    started = [e for e in progress.read() if e["event"] == "drill_start"][-1]
+    finish = time.strftime("%H:%M", time.localtime(started["t"] + 20 * 60))     # target 20 min from the start
+    assert f"finish by {finish}" in capsys.readouterr().out and f"finish by {finish}" in path.read_text()
     assert path.parent == store / "drills" and path.name.startswith("01_drill_1-5_project_points")
     started = [e for e in progress.read() if e["event"] == "drill_start"]
     assert started[-1]["id"] == "1.5" and started[-1]["file"] == str(path)
