@@ -103,5 +103,7 @@ def grade(card: Card, response: Any) -> Verdict:
             return Verdict(False, f"an order of magnitude is positive. Answer: {card.back()}", 1)
         err = abs(math.log10(given / card.answer))
         ok, close = err <= card.tol, err <= 2 * card.tol
-    rating = (4 if err <= card.tol / 4 else 3) if ok else (2 if close else 1)
-    return Verdict(ok, ("right. " if ok else f"no ({_fmt(given)}). ") + f"Answer: {card.back()}", rating)
+    if not ok:      # a wrong number was not recalled, however close: never hard/good/easy
+        near = "close, but outside the tolerance: " if close else ""
+        return Verdict(False, f"no ({_fmt(given)}; {near}rated 1 again). Answer: {card.back()}", 1)
+    return Verdict(True, f"right. Answer: {card.back()}", 4 if err <= card.tol / 4 else 3)

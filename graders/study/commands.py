@@ -11,7 +11,7 @@ import sys
 from graders.study.drill import (DIFFICULTY, check_drill, code_exercises, difficulty, review, start, target_minutes,
                                  today)
 from graders.study import drill
-from graders.study.deck import deck, export_anki
+from graders.study.deck import NO_HISTORY, deck, export_anki
 from graders.study.mock import mock_interview
 
 # The usage block of graders/study/drill.py: `drill --help` lists every verb, not only the first.
@@ -57,8 +57,9 @@ def main(argv: list[str] | None = None) -> int:
     elif verb == "cards":
         review(args.n)
     elif verb == "export":
-        cards = deck()
-        print(f"{len(cards)} cards written to {export_anki(args.out, cards)}")
+        cards, drills = deck(), drill.drill_notes()
+        print(f"{len(cards)} cards and {len(drills)} drills written to {export_anki(args.out, cards, drills)}\n"
+              f"({NO_HISTORY})")
     else:
         mock_interview(args.minutes, args.cards)
     return 0

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import html
 import importlib
+from dataclasses import dataclass
 
 from graders.core.chapters import READY
 from graders.study.cards import Card
@@ -47,8 +48,24 @@ ANKI_DECK_ID = 1_719_301_903        # fixed: re-importing an export updates the 
 ANKI_MODEL_ID = 1_719_301_904
 
 
-def export_anki(path: str, cards: list[Card] | None = None) -> str:
-    """Write the deck as an Anki package (.apkg, read by Anki and by genanki's own reader)."""
+# genanki 0.13.1 writes every card as new (genanki/card.py: type 0, queue 0, ivl 0, reps 0) and has no API
+# for Anki's review log (the `revlog` table is created empty): an export cannot carry the learner's history.
+NO_HISTORY = ("review history not included: genanki 0.13.1 writes every card as new and cannot write Anki's "
+              "review log; your reviews and schedule stay in the progress file (python -m graders drill today)")
+
+
+@dataclass(frozen=True)
+class DrillNote:
+    """A CODE drill as an Anki note: the problem on the front, how to solve and check it timed on the back."""
+    id: str                      # the exercise id, e.g. "1.5"
+    front: str                   # plain text: title, difficulty, target time, the statement
+    back: str                    # plain text: the commands to run
+    chapter: int
+
+
+def export_anki(path: str, cards: list[Card] | None = None, drills: list[DrillNote] = ()) -> str:
+    """Write the cards and the drills as an Anki package (.apkg, read by Anki and by genanki's own reader).
+    Every note is new in Anki: see NO_HISTORY."""
     import genanki
     cards = deck() if cards is None else cards
     model = genanki.Model(ANKI_MODEL_ID, "cv3d-course reference card",
@@ -63,5 +80,9 @@ def export_anki(path: str, cards: list[Card] | None = None) -> str:
         tags = [c.dimension] + ([f"chapter{c.chapter}"] if c.chapter else ["cross-chapter"])
         anki.add_note(genanki.Note(model=model, fields=[esc(c.id), front, back, esc(c.source)], guid=genanki.guid_for(c.id),
                                    tags=tags))
+    for d in drills:     # guid "drill:<id>": never the same note as a card
+        anki.add_note(genanki.Note(model=model, fields=[esc(f"drill:{d.id}"), esc(d.front).replace("\n", "<br>"),
+                                                        esc(d.back).replace("\n", "<br>"), ""],
+                                   guid=genanki.guid_for(f"drill:{d.id}"), tags=["drill", f"chapter{d.chapter}"]))
     genanki.Package(anki).write_to_file(path)
     return path

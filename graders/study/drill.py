@@ -4,7 +4,7 @@
     python -m graders drill check [FILE]                   # grade it on fresh hidden cases; score and time recorded
     python -m graders drill today                          # cards and drills due (FSRS), new cards for today
     python -m graders drill cards [--n 10]                 # review the due cards in the terminal
-    python -m graders drill export deck.apkg               # the reference cards as an Anki deck
+    python -m graders drill export deck.apkg               # the reference cards and the drills as an Anki deck
     python -m graders drill mock [--minutes 45]            # one CODE drill, a few cards, one DEBUG scenario
 
 In a notebook: `from graders.study import drill`, then `path = drill.start("1.5")`, edit the file,
@@ -137,7 +137,7 @@ def _hands_nothing(imports: list[str], stub: str) -> list[str]:
     return kept
 
 
-def stub_text(ex: Exercise) -> str:
+def stub_text(ex: Exercise, t0: float | None = None) -> str:
     """The drill's file: a header (what, how long, how to check), the imports, the stub."""
     imports, stub = _notebook_parts(ex)
     if ex.stub:
@@ -146,15 +146,22 @@ def stub_text(ex: Exercise) -> str:
     if not stub:
         args = ", ".join(ex.arg_names) if ex.arg_names else "*args"
         stub = f'def {ex.name}({args}):\n    """Exercise {ex.id}: {ex.title}."""\n    raise NotImplementedError\n'
+    now = time.time() if t0 is None else t0
     header = (f"# DRILL {ex.id} — {ex.title} (CODE, {ex.points:g} points)\n"
               f"# difficulty: {DIFFICULTY[difficulty(ex)]} · target: {target_minutes(ex):g} min · "
-              f"started {time.strftime('%Y-%m-%d %H:%M')}\n"
+              f"started {time.strftime('%Y-%m-%d %H:%M', time.localtime(now))} · "
+              f"finish by {_finish_by(now, target_minutes(ex))}\n"
               "# Implement the function, then:  python -m graders drill check  (this file, the latest drill)\n")
     text = statement(ex)
     if text:
         header += "#\n" + _as_comment(text)
     body = "\n".join(imports or ["import numpy as np"])
     return f"{header}\n{body}\n\n\n{stub.rstrip()}\n"
+
+
+def _finish_by(t0: float, minutes: float) -> str:
+    """The local clock time at which the target runs out, e.g. '14:35'."""
+    return time.strftime("%H:%M", time.localtime(t0 + 60 * minutes))
 
 
 def start(exercise_id: str | None = None, topic: str | None = None, weakest: bool = False,
@@ -173,12 +180,28 @@ def start(exercise_id: str | None = None, topic: str | None = None, weakest: boo
     while path.exists():
         n += 1
         path = path.with_name(f"{path.stem.rsplit('~', 1)[0]}~{n}.py")
-    path.write_text(stub_text(ex), encoding="utf-8")
-    progress.append({"event": "drill_start", "id": ex.id, "file": str(path), "difficulty": difficulty(ex),
+    t0 = round(time.time(), 3)      # one clock reading: the header's times and the recorded start agree
+    path.write_text(stub_text(ex, t0), encoding="utf-8")
+    progress.append({"t": t0, "event": "drill_start", "id": ex.id, "file": str(path), "difficulty": difficulty(ex),
                      "target_minutes": target_minutes(ex)})
     print(f"Drill {ex.id}: {ex.title} — {DIFFICULTY[difficulty(ex)]}, target {target_minutes(ex):g} min.\n"
+          f"The clock is running: finish by {_finish_by(t0, target_minutes(ex))} "
+          f"(`drill check` reports your time against the target).\n"
           f"Your stub: {path}\nWhen done: python -m graders drill check {path}")
     return path
+
+
+def drill_notes(exercises: list[Exercise] | None = None) -> list:
+    """The CODE drills (default: all) as Anki notes (`deck.DrillNote`), for `drill export`."""
+    from graders.study.deck import DrillNote
+    out = []
+    for ex in code_exercises() if exercises is None else exercises:
+        front = (f"Drill {ex.id}: {ex.title} ({DIFFICULTY[difficulty(ex)]}, target {target_minutes(ex):g} min)\n\n"
+                 + (statement(ex) or f"Implement {ex.name}."))
+        back = (f"Solve it timed on fresh hidden cases:\npython -m graders drill {ex.id}\n"
+                "then: python -m graders drill check")
+        out.append(DrillNote(ex.id, front, back, int(ex.id.split(".")[0])))
+    return out
 
 
 # ------------------------------------------------------------------ choosing a drill

@@ -161,11 +161,15 @@ def chapter_totals() -> dict[tuple[str, str], tuple[int, float]]:
     return totals
 
 
-def table(events: Iterable[dict] | None = None, totals: dict | None = None) -> str:
-    """The progress table: one row per chapter and dimension that has exercises or attempts."""
+def table(events: Iterable[dict] | None = None, totals: dict | None = None, attempted_only: bool = False) -> str:
+    """The progress table: one row per chapter and dimension that has exercises or attempts (with
+    `attempted_only`, only those with attempts), then a total line. A row's "attempted" is out of the
+    course's exercises; its points are out of the course's points, or with `attempted_only` out of the
+    attempted exercises' points (so the total says over how many of the course's exercises)."""
     rows = summary(events)
     totals = {} if totals is None else totals
-    keys = sorted(set(rows) | set(totals), key=lambda k: (_num(k[0]), KINDS.index(k[1]) if k[1] in KINDS else 9))
+    keys = sorted(set(rows) | (set() if attempted_only else set(totals)),
+                  key=lambda k: (_num(k[0]), KINDS.index(k[1]) if k[1] in KINDS else 9))
     if not keys:
         return f"no attempts recorded yet (progress file: {progress_file()})"
     lines = [f"{'chapter':>7}  {'dimension':<9}  {'attempted':>9}  {'passed':>6}  {'points':>13}  last attempt",
@@ -173,10 +177,26 @@ def table(events: Iterable[dict] | None = None, totals: dict | None = None) -> s
     for ch, kind in keys:
         r = rows.get((ch, kind), {"attempted": 0, "passed": 0, "points": 0.0, "max_points": 0.0, "last": 0.0})
         n, pts = totals.get((ch, kind), (r["attempted"], r["max_points"]))
+        pts = r["max_points"] if attempted_only else pts
         last = time.strftime("%Y-%m-%d %H:%M", time.localtime(r["last"])) if r["last"] else "—"
         lines.append(f"{ch:>7}  {kind.upper():<9}  {r['attempted']:>4}/{n:<4}  {r['passed']:>6}  "
                      f"{r['points']:>6.3g}/{pts:<6.3g}  {last}")
-    return "\n".join(lines)
+    return "\n".join(lines + ["-" * 72, _total_line(rows, totals, attempted_only)])
+
+
+def _total_line(rows: dict, totals: dict, attempted_only: bool) -> str:
+    """'total: 3/3 points over 1 attempted exercise of 17' (attempted only) or
+    'total: 3/50 points over 17 exercises, 1 attempted, 1 passed' (the full view)."""
+    attempted, passed = sum(r["attempted"] for r in rows.values()), sum(r["passed"] for r in rows.values())
+    points, attempted_max = sum(r["points"] for r in rows.values()), sum(r["max_points"] for r in rows.values())
+    n = sum(t[0] for t in totals.values()) if totals else attempted
+    course_max = sum(t[1] for t in totals.values()) if totals else attempted_max
+    s = "" if attempted == 1 else "s"
+    if attempted_only:
+        return (f"total: {points:.3g}/{attempted_max:.3g} points over {attempted} attempted exercise{s} of {n} "
+                f"({passed} passed; {points:.3g}/{course_max:.3g} points over all {n})")
+    return (f"total: {points:.3g}/{course_max:.3g} points over {n} exercises, {attempted} attempted, "
+            f"{passed} passed")
 
 
 def _num(key: str) -> float:
@@ -197,7 +217,7 @@ def main(argv: list[str] | None = None) -> int:
         print(progress_file())
         return 0
     events = read()
-    print(table(events, None if args.attempted_only else chapter_totals()))
+    print(table(events, chapter_totals(), attempted_only=args.attempted_only))
     print(f"\n(progress file: {progress_file()})")
     return 0
 

@@ -7,12 +7,18 @@ rated from its score and time. Each item's FSRS state is rebuilt by replaying it
 
 Ratings: 1 again, 2 hard, 3 good, 4 easy. A drill that passes within half its target time is easy,
 within its target good, slower hard; a drill that does not pass is again.
+
+Drills are rated once a day: the first graded attempt of a local day is that day's review (a drill is a
+test of recall, so checking again after fixing it the same day does not add a review). Cards keep FSRS's
+learning steps (1 and 10 minutes: a new fact is asked again in the session); drills have none
+(`DRILL_SCHEDULER`), since re-solving a problem minutes later tests short-term memory. With fsrs 6.3.2's
+default parameters a first drill rated again or hard is due in 1 day, good in 2 days, easy in 8 days.
 """
 from __future__ import annotations
 
 import zlib
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import date, datetime, timezone
 from typing import Iterable
 
 from fsrs import Card as FsrsCard
@@ -21,6 +27,7 @@ from fsrs import Rating, Scheduler
 from graders.study import progress
 
 SCHEDULER = Scheduler(enable_fuzzing=False)
+DRILL_SCHEDULER = Scheduler(enable_fuzzing=False, learning_steps=(), relearning_steps=())   # intervals in days
 NEW_PER_DAY = 10
 
 
@@ -39,7 +46,7 @@ def drill_rating(event: dict) -> int:
 
 
 def reviews(events: Iterable[dict]) -> list[tuple[str, int, float]]:
-    """(item, rating, time) of every review and drill attempt, oldest first."""
+    """(item, rating, time) of every card review and of each drill's first attempt of a day, oldest first."""
     out = []
     for e in events:
         try:
@@ -49,7 +56,22 @@ def reviews(events: Iterable[dict]) -> list[tuple[str, int, float]]:
                 out.append((f"drill:{e['id']}", drill_rating(e), float(e["t"])))
         except (KeyError, TypeError, ValueError):   # a line from an older or damaged file: not a review
             continue
-    return sorted(out, key=lambda r: r[2])
+    out.sort(key=lambda r: r[2])
+    seen: set[tuple[str, date]] = set()     # (drill, local day) already rated
+    kept = []
+    for item, rating, t in out:
+        if item.startswith("drill:"):
+            day = (item, when(t).astimezone().date())
+            if day in seen:
+                continue
+            seen.add(day)
+        kept.append((item, rating, t))
+    return kept
+
+
+def scheduler(item: str) -> Scheduler:
+    """Drills are scheduled in days (no learning steps), cards with FSRS's default minute steps first."""
+    return DRILL_SCHEDULER if item.startswith("drill:") else SCHEDULER
 
 
 def states(events: Iterable[dict]) -> dict[str, FsrsCard]:
@@ -58,7 +80,7 @@ def states(events: Iterable[dict]) -> dict[str, FsrsCard]:
     for item, rating, t in reviews(events):
         if item not in cards:
             cards[item] = FsrsCard(card_id=zlib.crc32(item.encode()), due=when(t))
-        cards[item], _ = SCHEDULER.review_card(cards[item], Rating(rating), review_datetime=when(t))
+        cards[item], _ = scheduler(item).review_card(cards[item], Rating(rating), review_datetime=when(t))
     return cards
 
 

@@ -7,6 +7,7 @@ import ast
 import math
 import re
 import sqlite3
+import time
 import zipfile
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
@@ -79,8 +80,11 @@ def test_stub_and_timing_come_from_exercise_data_when_given():
     assert drill.difficulty(custom) == 2 and drill.target_minutes(custom) == 7
 
 
-def test_a_drill_from_stub_to_graded_result_with_its_time_recorded(store):
+def test_a_drill_from_stub_to_graded_result_with_its_time_recorded(store, capsys):
     path = drill.start("1.5")
+    started = [e for e in progress.read() if e["event"] == "drill_start"][-1]
+    finish = time.strftime("%H:%M", time.localtime(started["t"] + 20 * 60))     # target 20 min from the start
+    assert f"finish by {finish}" in capsys.readouterr().out and f"finish by {finish}" in path.read_text()
     assert path.parent == store / "drills" and path.name.startswith("01_drill_1-5_project_points")
     started = [e for e in progress.read() if e["event"] == "drill_start"]
     assert started[-1]["id"] == "1.5" and started[-1]["file"] == str(path)
@@ -165,6 +169,33 @@ def test_drill_ratings_follow_score_and_time():
     assert srs.drill_rating({"status": "passed", "seconds": 2000, "target_minutes": 20}) == 2
 
 
+def _drill(t, status="passed", seconds=900.0, target=20.0, id_="1.5"):
+    return {"event": "attempt", "source": "drill", "id": id_, "status": status, "seconds": seconds,
+            "target_minutes": target, "t": t.timestamp()}
+
+
+def test_a_first_drill_passed_on_time_is_good_and_due_in_days():
+    # fsrs 6.3.2 with learning_steps=() and its default parameters: first "good" -> 2 days, "hard" and
+    # "again" -> 1 day (fsrs/scheduler.py, Scheduler.review_card, State.Learning with no learning steps)
+    assert srs.reviews([_drill(T0)]) == [("drill:1.5", 3, T0.timestamp())]
+    assert srs.states([_drill(T0)])["drill:1.5"].due - T0 == timedelta(days=2)
+    assert srs.states([_drill(T0, seconds=1500)])["drill:1.5"].due - T0 == timedelta(days=1)      # late: hard
+    assert srs.states([_drill(T0, status="failed")])["drill:1.5"].due - T0 == timedelta(days=1)   # again
+    assert srs.states([_review("card:a", 3, T0)])["card:a"].due - T0 == timedelta(minutes=10)    # cards: steps
+
+
+def test_a_drill_is_reviewed_at_most_once_a_day():
+    once = srs.states([_drill(T0)])["drill:1.5"]
+    again = [_drill(T0), _drill(T0 + timedelta(minutes=5)), _drill(T0 + timedelta(minutes=9), seconds=100)]
+    assert srs.reviews(again) == srs.reviews([_drill(T0)])
+    assert srs.states(again)["drill:1.5"].due == once.due
+    # the day's first attempt is the one rated: failing, then passing after a fix, is "again"
+    fixed = [_drill(T0, status="failed"), _drill(T0 + timedelta(minutes=20))]
+    assert [r for _, r, _ in srs.reviews(fixed)] == [1]
+    # another day is another review
+    assert len(srs.reviews([_drill(T0), _drill(T0 + timedelta(days=2))])) == 2
+
+
 def test_reviewing_cards_records_ratings_and_today_shows_what_is_due(store, capsys):
     cards = reference_cards()[:3]            # frame conventions: choice cards
     answers = iter([cards[0].answer, "-Z" if cards[1].answer != "-Z" else "+Z", "q"])
@@ -191,6 +222,17 @@ def test_card_grading_by_kind():
     assert grade(ch, " -z ").correct and not grade(ch, "+Z").correct
     text = grade(Card(id="t", prompt="?", answer="model answer"), "anything")
     assert text.correct is None and text.rating is None and "model answer" in text.message
+
+
+def test_a_number_judged_wrong_is_rated_again_however_close():
+    num = Card(id="n", prompt="?", answer=448, kind="numeric", tol=0.02)
+    near = grade(num, "460")                    # 2.7 % off: within 3 tol, outside tol
+    assert near.correct is False and near.rating == 1 and "again" in near.message and "close" in near.message
+    mag = Card(id="m", prompt="?", answer=50.0, kind="magnitude", tol=0.5)
+    assert grade(mag, "300").correct is False and grade(mag, "300").rating == 1    # 0.78 decades off
+    for card, wrong in ((num, "460"), (mag, "300")):   # the terminal review records "again", asks no rating
+        asked = iter([wrong, "4"])
+        assert drill.ask_card(card, ask=lambda prompt: next(asked), say=lambda *a: None) == 1
 
 
 def _iterations(w: float, s: int) -> int:
@@ -359,6 +401,23 @@ def test_anki_export_reads_back(tmp_path):
     assert ids == {c.id for c in cards}
     ransac = next(f for f, _ in notes if f.startswith("ransac-w30") or f.startswith("ransac-prose-w30"))
     assert "1893" in ransac and "Correction" in ransac
+
+
+def test_anki_export_has_the_drills_and_says_it_carries_no_review_history(tmp_path, monkeypatch, capsys):
+    from graders.core.engine import get
+    cards = reference_cards()[:2]
+    monkeypatch.setattr(commands, "deck", lambda: cards)
+    monkeypatch.setattr(drill, "code_exercises", lambda: [get("1.5")])
+    assert commands.main(["export", str(tmp_path / "deck.apkg")]) == 0
+    out = capsys.readouterr().out
+    assert "2 cards and 1 drills written" in out and "review history not included" in out
+    with zipfile.ZipFile(tmp_path / "deck.apkg") as z:
+        z.extract("collection.anki2", tmp_path)
+    db = sqlite3.connect(tmp_path / "collection.anki2")
+    notes = {flds.split("\x1f")[0]: (flds, tags) for flds, tags in db.execute("select flds, tags from notes")}
+    assert set(notes) == {c.id for c in cards} | {"drill:1.5"}
+    assert "python -m graders drill 1.5" in notes["drill:1.5"][0] and "drill" in notes["drill:1.5"][1].split()
+    assert db.execute("select count(*) from revlog").fetchone()[0] == 0      # genanki writes no history
 
 
 def test_mock_interview_runs_cards_a_debug_scenario_and_a_drill_then_reports(store):

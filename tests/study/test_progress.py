@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import warnings
@@ -117,12 +118,25 @@ def test_table_counts_exercises_attempted_passed_and_best_points(store):
     assert "0/2" in lines[("3", "DEBUG")] and "—" in lines[("3", "DEBUG")]
 
 
+def test_attempted_only_says_over_how_many_of_the_course_exercises(store):
+    progress.record_result(_result("1.5", "code", "passed", 3, 3))
+    totals = {("1", "code"): (9, 30.0), ("1", "concept"): (8, 8.0)}           # 17 exercises, 38 points
+    full, only = progress.table(totals=totals), progress.table(totals=totals, attempted_only=True)
+    assert "total: 3/38 points over 17 exercises, 1 attempted, 1 passed" in full
+    assert "total: 3/3 points over 1 attempted exercise of 17 (1 passed; 3/38 points over all 17)" in only
+    rows = [line for line in only.splitlines() if line.split()[:2] in (["1", "CODE"], ["1", "CONCEPT"])]
+    assert len(rows) == 1 and "1/9" in rows[0] and "3/3" in rows[0]       # attempted out of the chapter's 9
+    assert "1/9" in full and "3/30" in full
+
+
 def test_progress_command_prints_the_table(store):
     progress.record_result(_result("1.5", "code", "passed", 4, 4))
     out = subprocess.run([sys.executable, "-m", "graders", "progress", "--attempted-only"], cwd=ROOT,
                          capture_output=True, text=True, timeout=120, env=dict(os.environ))
     assert out.returncode == 0, out.stderr
-    assert "CODE" in out.stdout and "1/1" in out.stdout and str(store) in out.stdout
+    assert "CODE" in out.stdout and str(store) in out.stdout
+    assert re.search(r"over 1 attempted exercise of \d+", out.stdout)      # not a bare "4/4 points"
+    assert not re.search(r"\b1/1\b", out.stdout)                          # 1 of chapter 1's CODE exercises
 
 
 def test_the_shell_grader_does_not_write_progress(store, tmp_path):
