@@ -64,7 +64,7 @@ def _first_code(ch):
 
 def _with_stub(ch, name: str | None = None, source: str = "") -> nbformat.NotebookNode:
     """The solved notebook, with the reference import of `name` (if given) replaced by `source`."""
-    from test_notebooks import _solved
+    from notebook_stubs import solved as _solved
     nb = _solved(ROOT / ch.notebook)
     for cell in nb.cells:
         if name and "stub" in cell.get("metadata", {}).get("tags", []):
