@@ -26,9 +26,7 @@ from graders.core.memo import cached
 from graders.kit.scene import look_at
 from graders.kit.threads import torch_threads
 
-from .floaters import gaussians_array
-from .raster import gt_rasterize
-from .splat import gt_project
+from .floaters import gaussians_array, render_gaussians
 
 W = H = 24
 FOCAL = 30.0
@@ -69,14 +67,8 @@ def _join(*gs) -> dict:
 
 
 def render_gaussians_at(g: dict, K, R, t, W: int = W, H: int = H) -> np.ndarray:
-    """The grader's 3DGS render (8.14's and 8.15's oracles) of Gaussians g at one camera: (H, W, 3)."""
-    if len(g["mu"]) == 0:
-        return np.zeros((H, W, 3))
-    p = gt_project(g["mu"], g["q"], g["s"], R, t, K, W, H)
-    v = p["visible"]
-    img, _ = gt_rasterize(p["means2d"][v], p["conic"][v], g["color"][v], g["opacity"][v], p["depth"][v],
-                          p["radius"][v], W, H)
-    return img
+    """The grader's 3DGS render (8.14's and 8.15's oracles) of Gaussians g at one camera of this scene: (H, W, 3)."""
+    return render_gaussians(g, K, R, t, W, H)
 
 
 def splat_fit_scene(rng: np.random.Generator) -> tuple[dict, dict, dict]:

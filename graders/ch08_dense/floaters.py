@@ -68,8 +68,8 @@ def _wall(rng: np.random.Generator) -> dict:
     return {"mu": mu, "q": q, "s": s, "color": color, "opacity": rng.uniform(0.6, 0.99, n)}
 
 
-def render_gaussians(g: dict, K, R, t) -> np.ndarray:
-    """The grader's 3DGS render (8.14's projection, 8.15's compositing) of Gaussians g at one camera."""
+def render_gaussians(g: dict, K, R, t, W: int = W, H: int = H) -> np.ndarray:
+    """The grader's 3DGS render (8.14's projection, 8.15's compositing) of Gaussians g at one camera: (H, W, 3)."""
     if len(g["mu"]) == 0:
         return np.zeros((H, W, 3))
     p = gt_project(g["mu"], g["q"], g["s"], R, t, K, W, H)
