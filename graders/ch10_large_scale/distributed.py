@@ -279,7 +279,7 @@ def gt_run_pipeline(image_paths, pairs, stages, out_path, address=None, n_worker
         futures = {client.submit(_standin_batch, stages.load, stages.extract, stages.match, stages.verify,
                                  {i: image_paths[i] for p in batches[k] for i in p}, batches[k],
                                  key=f"pairs-{run}-{k}", retries=retries): k for k in left}
-        for future in as_completed(futures):
+        for future in as_completed(futures, loop=client.loop):   # its own client's loop (dask/distributed#4357)
             rows = future.result()
             _write_json(names[futures[future]], rows)
             done[names[futures[future]]] = rows

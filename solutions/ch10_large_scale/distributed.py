@@ -153,7 +153,10 @@ def run_pipeline(image_paths, pairs, stages, out_path: str, address: str | None 
         if client is not None:
             from distributed import as_completed
             futures = _on_dask(client, stages, list(image_paths), pair_batches, left, batch_size, retries)
-            for future in as_completed(futures):       # checkpoint each batch the moment it is done
+            # loop=client.loop: without it as_completed waits on the loop of the process's default client (the
+            # newest Client made anywhere in the process), and hangs for good once that other client is closed
+            # (dask/distributed#4357; seen when a second Client ran beside this one in a test).
+            for future in as_completed(futures, loop=client.loop):    # checkpoint each batch the moment it is done
                 finished(futures[future], future.result())
         elif left:
             extract = _with_retries(extract_batch, retries)

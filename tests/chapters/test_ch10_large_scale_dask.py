@@ -57,13 +57,25 @@ def test_reference_pipeline_on_a_multi_process_cluster(tmp_path):
         # A worker killed while it runs a batch of pairs: the scheduler reruns the batch on the other one.
         paths, pairs, expected = _problem(3, tmp_path / "kill", 7)
         out = str(tmp_path / "kill.json")
+        # busy_worker's Client, made in this process while the run's own waits, is the default client until it
+        # closes: a pipeline whose as_completed follows the default client's loop hangs here (dask/distributed#4357).
         result = {}
-        run = threading.Thread(target=lambda: result.update(rows=run_pipeline(
-            paths, pairs, ch10.PipelineStages(latency_s=0.3), out, address=address, batch_size=2)))
+
+        def pipeline():
+            try:
+                result["rows"] = run_pipeline(paths, pairs, ch10.PipelineStages(latency_s=0.3), out, address=address,
+                                              batch_size=2)
+            except BaseException as exc:     # noqa: BLE001 — reported below, with the cluster's log
+                result["error"] = repr(exc)
+
+        run = threading.Thread(target=pipeline, daemon=True)
         run.start()
         victim = busy_worker(address, set(workers), lambda key: key.startswith("match-"))
         stop(workers.pop(victim))
-        run.join(600)
+        run.join(300)
+        log = (tmp_path / "cluster.log").read_text(errors="replace")[-3000:]
+        assert not run.is_alive(), f"the run hung after its worker was killed; the cluster's log ends:\n{log}"
+        assert "rows" in result, f"the run failed: {result.get('error')}; the cluster's log ends:\n{log}"
         assert np.array_equal(result["rows"], expected)
         assert not os.path.exists(out + ".parts")
 
