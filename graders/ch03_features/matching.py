@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from graders.core.engine import Case, Exercise, Hint, OutputError, register
+from graders.core.memo import cached
 from ..oracles.features import cv_match
 
 
@@ -52,6 +53,7 @@ def _match_metric(out, exp):
     return float(sum(1 for i in np.nonzero(ok)[0] if mine.get(i) != ref.get(i)))
 
 
+@cached    # the same draw for every grade of a seed: its oracle runs once per process
 def cases_match(rng: np.random.Generator) -> list[Case]:
     out = []
     for key, name, n, m, d, ratio, mutual in [

@@ -14,6 +14,7 @@ from graders.core.engine import as_points, as_pose, Case, Exercise, Hint, Output
 from graders.kit.geometry import camera_centre, pixels_to_normalised, project, project_P
 from ..oracles.two_view import refine_essential
 from graders.kit.scene import two_view
+from graders.core.memo import cached
 from ..oracles.sfm_standin import triangulate_normalised
 from .triangulation import cv_triangulate, gt_triangulation_angles
 
@@ -138,6 +139,7 @@ def _near_epipole(rng: np.random.Generator,
     return s
 
 
+@cached    # the same draw for every grade of a seed: its oracle runs once per process
 def cases_two_view_init(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, kw in [("300 matches, 20 % wrong, 0.5 px", dict(n=300, noise=0.5, outliers=0.2)),

@@ -24,6 +24,7 @@ from scipy.spatial import cKDTree
 from graders.core.convert import as_pose_stack
 from graders.core.engine import Case, Exercise, Hint, OutputError, register, shared_run
 from graders.kit.geometry import so3_exp
+from graders.core.memo import cached
 
 CAUSES = ("a", "b", "c", "d")
 CAUSE_TEXT = {
@@ -216,6 +217,7 @@ TOL_ATE = 0.02   # m RMS: the reference reaches 1-4 mm; a tracker lost at the tu
 CAUSE_WEIGHT = 4 / 9  # the cause row's weight: 1/10 of the points beside four repair rows of weight 1
 
 
+@cached    # the same draw for every grade of a seed: its oracle runs once per process
 def cases_tracking(rng: np.random.Generator):
     for i in range(2):
         case, truth = debug_tracking(rng)

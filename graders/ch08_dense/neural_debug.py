@@ -18,6 +18,7 @@ from . import fit2d
 from .diverge import debug_diverging
 from .floaters import debug_floaters
 from graders.kit.threads import torch_threads
+from graders.core.memo import cached
 
 CAUSES = {
     "no_densification": "the number of Gaussians never grows: too few, too large Gaussians cannot draw the edges",
@@ -56,6 +57,7 @@ def _psnr(out, case):
     return fit2d.psnr(fit2d.render_splats(**out["gaussians"], H=t.shape[0], W=t.shape[1]), t)
 
 
+@cached    # the same draw for every grade of a seed: its oracle runs once per process
 def _cases(rng: np.random.Generator):
     case, truth = debug_blurry(rng)
     def learner(fn, c=case):
