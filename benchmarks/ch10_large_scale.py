@@ -118,7 +118,8 @@ def retrieval(write: bool = True) -> list[dict]:
                        "date": time.strftime("%Y-%m-%d"), "load average": [round(x, 1) for x in (*load, *after[:1])],
                        "cores": os.cpu_count(), "database": "ch10.place_problem renders, 3 db photos + 1 query a place, "
                        "OpenCV SIFT", "tree": "solutions.ch10_large_scale build_index / query_scores, k = 6, L = 3",
-                       "rows": data}, f, indent=1)
+                       "rows": [{k: float(f"{v:.4g}") if isinstance(v, float) else v for k, v in d.items()}
+                                for d in data]}, f, indent=1)
     return rows
 
 
