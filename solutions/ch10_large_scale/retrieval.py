@@ -44,14 +44,50 @@ class _Tree:
         return node
 
     def quantise(self, D: np.ndarray) -> np.ndarray:
-        """Each descriptor's word by descending the tree: k distances per level. D: (n, D) -> (n,)."""
-        out = np.empty(len(D), int)
-        for i, x in enumerate(D):
-            node = 0
-            while node in self.centres:
-                node = self.children[node][int(np.argmin(((self.centres[node] - x) ** 2).sum(1)))]
-            out[i] = self.word[node]
-        return out
+        """Each descriptor's word by descending the tree: k distances per level. D: (n, D) -> (n,).
+        All descriptors descend together, one level at a time: the Python loop runs over the tree's
+        nodes (1 + k + k² ...), not over the descriptors."""
+        node = np.zeros(len(D), int)                               # every descriptor starts at the root
+        for _ in range(self.depth):
+            for n in np.unique(node):
+                if n not in self.centres:                          # a leaf above the last level
+                    continue
+                here = node == n
+                d2 = ((D[here, None, :] - self.centres[n][None]) ** 2).sum(2)    # (m, k)
+                node[here] = np.asarray(self.children[n])[np.argmin(d2, 1)]
+        return np.array([self.word[n] for n in node], int)
+
+
+def build_index(db_descriptors: list, branching: int = 6, depth: int = 3, seed: int = 0) -> dict:
+    """The offline half: the tree trained on all database descriptors, the idf weights and the inverted
+    file word -> (images (m,), d̂_w (m,)). db_descriptors: N arrays (n_i, D)."""
+    tree = _Tree.__new__(_Tree)
+    tree.depth = depth
+    tree.__init__(np.concatenate(db_descriptors).astype(float), branching, depth, seed)
+    n_words, N = len(tree.word), len(db_descriptors)
+    db_counts = [np.bincount(tree.quantise(np.asarray(D, float)), minlength=n_words) for D in db_descriptors]
+    Nw = np.sum([c > 0 for c in db_counts], 0)
+    idf = np.where(Nw > 0, np.log(N / np.maximum(Nw, 1)), 0.0)
+    Vd = np.array([_unit(c * idf) for c in db_counts])             # (N, words), rows sum to 1
+    inverted = {int(w): (np.flatnonzero(Vd[:, w]), Vd[Vd[:, w] > 0, w]) for w in range(n_words)}
+    return {"tree": tree, "idf": idf, "inverted": inverted, "N": N, "n_words": n_words}
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / v.sum() if v.sum() > 0 else v.astype(float)
+
+
+def query_scores(index: dict, D: np.ndarray) -> np.ndarray:
+    """The online half: one query's scores Σ_w min(q̂_w, d̂_w) against every database image, (N,),
+    accumulated over the inverted-file lists of the query's own words (images sharing none stay 0)."""
+    S = np.zeros(index["N"])
+    if not len(D):
+        return S
+    q = _unit(np.bincount(index["tree"].quantise(np.asarray(D, float)), minlength=index["n_words"]) * index["idf"])
+    for w in np.flatnonzero(q):
+        images, dw = index["inverted"][int(w)]
+        S[images] += np.minimum(q[w], dw)
+    return S
 
 
 def vocab_tree_retrieve(db_descriptors: list, query_descriptors: list, k: int = 5, branching: int = 6,
@@ -62,26 +98,6 @@ def vocab_tree_retrieve(db_descriptors: list, query_descriptors: list, k: int = 
     depth L, k^L leaves at most) is trained on all database descriptors. Weights v_w = n_w ln(N / N_w),
     v̂ = v / ‖v‖₁, score = 1 − ½‖q̂ − d̂‖₁ = Σ_w min(q̂_w, d̂_w), accumulated over the inverted file of
     each query word. Returns (top: (Q, k) indices, best first; scores: (Q, N))."""
-    tree = _Tree.__new__(_Tree)
-    tree.depth = depth
-    tree.__init__(np.concatenate(db_descriptors).astype(float), branching, depth, seed)
-    n_words, N = len(tree.word), len(db_descriptors)
-    db_counts = [np.bincount(tree.quantise(np.asarray(D, float)), minlength=n_words) for D in db_descriptors]
-    Nw = np.sum([c > 0 for c in db_counts], 0)
-    idf = np.where(Nw > 0, np.log(N / np.maximum(Nw, 1)), 0.0)
-
-    def unit(counts):
-        v = counts * idf
-        return v / v.sum() if v.sum() > 0 else v
-    inverted: dict[int, list[tuple[int, float]]] = {}          # word -> [(image, d̂_w)]
-    for i, c in enumerate(db_counts):
-        d = unit(c)
-        for w in np.flatnonzero(d):
-            inverted.setdefault(int(w), []).append((i, float(d[w])))
-    S = np.zeros((len(query_descriptors), N))
-    for j, D in enumerate(query_descriptors):
-        q = unit(np.bincount(tree.quantise(np.asarray(D, float)), minlength=n_words)) if len(D) else np.zeros(n_words)
-        for w in np.flatnonzero(q):                              # only images sharing a word are touched
-            for i, dw in inverted.get(int(w), ()):
-                S[j, i] += min(q[w], dw)
+    index = build_index(db_descriptors, branching, depth, seed)
+    S = np.array([query_scores(index, D) for D in query_descriptors]).reshape(len(query_descriptors), index["N"])
     return np.argsort(-S, axis=1, kind="stable")[:, :k], S
