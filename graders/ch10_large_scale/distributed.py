@@ -19,7 +19,9 @@ batches finished before the crash are read back, not recomputed).
 
 The judge prepares the folder of `out_path` (in graded mode, inside the learner process's own writable
 folder) and holds the previous file open; stages sleep 0-12 ms per task so that completion order is not
-submission order.
+submission order. Where the tasks ran is judged from the stages' side: on a Dask worker of this run (self-study,
+where the stages run in the learner's workers), or in graded mode, where they run in the judge and the learner's
+worker cannot be seen, whether two stage calls were ever in the judge at once (see `_not_on_dask`).
 """
 from __future__ import annotations
 
