@@ -209,11 +209,13 @@ def _next_frame(wanted: int | None) -> Any:
                 _inbox.wait()
         try:
             frame = pickle.loads(receive_bytes(_fds[0]))
-        finally:
+        except BaseException:      # the pipe closed (or a time limit struck): the next waiter reads, and fails too
             with _inbox:
                 _reading[0] = False
                 _inbox.notify_all()
+            raise
         with _inbox:
+            _reading[0] = False
             if isinstance(frame, dict) and frame.get("op") == "reply":
                 _replies[frame.get("id")] = frame
             else:
