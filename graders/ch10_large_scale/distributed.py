@@ -19,7 +19,9 @@ batches finished before the crash are read back, not recomputed).
 
 The judge prepares the folder of `out_path` (in graded mode, inside the learner process's own writable
 folder) and holds the previous file open; stages sleep 0-12 ms per task so that completion order is not
-submission order.
+submission order. Where the tasks ran is judged from the stages' side: on a Dask worker of this run (self-study,
+where the stages run in the learner's workers), or in graded mode, where they run in the judge and the learner's
+worker cannot be seen, whether two stage calls were ever in the judge at once (see `_not_on_dask`).
 """
 from __future__ import annotations
 
@@ -58,7 +60,10 @@ class PipelineStages:
     paths: if given, the only paths `load` reads (the judge's own images: learner code never makes it read
     another file). crash_after: every verification after that many (counted in `scratch`) raises
     `PermanentTaskError`.
+    Graded mode serves its methods concurrently (`served_concurrently`): two tasks the learner's Dask workers run
+    at once are two stage calls in the judge at once, which `_after_run` sees in the markers' time windows.
     """
+    served_concurrently = True
 
     def __init__(self, n_corners: int = 40, flaky: tuple[str, ...] = (), scratch: str | None = None,
                  latency_s: float = 0.012, paths: tuple[str, ...] = (), crash_after: int | None = None):
@@ -80,10 +85,11 @@ class PipelineStages:
     # -- failure injection and scrambled latencies
     def _task(self, kind: str, *inputs) -> None:
         key = task_key(kind, *inputs)
-        if self.scratch is not None:
-            _record_where(self.scratch, kind)
+        start = time.monotonic_ns()
         if self.latency_s:
             time.sleep(self.latency_s * (zlib.crc32(key.encode()) % 97) / 96)
+        if self.scratch is not None:
+            _record_where(self.scratch, kind, start)
         if self.crash_after is not None and kind == "verify" and _runs(self.scratch, "verify") > self.crash_after:
             raise PermanentTaskError(f"task {key} failed: the cluster is down (simulated); the run cannot finish")
         if key not in self.flaky or self.scratch is None:
@@ -169,11 +175,13 @@ def _workers_here():
     return worker, ours, [w for w in running if _scheduler_of(w) != _scheduler_of(worker)]
 
 
-def _record_where(scratch: str, kind: str) -> None:
-    """One marker file per task run: on a Dask worker or not, and how many workers of other schedulers (a
-    cluster left open by an earlier run) were running in the process."""
+def _record_where(scratch: str, kind: str, start_ns: int) -> None:
+    """One marker file per task run: on a Dask worker or not, how many workers of other schedulers (a cluster
+    left open by an earlier run) were running in the process, and the time window of its latency
+    (time.monotonic_ns() at its start and now)."""
     worker, _, others = _workers_here()
-    name = f".ran-{kind}-{'worker' if worker is not None else 'local'}-{len(others)}-{os.getpid()}-{time.time_ns()}"
+    name = (f".ran-{kind}-{'worker' if worker is not None else 'local'}-{len(others)}-{os.getpid()}-{start_ns}-"
+            f"{time.monotonic_ns()}")
     try:
         os.close(os.open(os.path.join(scratch, name), os.O_CREAT | os.O_EXCL | os.O_WRONLY))
     except OSError:
@@ -299,13 +307,22 @@ def gt_run_pipeline(image_paths, pairs, stages, out_path, address=None, n_worker
 JUDGE_BATCH = 2       # the judge's batch_size: 9 pairs -> 5 batches, enough for order and resume to show
 
 
-def _folder_for(fn) -> str:
-    """Where the learner's process may write: a folder its user owns in its private folder in graded mode
-    (the judge sees the same path), a fresh temporary folder otherwise."""
-    learner = getattr(fn, "learner", None) or getattr(getattr(fn, "parent", None), "learner", None)
-    if learner is not None:
-        return learner.writable_folder("cv3d-10.10-")
-    return tempfile.mkdtemp(prefix="cv3d-10.10-")
+def _learner_of(fn):
+    """The learner's process in graded mode (graders.grading.isolation.LearnerProcess), None in self-study."""
+    return getattr(fn, "learner", None) or getattr(getattr(fn, "parent", None), "learner", None)
+
+
+def _folders_for(fn) -> tuple[str, str]:
+    """(folder, scratch): where the learner's process may write — a folder its user owns in its private folder in
+    graded mode (the judge sees the same path), a fresh temporary folder otherwise — and where the stages keep
+    their markers. In graded mode the stages run here, in the judge, and their markers go to a folder of the
+    judge's that the learner's code cannot write (it could otherwise delete or forge them); in self-study they
+    run in the learner's workers, beside the images."""
+    learner = _learner_of(fn)
+    if learner is None:
+        folder = tempfile.mkdtemp(prefix="cv3d-10.10-")
+        return folder, folder
+    return learner.writable_folder("cv3d-10.10-"), tempfile.mkdtemp(prefix="cv3d-10.10-judge-", dir=learner.exchange)
 
 
 def _open_no_link(path: str, mode: str):
@@ -314,27 +331,35 @@ def _open_no_link(path: str, mode: str):
     return os.fdopen(os.open(path, flags, 0o644), mode)
 
 
-def _after_run(folder: str, out_path: str) -> dict:
-    """What the file system shows after a run: the result file, what else is left, where the tasks ran."""
+def _overlapping(windows: list[tuple[int, int]]) -> int:
+    """How many task runs' latency windows (start, end) overlap another run's: 0 when they ran one after another."""
+    return sum(any(a < d and c < b for m, (c, d) in enumerate(windows) if m != k) for k, (a, b) in enumerate(windows))
+
+
+def _after_run(folder: str, scratch: str, out_path: str, graded: bool) -> dict:
+    """What the file system shows after a run: the result file, what else is left, where the tasks ran and how
+    many of them overlapped in time."""
     try:
         with _open_no_link(out_path, "r") as f:
             written = json.load(f)
     except (OSError, ValueError) as exc:
         written = f"unreadable ({type(exc).__name__}: {exc})"
-    names = os.listdir(folder)
-    leftovers = sorted(n for n in names if n not in ("matches.json", "images")
-                       and not n.startswith((".failed-", ".ran-", ".lost-worker")))
-    ran = [n.split("-")[1:4] for n in names if n.startswith(".ran-")]
-    return {"written": written, "leftovers": leftovers, "tasks": len(ran),
+    ours = (".failed-", ".ran-", ".lost-worker") if scratch == folder else ()    # the stages' markers, if there
+    leftovers = sorted(n for n in os.listdir(folder) if n not in ("matches.json", "images") and not n.startswith(ours))
+    markers = [m for n in os.listdir(scratch) if len(m := n.split("-")) == 7 and m[0] == ".ran"
+               and all(v.isdigit() for v in m[3:])]
+    ran = [m[1:4] for m in markers]
+    return {"written": written, "leftovers": leftovers, "tasks": len(ran), "graded": graded,
             "local": sum(w == "local" for _, w, _ in ran), "local_loads": sum(k == "load" and w == "local"
                                                                            for k, w, _ in ran),
-            "stale_workers": max([int(n) for _, _, n in ran] or [0])}
+            "stale_workers": max([int(n) for _, _, n in ran] or [0]),
+            "overlapping": _overlapping([(int(m[5]), int(m[6])) for m in markers])}
 
 
 def _run_and_inspect(fn, images, pairs, flaky_kinds: tuple[str, ...]) -> dict:
     """Run the learner's pipeline once on images saved in its folder, with flaky stages and a stale result file
     held open; report what came back and what the file system shows afterwards."""
-    folder = _folder_for(fn)
+    folder, scratch = _folders_for(fn)
     try:
         paths = save_images(images, folder)
         out_path = os.path.join(folder, "matches.json")
@@ -345,39 +370,41 @@ def _run_and_inspect(fn, images, pairs, flaky_kinds: tuple[str, ...]) -> dict:
         feats = [reference.extract(img) for img in images]
         keys = {"extract": task_key("extract", images[len(images) // 2]),
                 "verify": task_key("verify", feats[0][0], feats[2][0])}
-        stages = PipelineStages(flaky=tuple(keys[k] for k in flaky_kinds), scratch=folder, paths=tuple(paths))
+        stages = PipelineStages(flaky=tuple(keys[k] for k in flaky_kinds), scratch=scratch, paths=tuple(paths))
         with _open_no_link(out_path, "r") as reader:         # a reader of the previous version
             rows = fn(paths, list(pairs), stages, out_path, batch_size=JUDGE_BATCH)
             old_text = reader.read()
         return {"rows": rows, "old_intact": old_text == json.dumps(STALE),
                 "replaced": os.stat(out_path).st_ino != inode if os.path.exists(out_path) else False,
-                **_after_run(folder, out_path)}
+                **_after_run(folder, scratch, out_path, _learner_of(fn) is not None)}
     finally:
         shutil.rmtree(folder, ignore_errors=True)
+        shutil.rmtree(scratch, ignore_errors=True)
 
 
 def _crash_and_resume(fn, images, pairs) -> dict:
     """Run the learner's pipeline with stages whose every verification after the first M - 1 fails for good (the
     run must fail: the client 'crashes'); then the same call with healthy stages. Reports the second run's rows,
     whether the first failed, and how many pairs the second verified (fewer than M: it resumed)."""
-    folder = _folder_for(fn)
+    folder, scratch = _folders_for(fn)
     try:
         paths = save_images(images, folder)
         out_path = os.path.join(folder, "matches.json")
         m = len({(min(i, j), max(i, j)) for i, j in pairs if i != j})
-        crashing = PipelineStages(scratch=folder, paths=tuple(paths), crash_after=m - 1)
+        crashing = PipelineStages(scratch=scratch, paths=tuple(paths), crash_after=m - 1)
         try:
             fn(paths, list(pairs), crashing, out_path, batch_size=JUDGE_BATCH)
             crashed = False
         except Exception:           # noqa: BLE001 — the run is meant to fail; how is the learner's business
             crashed = True
-        before = _runs(folder, "verify")
-        rows = fn(paths, list(pairs), PipelineStages(scratch=folder, paths=tuple(paths)), out_path,
+        before = _runs(scratch, "verify")
+        rows = fn(paths, list(pairs), PipelineStages(scratch=scratch, paths=tuple(paths)), out_path,
                   batch_size=JUDGE_BATCH)
-        return {"rows": rows, "crashed": crashed, "pairs": m, "verified": _runs(folder, "verify") - before,
-                **_after_run(folder, out_path)}
+        return {"rows": rows, "crashed": crashed, "pairs": m, "verified": _runs(scratch, "verify") - before,
+                **_after_run(folder, scratch, out_path, _learner_of(fn) is not None)}
     finally:
         shutil.rmtree(folder, ignore_errors=True)
+        shutil.rmtree(scratch, ignore_errors=True)
 
 
 def _convert_rows(out, case: Case) -> np.ndarray:
@@ -409,8 +436,21 @@ def _file_problems(out, expected: np.ndarray) -> float:
 
 
 def _not_on_dask(out, expected) -> float:
-    """Task runs that were not on a Dask worker, + 1 if workers of a cluster an earlier run left open were still
-    running in the process (+ 1 if no task ran at all)."""
+    """Self-study: task runs that were not on a Dask worker, + 1 if workers of a cluster an earlier run left open
+    were still running in the process (+ 1 if no task ran at all).
+
+    Graded mode: the stages run in the judge, where the learner's Dask worker cannot be seen, so the judge
+    observes what it serves: 1 if no two stage calls were ever in the judge at the same time, else 0. Why this
+    cannot fail the reference nor pass a serial loop, whatever the load: a serial loop sends its next call only
+    after the judge has answered the last one, and each marker's window closes before that answer, so its
+    windows never overlap — exactly 0, by causality, not by timing. Two Dask workers (the judge's batch_size
+    gives the reference 3 extraction and 5 pair tasks: both workers busy from the start) make 30-56 stage calls
+    side by side, each waiting 0-12 ms in the judge: one overlapping pair (2 calls) is all it takes, and the
+    reference showed 13-40 overlapping calls per run, median 26 (600 runs: 200 fresh seeds graded in graded
+    mode, load 12-19 on 2 cores). What this cannot tell is Dask from a thread pool: both run tasks
+    concurrently, which is what the judge can see."""
+    if out.get("graded"):
+        return float(out["overlapping"] < 2)
     return float(out["local"] + (out["stale_workers"] > 0) + (out["tasks"] == 0))
 
 
@@ -455,6 +495,10 @@ def _file_text(case: Case, out: dict) -> str:
 
 
 def _dask_text(case: Case, out: dict) -> str:
+    if out.get("graded"):
+        return (f"no two of your {out['tasks']} stage calls ever ran at the same time: the tasks ran one after another "
+                "(a serial loop?). Submit them to a Dask Client (a LocalCluster you start, or Client(address)) so that "
+                "its workers run them side by side.")
     why = []
     if out["stale_workers"]:
         why.append(f"{out['stale_workers']} Dask workers of an earlier run were still running beside this run's: close "
@@ -503,12 +547,12 @@ def _cases(rng: np.random.Generator):
                "rows differ", convert=_convert_rows, call=runs[("extract", "verify")], key="transient")
     yield Case(f"{label}: result file replaced atomically", (), expected, _file_problems, 0, "problems",
                convert=_convert_file, call=runs[()], key="atomic", tags=("atomic",))
-    # The second run (after the first): every task on a Dask worker, and no worker of the first run left running.
+    # The second run (after the first): every task on a Dask worker, and no worker of the first run left running
+    # (graded mode, where the stages run in the judge: tasks ran concurrently; see _not_on_dask).
     # Weight 2: the distributed part is what the exercise is about (a serial loop keeps 3/5 of the points).
     yield Case(f"{label}: every task ran on a Dask worker, no cluster left open", (), expected, _not_on_dask, 0,
                "problems", convert=_convert_file, call=runs[("extract", "verify")], key="dask", tags=("dask",),
-               weight=2.0, local_only="the stages run in the grader's process there, where the Dask worker that "
-               "called them cannot be seen (your notebook's own check judges it)")
+               weight=2.0)
     yield Case(f"{label}: the run fails after {len(expected) - 1} verifications (batch_size={JUDGE_BATCH}); run "
                "again, it resumes", (), expected, _resume_problems, 0, "problems", convert=_convert_resume,
                call=resume, key="resume", tags=("resume",))

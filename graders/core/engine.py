@@ -62,7 +62,8 @@ class Case:
     key: str = ""                  # stable identifier for hints and tests; defaults to a slug of `name`
     tags: tuple[str, ...] = ()     # properties hints select on ("noise", "planar", ...), never display text
     # Why graded mode cannot judge this row ('' if it can): what it measures is only visible in the learner's
-    # own process (10.10: which Dask worker ran a stage). In graded mode the row is shown, not run, and weighs 0.
+    # own process. In graded mode the row is shown, not run, and weighs 0 (prefer a judge-side signal: 10.10's
+    # Dask row judges there the overlap of the stage calls the judge serves).
     local_only: str = ""
 
     def __post_init__(self):

@@ -39,6 +39,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from typing import Any, Callable
 
@@ -50,6 +51,7 @@ from graders.grading.transport import RemoteError, gradients_back, loads, swap_c
 
 MARGIN_S = 5.0          # the judge waits this much longer than the learner's own time limit
 CPU_SECONDS = 1800      # CPU time of one learner process (it is restarted after every time-out)
+MAX_CONCURRENT = 8      # grader callbacks served at once for one learner process (10.10's stages)
 
 
 # ------------------------------------------------------------------ the learner process
@@ -306,6 +308,7 @@ class LearnerProcess:
         for src, dst in (("grading/learner.py", "cv3d_learner.py"), ("core/sandbox.py", "cv3d_sandbox.py")):
             shutil.copyfile(os.path.join(graders_dir, src), os.path.join(self.runtime, dst))
         self.restarts = 0
+        self._sending, self._slots = threading.Lock(), threading.BoundedSemaphore(MAX_CONCURRENT)
 
     def writable_folder(self, prefix: str, exact: bool = False) -> str:
         """A new folder inside the private folder that the learner's code may write (owned by its user)."""
@@ -404,38 +407,87 @@ class LearnerProcess:
     def _exchange(self, request: dict, timeout: float, callbacks: list[Callable] | None = None) -> dict:
         """Send a request; serve the learner's callbacks until its reply; raise on silence or death."""
         try:
-            send(self.req, request)
+            with self._sending:
+                send(self.req, request)
         except (BrokenPipeError, OSError):
             raise RemoteError("crash", self._death()) from None
         deadline = time.monotonic() + timeout
-        while True:
+        serving: list[threading.Thread] = []
+        try:
+            while True:
+                try:
+                    reply = loads(receive_bytes(self.res, deadline))
+                except TimeoutError:
+                    raise TimeLimitExceeded(f"time limit of {max(timeout - MARGIN_S, 0.05):.3g} s exceeded") from None
+                except EOFError:
+                    raise RemoteError("crash", self._death()) from None
+                except (pickle.UnpicklingError, ValueError, TypeError, AttributeError, IndexError) as exc:
+                    raise RemoteError("garbage", f"returned an object the grader cannot receive ({exc}): return "
+                                                   "numpy arrays, numbers, strings, lists, tuples or dicts") from None
+                if reply.get("op") != "callback":
+                    return reply
+                self._dispatch_callback(reply, callbacks or [], serving, deadline)
+        finally:
+            self._join(serving, deadline)
+
+    def _dispatch_callback(self, request: dict, callbacks: list[Callable], serving: list, deadline: float) -> None:
+        """Serve one callback here, or in a thread of its own if its grader object asks to be served concurrently
+        (`served_concurrently`: 10.10's stages, whose concurrent calls are what the judge observes); at most
+        MAX_CONCURRENT at once, whatever the learner's code sends."""
+        try:
+            target = _callback_target(request, callbacks)
+        except IndexError:
+            target = None
+        if "attr" in request or not getattr(getattr(target, "__self__", target), "served_concurrently", False):
+            self._serve_callback(request, callbacks)
+            return
+        serving[:] = [t for t in serving if t.is_alive()]
+        if not self._slots.acquire(timeout=max(deadline - time.monotonic(), 0.0)):
+            raise TimeLimitExceeded("time limit exceeded (the grader's callbacks were never read)")
+
+        def serve() -> None:
             try:
-                reply = loads(receive_bytes(self.res, deadline))
-            except TimeoutError:
-                raise TimeLimitExceeded(f"time limit of {max(timeout - MARGIN_S, 0.05):.3g} s exceeded") from None
-            except EOFError:
-                raise RemoteError("crash", self._death()) from None
-            except (pickle.UnpicklingError, ValueError, TypeError, AttributeError, IndexError) as exc:
-                raise RemoteError("garbage", f"returned an object the grader cannot receive ({exc}): return "
-                                               "numpy arrays, numbers, strings, lists, tuples or dicts") from None
-            if reply.get("op") != "callback":
-                return reply
-            self._serve_callback(reply, callbacks or [])
+                self._serve_callback(request, callbacks)
+            except OSError:       # the learner's process has ended: nobody to reply to
+                pass
+            finally:
+                self._slots.release()
+        thread = threading.Thread(target=serve, name="cv3d-callback", daemon=True)
+        thread.start()
+        serving.append(thread)
+
+    def _join(self, serving: list[threading.Thread], deadline: float) -> None:
+        """Every callback served in a thread has replied before the exchange ends (a late reply would land in the
+        next request's frames); one still writing past the deadline means the learner stopped reading: its
+        process ends (the reply's write then fails) and the next call starts a fresh one."""
+        for thread in serving:
+            thread.join(max(deadline - time.monotonic(), 0.0) + 1.0)
+        if any(t.is_alive() for t in serving):
+            try:
+                os.killpg(self.proc.pid, 9)      # first: a write blocked on its pipe then fails (EPIPE)
+            except (ProcessLookupError, PermissionError, AttributeError):
+                pass
+            for thread in serving:
+                thread.join()
+            self.stop()
 
     def _serve_callback(self, request: dict, callbacks: list[Callable]) -> None:
         try:
-            target = callbacks[request["index"]]
+            target = _callback_target(request, callbacks)
             if "attr" in request:        # a public attribute of a grader object the case handed over
                 if request["attr"].startswith("_"):
                     raise AttributeError(f"{type(target).__name__} has no public attribute {request['attr']!r}")
                 value = getattr(target, request["attr"])
             else:
                 value = target(*tensors_back(request["args"]), **request["kwargs"])
-            reply = {"ok": True, "value": swap_callables(value, callbacks)}
+            reply = {"ok": True, "value": value}
         except Exception as exc:   # the grader's callback failing on the learner's inputs: the learner's error
             reply = {"ok": False, "error": f"{type(exc).__name__}: {exc}",
                      "type": type(exc).__name__ if type(exc).__module__.startswith("graders") else ""}
-        send(self.req, reply)
+        with self._sending:      # the callback table and the pipe: one thread at a time
+            if reply["ok"]:
+                reply["value"] = swap_callables(reply["value"], callbacks)
+            send(self.req, dict(reply, op="reply", id=request.get("id")))
 
     def _death(self) -> str:
         try:
@@ -458,6 +510,13 @@ class LearnerProcess:
 
     def function(self, name: str, exercise: Any) -> "RemoteFunction":
         return RemoteFunction(self, name, exercise)
+
+
+def _callback_target(request: dict, callbacks: list[Callable]) -> Any:
+    index = request.get("index")
+    if not isinstance(index, int) or not 0 <= index < len(callbacks):
+        raise IndexError(f"no grader callback number {index!r}")
+    return callbacks[index]
 
 
 class RemoteFunction:

@@ -180,17 +180,58 @@ class _Policy(importlib.abc.MetaPathFinder, importlib.abc.Loader):
 _fds: tuple[int, int] = (-1, -1)     # (requests from the judge, responses to it)
 
 
+# Callbacks from the learner's threads (a Dask pool) share the pipe without taking turns for a whole round trip:
+# each request carries an id, the judge's reply the same id, and whichever waiting thread is free reads the next
+# frame and hands it to its owner (a reply to the thread that asked, a request to the main loop). So calls from
+# two threads can be in the judge at once, where the judge serves them concurrently if it chooses to (10.10's
+# stages: concurrent tasks are what the judge observes there).
+_sending = threading.Lock()
+_inbox = threading.Condition()
+_replies: dict[int, Any] = {}     # callback id -> the judge's reply, read by another thread
+_requests: list = []              # the judge's requests read by a callback thread (a late straggler)
+_reading = [False]                # a thread is reading the pipe now
+_ids = iter(range(1, 1 << 62))
+
+
+def _next_frame(wanted: int | None) -> Any:
+    """The judge's reply to callback `wanted`, or (wanted None) the judge's next request: taken from what another
+    thread has read, or read here if no other thread is reading."""
+    while True:
+        with _inbox:
+            while True:
+                if wanted is None and _requests:
+                    return _requests.pop(0)
+                if wanted is not None and wanted in _replies:
+                    return _replies.pop(wanted)
+                if not _reading[0]:
+                    _reading[0] = True
+                    break
+                _inbox.wait()
+        try:
+            frame = pickle.loads(receive_bytes(_fds[0]))
+        except BaseException:      # the pipe closed (or a time limit struck): the next waiter reads, and fails too
+            with _inbox:
+                _reading[0] = False
+                _inbox.notify_all()
+            raise
+        with _inbox:
+            _reading[0] = False
+            if isinstance(frame, dict) and frame.get("op") == "reply":
+                _replies[frame.get("id")] = frame
+            else:
+                _requests.append(frame)
+            _inbox.notify_all()
+
+
 def _receive() -> Any:
-    return pickle.loads(receive_bytes(_fds[0]))
-
-
-_channel = threading.Lock()    # callbacks from the learner's threads (a Dask pool) take turns on the pipe
+    return _next_frame(None)
 
 
 def _ask_judge(request: dict, error: type = RuntimeError) -> Any:
-    with _channel:
+    with _sending:
+        request = dict(request, id=next(_ids))
         send(_fds[1], request)
-        reply = _receive()
+    reply = _next_frame(request["id"])
     if not reply["ok"]:
         kind = _exception_class(reply["type"]) if reply.get("type") else error
         raise kind(f"the grader's callback failed on your inputs: {reply['error']}")

@@ -134,3 +134,24 @@ def test_cheating_earns_nothing_and_changes_nothing(tmp_path):
     else:
         cheat.unlink(missing_ok=True)
         pytest.skip("this machine cannot give the learner a read-only file system (needs Linux namespaces as root)")
+
+
+SERIAL_PIPELINE = f'''
+def run_pipeline(*args, **kwargs):
+    import sys
+    sys.path.append({str(ROOT / "tests")!r})      # in a function: the grader keeps a notebook's definitions only
+    from mutants.ch10_large_scale_learned import pipeline_serial_loop
+    return pipeline_serial_loop(*args, **kwargs)
+'''
+
+
+def test_a_serial_loop_does_not_get_full_marks_for_the_dask_pipeline(tmp_path):
+    """10.10 in graded mode: the stages run in the judge, which cannot see the learner's Dask workers, so it serves
+    them concurrently and judges whether two stage calls were ever in it at once. A serial loop never is (the
+    reference always is: the solved chapter 10 above): it loses that row's point (weight 2 of 6: 2/3 points left)."""
+    learner = tmp_path / "10_large_scale.py"
+    learner.write_text(SERIAL_PIPELINE)
+    # The catalogue's mutant imports `solutions` (its helpers): let in by name, as for the reference.
+    test = _grade(learner, tmp_path / "r.json", "--only", "10.10", "--seed", "0", env={"CV3D_GRADE_REFERENCE": "1"})["10.10"]
+    assert test["score"] == pytest.approx(2.0), test["output"][:3000]
+    assert "ran at the same time" in test["output"] and "serial loop" in test["output"], test["output"][:3000]
