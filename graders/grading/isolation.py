@@ -46,6 +46,7 @@ from graders.core.attempt import CaseReport
 from graders.core.sandbox import TimeLimitExceeded, current_cotangent
 from graders.grading.learner import receive_bytes, send
 from graders.grading.policy import refusal
+from graders.grading.quota import DISK_GB, POLL_S, DiskQuota, empty, unmount_stale
 from graders.grading.transport import RemoteError, gradients_back, loads, swap_callables, tensors_back
 
 MARGIN_S = 5.0          # the judge waits this much longer than the learner's own time limit
@@ -287,15 +288,21 @@ class LearnerProcess:
     """
 
     def __init__(self, source: str, memory_gb: float = 8.0, max_processes: int = 256, max_file_gb: float = 1.0,
-                 refused: tuple[str, ...] = ("cv2", "pycolmap", "kornia"), hide: tuple[str, ...] = ()):
+                 refused: tuple[str, ...] = ("cv2", "pycolmap", "kornia"), hide: tuple[str, ...] = (),
+                 disk_gb: float | None = None):
+        disk_gb = DISK_GB if disk_gb is None else disk_gb     # read at each start: a test lowers it
         self.source, self.memory_gb = source, memory_gb
-        self.max_processes, self.max_file_gb = max_processes, max_file_gb
+        self.max_processes, self.max_file_gb = max_processes, min(max_file_gb, disk_gb)
         self.refused, self.extra_hidden = tuple(refused), tuple(hide)
         self.proc: subprocess.Popen | None = None
         self.problem, self.skipped = "", []
-        self.private = tempfile.mkdtemp(prefix="cv3d-learner-")
-        os.chmod(self.private, 0o755)
         self.level = level()
+        self.private = tempfile.mkdtemp(prefix=f"cv3d-learner-{os.getpid()}-")   # its pid: see quota.unmount_stale
+        os.chmod(self.private, 0o755)
+        unmount_stale(os.path.dirname(self.private))
+        # Everything the learner may write lives in here: the quota covers it (a tmpfs where we may mount).
+        self.quota = DiskQuota(self.private, int(disk_gb * 2**30), mount=self.level == "namespaces")
+        self._writable: list[str] = []
         self.uid, self.gid = _nobody() if self.level == "namespaces" else (os.getuid(), os.getgid())
         self.home = self.writable_folder("home", exact=True)
         self.exchange = os.path.join(self.private, "from-the-grader")
@@ -312,6 +319,7 @@ class LearnerProcess:
         path = os.path.join(self.private, prefix) if exact else tempfile.mkdtemp(prefix=prefix, dir=self.private)
         if exact:
             os.mkdir(path, 0o700)
+        self._writable.append(path)
         os.chown(path, self.uid, self.gid)
         os.chmod(path, 0o700)
         return path
@@ -366,7 +374,7 @@ class LearnerProcess:
             self.skipped = reply.get("skipped", [])
         except (RemoteError, TimeLimitExceeded) as exc:
             self.problem = f"your code failed to load: {exc}"
-        self.residents = self.pids.members() | {self.proc.pid}   # what may live between calls
+        self.residents = self.pids.members() | ({self.proc.pid} if self.proc else set())   # may live between calls
 
     def stop(self) -> None:
         if self.proc is None:
@@ -386,7 +394,27 @@ class LearnerProcess:
 
     def close(self) -> None:
         self.stop()
+        self.quota.release()
         shutil.rmtree(self.private, ignore_errors=True)
+
+    def check_quota(self) -> None:
+        """Past its disk quota the learner is stopped, what it wrote is removed, and the call fails saying so."""
+        if not self.quota.exceeded():
+            return
+        self.stop()
+        for folder in self._writable:
+            if os.path.isdir(folder) and not os.path.islink(folder):
+                empty(folder)
+        raise RemoteError("crash", self.quota.message())
+
+    def _wait(self, deadline: float, watch: bool) -> None:
+        """Until the learner's reply starts (or the deadline passes), looking at its disk use meanwhile."""
+        while True:
+            left = deadline - time.monotonic()
+            if select.select([self.res], [], [], max(min(left, POLL_S), 0.0))[0] or left <= 0:
+                return
+            if watch:
+                self.check_quota()
 
     def __enter__(self) -> "LearnerProcess":
         self.start()
@@ -408,8 +436,10 @@ class LearnerProcess:
         except (BrokenPipeError, OSError):
             raise RemoteError("crash", self._death()) from None
         deadline = time.monotonic() + timeout
+        watch = request["op"] in ("load", "call")        # what runs the learner's code
         while True:
             try:
+                self._wait(deadline, watch)
                 reply = loads(receive_bytes(self.res, deadline))
             except TimeoutError:
                 raise TimeLimitExceeded(f"time limit of {max(timeout - MARGIN_S, 0.05):.3g} s exceeded") from None
@@ -419,6 +449,8 @@ class LearnerProcess:
                 raise RemoteError("garbage", f"returned an object the grader cannot receive ({exc}): return "
                                                "numpy arrays, numbers, strings, lists, tuples or dicts") from None
             if reply.get("op") != "callback":
+                if watch:
+                    self.check_quota()
                 return reply
             self._serve_callback(reply, callbacks or [])
 

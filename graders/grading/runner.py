@@ -247,7 +247,8 @@ def isolation_note() -> str:
         return ""
     return ("weaker isolation: this machine cannot give your code its own file system view (that needs Linux "
             "namespaces as root), so the grader's files stay readable to it; the from-scratch rules are enforced "
-            "by import stand-ins and a static check of your source instead")
+            "by import stand-ins and a static check of your source instead, and your disk quota is measured by the "
+            "grader in your own folder while your code runs rather than enforced by the OS as it writes")
 
 
 def check_file(path: str | Path, seed: int | None = None, only: list[str] | None = None,

@@ -1,0 +1,96 @@
+"""The learner's disk quota in graded mode (issue 29, 6: "no disk quota (7 GiB written in one exercise)").
+
+A hostile answer writes real data (not sparse: a tmpfs and st_blocks would not count a hole) in 1 MiB
+files, swallowing every error, until something stops it. With the quota lowered to a few MiB the test costs
+well under a second of writing. Namespace level (root): the learner's folder is a tmpfs of the quota's size,
+so its writes fail and the grader's disk never holds more than the quota. Process level (no mounts): the
+judge measures the folder while it waits and stops the learner; the overshoot is bounded by what it can
+write between two looks.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import pytest
+
+from graders.core.engine import get
+from graders.grading import isolation, quota, worker
+from graders.grading.isolation import sandbox_level
+from graders.grading.transport import RemoteError
+
+NAMESPACES = sandbox_level() == "namespaces"
+QUOTA_MB = 8
+MB_PER_S = 20      # the writer's pace: 1 MiB every 5 ms (a real disk writes faster; this keeps the test cheap)
+
+FILL = f'''
+import os, time
+def project_points(X, K, R, t, dist=None):
+    """Fill the disk: 1 MiB files forever, every refusal ignored."""
+    chunk = b"x" * (1 << 20)
+    i = 0
+    while True:
+        i += 1
+        try:
+            with open(f"fill-{{i}}", "wb") as f:
+                f.write(chunk)
+        except OSError:
+            pass
+        time.sleep({1 / MB_PER_S})
+'''
+
+
+@pytest.fixture(params=["namespaces", "process"])
+def level(request, monkeypatch):
+    if request.param == "namespaces" and not NAMESPACES:
+        pytest.skip("this machine cannot give the learner namespaces (needs Linux, root and util-linux unshare)")
+    monkeypatch.setattr(isolation, "_LEVEL", request.param)
+    monkeypatch.setattr(tempfile, "tempdir", tempfile.tempdir)   # the judge points it at the learner's folder
+    monkeypatch.setattr(isolation, "DISK_GB", QUOTA_MB / 1024)
+    return request.param
+
+
+def test_an_answer_that_fills_the_disk_is_stopped_with_a_clear_message(level, monkeypatch):
+    peak = []
+    measured = quota.DiskQuota.used
+    monkeypatch.setattr(quota.DiskQuota, "used", lambda self: peak.append(measured(self)[0]) or measured(self))
+    ex = get("1.5")
+    graded = worker._Graded(FILL, [ex])
+    try:
+        start = time.monotonic()
+        result = worker.judge_one(graded, ex, 7)
+        took = time.monotonic() - start
+        learner = graded.process(ex)
+        assert result.score == 0 and "disk quota of 8 MiB" in str(result), str(result)[:1500]
+        assert took < ex.timeout, f"stopped by its time limit ({took:.1f} s), not by the quota"
+        overshoot = 0 if level == "namespaces" else 2 * quota.POLL_S * MB_PER_S    # MiB written between two looks
+        assert max(peak) <= (QUOTA_MB + overshoot) * 2**20, (max(peak) / 2**20, level)
+        assert learner.quota.mounted == (level == "namespaces")
+        if level == "namespaces":      # the writes went to the quota's tmpfs, never to the grader's disk
+            assert os.stat(learner.home).st_dev != os.stat(os.path.dirname(learner.private)).st_dev
+        assert os.listdir(learner.home) == [], "what it wrote is removed"
+    finally:
+        graded.close()
+    assert not os.path.exists(learner.private)
+
+
+def test_a_learner_under_its_quota_is_not_disturbed(level):
+    source = ("def write(n):\n    for i in range(n):\n        open(f'f{i}', 'wb').write(b'x' * (1 << 20))\n"
+              "    return sorted(__import__('os').listdir('.'))\n")
+    with isolation.LearnerProcess(source) as learner:
+        assert learner.function("write", get("1.5"))(2) == ["f0", "f1"]
+
+
+def test_a_killed_graders_quota_mount_is_removed_by_the_next_run(tmp_path):
+    if not NAMESPACES:
+        pytest.skip("only root mounts a quota tmpfs")
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    folder = tmp_path / f"cv3d-learner-{int(dead.stdout)}-x"
+    folder.mkdir()
+    left = quota.DiskQuota(str(folder), 1 << 20, mount=True)
+    assert left.mounted and os.path.ismount(folder)
+    assert quota.unmount_stale(str(tmp_path)) == [str(folder)]
+    assert not os.path.ismount(folder)
