@@ -38,6 +38,7 @@ import select
 import shutil
 import subprocess
 import sys
+import sysconfig
 import tempfile
 import time
 from typing import Any, Callable
@@ -261,6 +262,33 @@ def _site_packages() -> list[str]:
     return [p for p in site.getsitepackages() if os.path.isdir(p)]
 
 
+PYTHON = sys.executable                 # the learner's interpreter
+STDLIB = sorted({sysconfig.get_paths()["stdlib"], sysconfig.get_paths()["platstdlib"]})
+
+
+def _others_can_read(paths: list[str]) -> bool:
+    """Whether a user who owns none of `paths` can reach and read each (every folder on the way o+x, the
+    path itself o+r): the learner's interpreter, standard library and packages, before it runs as `nobody`."""
+    for path in map(os.path.realpath, paths):
+        try:
+            if not os.stat(path).st_mode & 0o004:
+                return False
+            while path != os.path.dirname(path):
+                path = os.path.dirname(path)
+                if not os.stat(path).st_mode & 0o001:
+                    return False
+        except OSError:
+            return False
+    return True
+
+
+def unprivileged_process_level() -> bool:
+    """Process level as root (a container that refuses `unshare`): the learner still runs as `nobody`, if
+    that user can run the interpreter; else it runs as root, and the isolation note says so."""
+    return (level() == "process" and os.geteuid() == 0
+            and _others_can_read([PYTHON, *STDLIB, *_site_packages()]))
+
+
 def _nobody() -> tuple[int, int]:
     import grp
     import pwd
@@ -303,7 +331,8 @@ class LearnerProcess:
         # Everything the learner may write lives in here: the quota covers it (a tmpfs where we may mount).
         self.quota = DiskQuota(self.private, int(disk_gb * 2**30), mount=self.level == "namespaces")
         self._writable: list[str] = []
-        self.uid, self.gid = _nobody() if self.level == "namespaces" else (os.getuid(), os.getgid())
+        self.drop = self.level == "process" and unprivileged_process_level()
+        self.uid, self.gid = _nobody() if self.level == "namespaces" or self.drop else (os.getuid(), os.getgid())
         self.home = self.writable_folder("home", exact=True)
         self.exchange = os.path.join(self.private, "from-the-grader")
         os.mkdir(self.exchange, 0o755)
@@ -346,7 +375,7 @@ class LearnerProcess:
                 "refused": list(self.refused), "allow_solutions": reference, "site": _site_packages(),
                 "extra_path": list(dict.fromkeys([CHECKOUT, os.path.dirname(solutions_dir)])) if reference else [],
                 "hide": hide, "keep": keep,
-                "uid": self.uid, "gid": self.gid, "tmpfs_mb": 256}
+                "uid": self.uid, "gid": self.gid, "drop": self.drop, "tmpfs_mb": 256}
 
     # -- life cycle
     def start(self) -> None:
@@ -356,7 +385,7 @@ class LearnerProcess:
         # Imported by name (not run as __main__) so that its classes pickle by reference (a Dask pool in
         # the learner's code ships the grader's callbacks to its threads).
         boot = f"import sys; sys.path.append({self.runtime!r}); import cv3d_learner; cv3d_learner.main()"
-        cmd = [sys.executable, "-I", "-S", "-c", boot, json.dumps(config)]
+        cmd = [PYTHON, "-I", "-S", "-c", boot, json.dumps(config)]
         if config["lockdown"]:
             cmd = ["unshare", *UNSHARE] + cmd
         self.pids = _PidsLimit(self.max_processes)

@@ -242,13 +242,16 @@ def run_workers(source: str, exercises: list, seed: int, hard_limit: float = HAR
 
 def isolation_note() -> str:
     """Said first in every graded result: how far the learner's code is kept from the grader here."""
-    from graders.grading.isolation import level
+    from graders.grading.isolation import level, unprivileged_process_level
     if level() == "namespaces":
         return ""
+    user = ("it runs as `nobody`" if unprivileged_process_level() else
+            "it runs as the grader's own user" + (" (root: `nobody` cannot read this machine's Python)"
+                                                   if os.geteuid() == 0 else ""))
     return ("weaker isolation: this machine cannot give your code its own file system view (that needs Linux "
-            "namespaces as root), so the grader's files stay readable to it; the from-scratch rules are enforced "
-            "by import stand-ins and a static check of your source instead, and your disk quota is measured by the "
-            "grader in your own folder while your code runs rather than enforced by the OS as it writes")
+            f"namespaces as root), so the grader's files stay readable to it ({user}); the from-scratch rules are "
+            "enforced by import stand-ins and a static check of your source instead, and your disk quota is "
+            "measured by the grader in your own folder while your code runs rather than enforced by the OS as it writes")
 
 
 def check_file(path: str | Path, seed: int | None = None, only: list[str] | None = None,
