@@ -46,6 +46,7 @@ from typing import Any, Callable
 from graders.core.attempt import CaseReport
 from graders.core.sandbox import TimeLimitExceeded, current_cotangent
 from graders.grading.learner import receive_bytes, send
+from graders.grading import users
 from graders.grading.policy import refusal
 from graders.grading.quota import DISK_GB, POLL_S, DiskQuota, empty, unmount_stale
 from graders.grading.transport import RemoteError, gradients_back, loads, swap_callables, tensors_back
@@ -266,42 +267,11 @@ PYTHON = sys.executable                 # the learner's interpreter
 STDLIB = sorted({sysconfig.get_paths()["stdlib"], sysconfig.get_paths()["platstdlib"]})
 
 
-def _others_can_read(paths: list[str]) -> bool:
-    """Whether a user who owns none of `paths` can reach and read each (every folder on the way o+x, the
-    path itself o+r): the learner's interpreter, standard library and packages, before it runs as `nobody`."""
-    for path in map(os.path.realpath, paths):
-        try:
-            if not os.stat(path).st_mode & 0o004:
-                return False
-            while path != os.path.dirname(path):
-                path = os.path.dirname(path)
-                if not os.stat(path).st_mode & 0o001:
-                    return False
-        except OSError:
-            return False
-    return True
-
-
 def unprivileged_process_level() -> bool:
-    """Process level as root (a container that refuses `unshare`): the learner still runs as `nobody`, if
-    that user can run the interpreter; else it runs as root, and the isolation note says so."""
+    """Process level as root (a container that refuses `unshare`): the learner still leaves root, if any user
+    can run the interpreter (graders.grading.users); else it runs as root, and the isolation note says so."""
     return (level() == "process" and os.geteuid() == 0
-            and _others_can_read([PYTHON, *STDLIB, *_site_packages()]))
-
-
-def _nobody() -> tuple[int, int]:
-    import grp
-    import pwd
-    try:
-        uid = pwd.getpwnam("nobody").pw_uid
-    except KeyError:
-        uid = 65534
-    for group in ("nogroup", "nobody"):
-        try:
-            return uid, grp.getgrnam(group).gr_gid
-        except KeyError:
-            pass
-    return uid, 65534
+            and users.others_can_read([PYTHON, *STDLIB, *_site_packages()]))
 
 
 class LearnerProcess:
@@ -326,13 +296,14 @@ class LearnerProcess:
         self.problem, self.skipped = "", []
         self.level = level()
         self.private = tempfile.mkdtemp(prefix=f"cv3d-learner-{os.getpid()}-")   # its pid: see quota.unmount_stale
-        os.chmod(self.private, 0o755)
+        self.drop = self.level == "process" and unprivileged_process_level() and users.open_the_way(self.private)
+        os.chmod(self.private, 0o711 if self.drop else 0o755)    # other learners of a batch may not list it
         unmount_stale(os.path.dirname(self.private))
         # Everything the learner may write lives in here: the quota covers it (a tmpfs where we may mount).
         self.quota = DiskQuota(self.private, int(disk_gb * 2**30), mount=self.level == "namespaces")
         self._writable: list[str] = []
-        self.drop = self.level == "process" and unprivileged_process_level()
-        self.uid, self.gid = _nobody() if self.level == "namespaces" or self.drop else (os.getuid(), os.getgid())
+        self.uid, self.gid = (users.nobody() if self.level == "namespaces" else users.learner_ids() if self.drop
+                              else (os.getuid(), os.getgid()))
         self.home = self.writable_folder("home", exact=True)
         self.exchange = os.path.join(self.private, "from-the-grader")
         os.mkdir(self.exchange, 0o755)

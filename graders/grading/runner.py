@@ -245,8 +245,8 @@ def isolation_note() -> str:
     from graders.grading.isolation import level, unprivileged_process_level
     if level() == "namespaces":
         return ""
-    user = ("it runs as `nobody`" if unprivileged_process_level() else
-            "it runs as the grader's own user" + (" (root: `nobody` cannot read this machine's Python)"
+    user = ("it runs as an unprivileged user" if unprivileged_process_level() else
+            "it runs as the grader's own user" + (" (root: no other user can read this machine's Python)"
                                                    if os.geteuid() == 0 else ""))
     return ("weaker isolation: this machine cannot give your code its own file system view (that needs Linux "
             f"namespaces as root), so the grader's files stay readable to it ({user}); the from-scratch rules are "

@@ -1,13 +1,15 @@
 """Process level as root (issue 29, "What to build" 2: an unprivileged learner): a container that refuses
 `unshare` (Docker's default seccomp profile, so Gradescope) gets no namespaces, but the grader still runs as
 root there. Its learner must not: as root it could overwrite the grader's files, read the secret (mode 0600),
-and signal or trace the judge. It runs as `nobody` when that user can run the interpreter; where it cannot
-(a Python under /root, as on the course's own machine) it stays the grader's user and the results say so.
+and signal or trace the judge. It runs as a uid of its own (graders.grading.users) when any user can run the
+interpreter; where none can (a Python under /root, as on the course's own machine) it stays the grader's user
+and the results say so.
 """
 from __future__ import annotations
 
 import os
 import sys
+import tempfile
 
 import pytest
 
@@ -41,6 +43,17 @@ def probe(canary, secret):
 '''
 
 
+def _as_user(uid: int, action) -> str:
+    """What `action` gives with this process's effective uid set to `uid` for a moment (then back to root)."""
+    os.setresuid(-1, uid, -1)
+    try:
+        return str(action())
+    except OSError as exc:
+        return type(exc).__name__
+    finally:
+        os.setresuid(-1, 0, -1)
+
+
 @pytest.fixture
 def root_process_level(monkeypatch):
     if os.geteuid() != 0:
@@ -48,9 +61,9 @@ def root_process_level(monkeypatch):
     monkeypatch.setattr(isolation, "_LEVEL", "process")
 
 
-def test_a_root_graders_learner_runs_as_nobody_without_namespaces(root_process_level, monkeypatch, tmp_path):
+def test_a_root_graders_learner_leaves_root_without_namespaces(root_process_level, monkeypatch, tmp_path):
     if not os.path.exists(SYSTEM_PYTHON):
-        pytest.skip(f"no {SYSTEM_PYTHON}: no interpreter `nobody` may run here")
+        pytest.skip(f"no {SYSTEM_PYTHON}: no interpreter another user may run here")
     stdlib = f"/usr/lib/python{sys.version_info.major}.{sys.version_info.minor}"
     monkeypatch.setattr(isolation, "PYTHON", SYSTEM_PYTHON)   # the same minor version, readable by anyone
     monkeypatch.setattr(isolation, "STDLIB", [stdlib])
@@ -60,16 +73,23 @@ def test_a_root_graders_learner_runs_as_nobody_without_namespaces(root_process_l
     canary.write_text("the grader's")
     secret.write_text("s3cret")
     secret.chmod(0o600)
+    grade = tmp_path / "cv3d-grade-x" / "scratch"      # as runner.run_workers makes it: the grade folder is 0700
+    grade.mkdir(parents=True)
+    grade.parent.chmod(0o700)
+    monkeypatch.setattr(tempfile, "tempdir", str(grade))
     with isolation.LearnerProcess(PROBE) as learner:
         seen = learner.function("probe", get("1.5"))(str(canary), str(secret))
-    assert seen["uid"] != 0 and seen["canary"] == "PermissionError" and seen["secret"] == "PermissionError", seen
+        assert learner.uid != 0 and os.stat(learner.home).st_uid == learner.uid
+        assert _as_user(learner.uid + 1, lambda: os.listdir(learner.home)) == "PermissionError"   # another grader's learner
+    assert seen["uid"] == learner.uid and seen["canary"] == "PermissionError" and seen["secret"] == "PermissionError", seen
     assert seen["judge"] == "PermissionError", seen
     assert canary.read_text() == "the grader's"
-    assert "runs as `nobody`" in runner.isolation_note()
+    assert oct(grade.parent.stat().st_mode & 0o777) == "0o701"       # passable, not listable
+    assert "runs as an unprivileged user" in runner.isolation_note()
 
 
 def test_a_learner_left_as_root_is_said_in_the_results(root_process_level, monkeypatch):
-    monkeypatch.setattr(isolation, "PYTHON", "/root/.no-such-python")    # an interpreter `nobody` cannot reach
+    monkeypatch.setattr(isolation, "PYTHON", "/root/.no-such-python")    # an interpreter no other user can reach
     assert not isolation.unprivileged_process_level()
     note = runner.isolation_note()
-    assert note.startswith("weaker isolation") and "(root: `nobody` cannot read this machine's Python)" in note
+    assert note.startswith("weaker isolation") and "(root: no other user can read this machine's Python)" in note

@@ -13,7 +13,6 @@ import os
 import subprocess
 import sys
 import tempfile
-import time
 
 import pytest
 
@@ -60,12 +59,10 @@ def test_an_answer_that_fills_the_disk_is_stopped_with_a_clear_message(level, mo
     ex = get("1.5")
     graded = worker._Graded(FILL, [ex])
     try:
-        start = time.monotonic()
         result = worker.judge_one(graded, ex, 7)
-        took = time.monotonic() - start
         learner = graded.process(ex)
         assert result.score == 0 and "disk quota of 8 MiB" in str(result), str(result)[:1500]
-        assert took < ex.timeout, f"stopped by its time limit ({took:.1f} s), not by the quota"
+        assert "time limit" not in str(result), "stopped by its time limit, not by the quota"
         overshoot = 0 if level == "namespaces" else 2 * quota.POLL_S * MB_PER_S    # MiB written between two looks
         assert max(peak) <= (QUOTA_MB + overshoot) * 2**20, (max(peak) / 2**20, level)
         assert learner.quota.mounted == (level == "namespaces")
