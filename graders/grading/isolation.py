@@ -346,7 +346,8 @@ class LearnerProcess:
                 "refused": list(self.refused), "allow_solutions": reference, "site": _site_packages(),
                 "extra_path": list(dict.fromkeys([CHECKOUT, os.path.dirname(solutions_dir)])) if reference else [],
                 "hide": hide, "keep": keep,
-                "uid": self.uid, "gid": self.gid, "drop": self.drop, "tmpfs_mb": 256}
+                "uid": self.uid, "gid": self.gid, "drop": self.drop,
+                "tmpfs_mb": max(1, min(256, self.quota.limit >> 20))}   # /tmp, /dev/shm, ...: each within the quota
 
     # -- life cycle
     def start(self) -> None:
