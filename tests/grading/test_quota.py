@@ -82,12 +82,22 @@ def test_a_learner_under_its_quota_is_not_disturbed(level):
 
 
 def test_a_killed_graders_quota_mount_is_removed_by_the_next_run(tmp_path):
+    """A killed batch leaves its grade folder with a learner's quota tmpfs (holding the learner's files) mounted
+    in it: the next run's clean-up (graders.grading.scratch) detaches it and removes the folder."""
     if not NAMESPACES:
         pytest.skip("only root mounts a quota tmpfs")
-    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
-    folder = tmp_path / f"cv3d-learner-{int(dead.stdout)}-x"
-    folder.mkdir()
-    left = quota.DiskQuota(str(folder), 1 << 20, mount=True)
-    assert left.mounted and os.path.ismount(folder)
-    assert quota.unmount_stale(str(tmp_path)) == [str(folder)]
-    assert not os.path.ismount(folder)
+    from graders.grading.scratch import GRADE_MARKER, GRADE_PREFIX, clean_stale_grade_folders
+    dead = int(subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                              text=True).stdout)
+    grade = tmp_path / f"{GRADE_PREFIX}killed"
+    (grade / "scratch").mkdir(parents=True)
+    (grade / GRADE_MARKER).write_text(f"{dead} \n")
+    private = grade / "scratch" / f"cv3d-learner-{dead}-x"
+    private.mkdir()
+    left = quota.DiskQuota(str(private), 1 << 20, mount=True)
+    (private / "home").mkdir()
+    (private / "home" / "answers.py").write_text("the learner's")
+    assert left.mounted and os.path.ismount(private)
+    assert clean_stale_grade_folders(tmp_path) == [grade.name]
+    assert not os.path.ismount(private) and not grade.exists()
+    assert quota.unmount_stale(str(tmp_path)) == []
