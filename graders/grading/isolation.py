@@ -20,7 +20,8 @@ per library policy. Its environment is an allow-list. Where the OS allows it (Li
 util-linux `unshare`), it also gets its own PID, network, mount, UTS and IPC namespaces: the course
 tree, `solutions`, the refused libraries, /root, /home, the grader's temp folders and the secret are
 gone from its file system view, /tmp, /run and /dev/shm are its own (size-limited), everything else is
-read-only but its home, and it runs as `nobody` with no capabilities. Without namespaces (`process`
+read-only but its private folder, a tmpfs of its disk quota (graders.grading.quota), and it runs as
+`nobody` with no capabilities. As root without namespaces it still leaves root (graders.grading.users). Without namespaces (`process`
 level) the files stay readable by the learner's code, so the judge adds a static check of the
 learner's source (graders.grading.static_check) and says the isolation is weaker. `sandbox_level()` says
 which level is in force; CV3D_SANDBOX=process forces the weaker one (to test it, or where namespaces
