@@ -41,6 +41,7 @@ from typing import Callable
 from graders.core.chapters import READY
 from graders.core.engine import chapter
 from graders.grading.extract import extract, read_cells
+from graders.grading.quota import unmount_stale
 from graders.grading.scratch import GRADE_PREFIX, mark_grade_folder
 from graders.core.report import ExerciseResult, result_from_dict
 
@@ -226,6 +227,7 @@ def run_workers(source: str, exercises: list, seed: int, hard_limit: float = HAR
             finally:
                 _end_group(proc)
                 os.close(fd)
+                unmount_stale(str(scratch))     # a killed worker's learner quota tmpfs (graded mode as root)
             todo = grade.todo()
             if not todo or grade.stop_reason():
                 break

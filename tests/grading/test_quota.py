@@ -13,6 +13,8 @@ import os
 import subprocess
 import sys
 import tempfile
+import threading
+import time
 
 import pytest
 
@@ -101,3 +103,30 @@ def test_a_killed_graders_quota_mount_is_removed_by_the_next_run(tmp_path):
     assert clean_stale_grade_folders(tmp_path) == [grade.name]
     assert not os.path.ismount(private) and not grade.exists()
     assert quota.unmount_stale(str(tmp_path)) == []
+
+
+def test_a_worker_killed_at_its_hard_limit_leaves_no_quota_mount(tmp_path, monkeypatch):
+    """The runner kills a worker that overruns: its learner's quota tmpfs, still mounted in the grade folder,
+    must not make the grade's clean-up fail (EBUSY) nor outlive it."""
+    if not NAMESPACES:
+        pytest.skip("only root mounts a quota tmpfs")
+    from graders.grading.runner import check_file
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))     # the grade folder, and so its mounts, in here
+    source = tmp_path / "01_hangs.py"        # hangs while loading: the worker is killed with its learner mounted
+    source.write_text("import time\ndef project_points(X, K, R, t, dist=None, _=time.sleep(120)):\n    pass\n")
+
+    def mounts() -> list[str]:
+        with open("/proc/self/mountinfo") as f:
+            return [line for line in f if str(tmp_path) in line]
+    seen, done = [], threading.Event()
+    watcher = threading.Thread(target=lambda: [seen.extend(mounts()) or time.sleep(0.1) for _ in iter(done.is_set, True)])
+    watcher.start()
+    try:
+        results, _ = check_file(source, seed=7, only=["1.5"], hard_limit=15.0, graded=True)
+    finally:
+        done.set()
+        watcher.join()
+    assert results[0].score == 0 and "longer than 15 s" in str(results[0]), str(results[0])
+    assert seen, "the learner's quota tmpfs was never mounted: nothing was tested"
+    assert mounts() == []
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith("cv3d-grade-")]
