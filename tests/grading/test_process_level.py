@@ -8,14 +8,17 @@ and the results say so.
 from __future__ import annotations
 
 import os
+import shutil
 import sys
 import tempfile
+from pathlib import Path
 
 import pytest
 
 from graders.core.engine import get
 from graders.grading import isolation, runner
 
+SYSTEM_TMP = tempfile.gettempdir()
 SYSTEM_PYTHON = f"/usr/bin/python{sys.version_info.major}.{sys.version_info.minor}"   # o+rx, unlike a pyenv under /root
 
 PROBE = '''
@@ -61,21 +64,25 @@ def root_process_level(monkeypatch):
     monkeypatch.setattr(isolation, "_LEVEL", "process")
 
 
-def test_a_root_graders_learner_leaves_root_without_namespaces(root_process_level, monkeypatch, tmp_path):
+def test_a_root_graders_learner_leaves_root_without_namespaces(root_process_level, monkeypatch, request):
     if not os.path.exists(SYSTEM_PYTHON):
         pytest.skip(f"no {SYSTEM_PYTHON}: no interpreter another user may run here")
     stdlib = f"/usr/lib/python{sys.version_info.major}.{sys.version_info.minor}"
     monkeypatch.setattr(isolation, "PYTHON", SYSTEM_PYTHON)   # the same minor version, readable by anyone
     monkeypatch.setattr(isolation, "STDLIB", [stdlib])
     assert isolation.unprivileged_process_level()
-    os.chmod(tmp_path, 0o755)
-    canary, secret = tmp_path / "grades.csv", tmp_path / "secret"
+    files = Path(tempfile.mkdtemp(prefix="cv3d-graders-files-", dir=SYSTEM_TMP))   # where any user may look
+    request.addfinalizer(lambda: shutil.rmtree(files))
+    files.chmod(0o755)
+    canary, secret = files / "grades.csv", files / "secret"
     canary.write_text("the grader's")
     secret.write_text("s3cret")
     secret.chmod(0o600)
-    grade = tmp_path / "cv3d-grade-x" / "scratch"      # as runner.run_workers makes it: the grade folder is 0700
-    grade.mkdir(parents=True)
-    grade.parent.chmod(0o700)
+    # As runner.run_workers makes it: a 0700 grade folder in the system's temporary folder (not pytest's, whose
+    # own 0700 folders the learner's way in would open).
+    grade = Path(tempfile.mkdtemp(prefix="cv3d-grade-", dir=SYSTEM_TMP)) / "scratch"
+    grade.mkdir()
+    request.addfinalizer(lambda: shutil.rmtree(grade.parent))
     monkeypatch.setattr(tempfile, "tempdir", str(grade))
     with isolation.LearnerProcess(PROBE) as learner:
         seen = learner.function("probe", get("1.5"))(str(canary), str(secret))
