@@ -20,7 +20,8 @@ per library policy. Its environment is an allow-list. Where the OS allows it (Li
 util-linux `unshare`), it also gets its own PID, network, mount, UTS and IPC namespaces: the course
 tree, `solutions`, the refused libraries, /root, /home, the grader's temp folders and the secret are
 gone from its file system view, /tmp, /run and /dev/shm are its own (size-limited), everything else is
-read-only but its home, and it runs as `nobody` with no capabilities. Without namespaces (`process`
+read-only but its private folder, a tmpfs of its disk quota (graders.grading.quota), and it runs as
+`nobody` with no capabilities. As root without namespaces it still leaves root (graders.grading.users). Without namespaces (`process`
 level) the files stay readable by the learner's code, so the judge adds a static check of the
 learner's source (graders.grading.static_check) and says the isolation is weaker. `sandbox_level()` says
 which level is in force; CV3D_SANDBOX=process forces the weaker one (to test it, or where namespaces
@@ -38,6 +39,7 @@ import select
 import shutil
 import subprocess
 import sys
+import sysconfig
 import tempfile
 import threading
 import time
@@ -45,13 +47,15 @@ from typing import Any, Callable
 
 from graders.core.attempt import CaseReport
 from graders.core.sandbox import TimeLimitExceeded, current_cotangent
+from graders.grading.callbacks import MAX_CONCURRENT, CallbackServing
 from graders.grading.learner import receive_bytes, send
+from graders.grading import users
 from graders.grading.policy import refusal
+from graders.grading.quota import DISK_GB, POLL_S, DiskQuota, empty, unmount_stale
 from graders.grading.transport import RemoteError, gradients_back, loads, swap_callables, tensors_back
 
 MARGIN_S = 5.0          # the judge waits this much longer than the learner's own time limit
 CPU_SECONDS = 1800      # CPU time of one learner process (it is restarted after every time-out)
-MAX_CONCURRENT = 8      # grader callbacks served at once for one learner process (10.10's stages)
 
 
 # ------------------------------------------------------------------ the learner process
@@ -262,22 +266,18 @@ def _site_packages() -> list[str]:
     return [p for p in site.getsitepackages() if os.path.isdir(p)]
 
 
-def _nobody() -> tuple[int, int]:
-    import grp
-    import pwd
-    try:
-        uid = pwd.getpwnam("nobody").pw_uid
-    except KeyError:
-        uid = 65534
-    for group in ("nogroup", "nobody"):
-        try:
-            return uid, grp.getgrnam(group).gr_gid
-        except KeyError:
-            pass
-    return uid, 65534
+PYTHON = sys.executable                 # the learner's interpreter
+STDLIB = sorted({sysconfig.get_paths()["stdlib"], sysconfig.get_paths()["platstdlib"]})
 
 
-class LearnerProcess:
+def unprivileged_process_level() -> bool:
+    """Process level as root (a container that refuses `unshare`): the learner still leaves root, if any user
+    can run the interpreter (graders.grading.users); else it runs as root, and the isolation note says so."""
+    return (level() == "process" and os.geteuid() == 0
+            and users.others_can_read([PYTHON, *STDLIB, *_site_packages()]))
+
+
+class LearnerProcess(CallbackServing):
     """One learner process for one submission and one library policy: load its code once, then call its
     functions. `refused`: the libraries that are stand-ins there (all of LIBRARIES for a from-scratch CODE
     exercise). The folder it works in:
@@ -289,16 +289,24 @@ class LearnerProcess:
     """
 
     def __init__(self, source: str, memory_gb: float = 8.0, max_processes: int = 256, max_file_gb: float = 1.0,
-                 refused: tuple[str, ...] = ("cv2", "pycolmap", "kornia"), hide: tuple[str, ...] = ()):
+                 refused: tuple[str, ...] = ("cv2", "pycolmap", "kornia"), hide: tuple[str, ...] = (),
+                 disk_gb: float | None = None):
+        disk_gb = DISK_GB if disk_gb is None else disk_gb     # read at each start: a test lowers it
         self.source, self.memory_gb = source, memory_gb
-        self.max_processes, self.max_file_gb = max_processes, max_file_gb
+        self.max_processes, self.max_file_gb = max_processes, min(max_file_gb, disk_gb)
         self.refused, self.extra_hidden = tuple(refused), tuple(hide)
         self.proc: subprocess.Popen | None = None
         self.problem, self.skipped = "", []
-        self.private = tempfile.mkdtemp(prefix="cv3d-learner-")
-        os.chmod(self.private, 0o755)
         self.level = level()
-        self.uid, self.gid = _nobody() if self.level == "namespaces" else (os.getuid(), os.getgid())
+        self.private = tempfile.mkdtemp(prefix=f"cv3d-learner-{os.getpid()}-")   # its pid: see quota.unmount_stale
+        self.drop = self.level == "process" and unprivileged_process_level() and users.open_the_way(self.private)
+        os.chmod(self.private, 0o711 if self.drop else 0o755)    # other learners of a batch may not list it
+        unmount_stale(os.path.dirname(self.private))
+        # Everything the learner may write lives in here: the quota covers it (a tmpfs where we may mount).
+        self.quota = DiskQuota(self.private, int(disk_gb * 2**30), mount=self.level == "namespaces")
+        self._writable: list[str] = []
+        self.uid, self.gid = (users.nobody() if self.level == "namespaces" else users.learner_ids() if self.drop
+                              else (os.getuid(), os.getgid()))
         self.home = self.writable_folder("home", exact=True)
         self.exchange = os.path.join(self.private, "from-the-grader")
         os.mkdir(self.exchange, 0o755)
@@ -315,6 +323,7 @@ class LearnerProcess:
         path = os.path.join(self.private, prefix) if exact else tempfile.mkdtemp(prefix=prefix, dir=self.private)
         if exact:
             os.mkdir(path, 0o700)
+        self._writable.append(path)
         os.chown(path, self.uid, self.gid)
         os.chmod(path, 0o700)
         return path
@@ -341,7 +350,8 @@ class LearnerProcess:
                 "refused": list(self.refused), "allow_solutions": reference, "site": _site_packages(),
                 "extra_path": list(dict.fromkeys([CHECKOUT, os.path.dirname(solutions_dir)])) if reference else [],
                 "hide": hide, "keep": keep,
-                "uid": self.uid, "gid": self.gid, "tmpfs_mb": 256}
+                "uid": self.uid, "gid": self.gid, "drop": self.drop,
+                "tmpfs_mb": max(1, min(256, self.quota.limit >> 20))}   # /tmp, /dev/shm, ...: each within the quota
 
     # -- life cycle
     def start(self) -> None:
@@ -351,7 +361,7 @@ class LearnerProcess:
         # Imported by name (not run as __main__) so that its classes pickle by reference (a Dask pool in
         # the learner's code ships the grader's callbacks to its threads).
         boot = f"import sys; sys.path.append({self.runtime!r}); import cv3d_learner; cv3d_learner.main()"
-        cmd = [sys.executable, "-I", "-S", "-c", boot, json.dumps(config)]
+        cmd = [PYTHON, "-I", "-S", "-c", boot, json.dumps(config)]
         if config["lockdown"]:
             cmd = ["unshare", *UNSHARE] + cmd
         self.pids = _PidsLimit(self.max_processes)
@@ -369,7 +379,7 @@ class LearnerProcess:
             self.skipped = reply.get("skipped", [])
         except (RemoteError, TimeLimitExceeded) as exc:
             self.problem = f"your code failed to load: {exc}"
-        self.residents = self.pids.members() | {self.proc.pid}   # what may live between calls
+        self.residents = self.pids.members() | ({self.proc.pid} if self.proc else set())   # may live between calls
 
     def stop(self) -> None:
         if self.proc is None:
@@ -389,7 +399,27 @@ class LearnerProcess:
 
     def close(self) -> None:
         self.stop()
+        self.quota.release()
         shutil.rmtree(self.private, ignore_errors=True)
+
+    def check_quota(self) -> None:
+        """Past its disk quota the learner is stopped, what it wrote is removed, and the call fails saying so."""
+        if not self.quota.exceeded():
+            return
+        self.stop()
+        for folder in self._writable:
+            if os.path.isdir(folder) and not os.path.islink(folder):
+                empty(folder)
+        raise RemoteError("crash", self.quota.message())
+
+    def _wait(self, deadline: float, watch: bool) -> None:
+        """Until the learner's reply starts (or the deadline passes), looking at its disk use meanwhile."""
+        while True:
+            left = deadline - time.monotonic()
+            if select.select([self.res], [], [], max(min(left, POLL_S), 0.0))[0] or left <= 0:
+                return
+            if watch:
+                self.check_quota()
 
     def __enter__(self) -> "LearnerProcess":
         self.start()
@@ -412,10 +442,12 @@ class LearnerProcess:
         except (BrokenPipeError, OSError):
             raise RemoteError("crash", self._death()) from None
         deadline = time.monotonic() + timeout
+        watch = request["op"] in ("load", "call")        # what runs the learner's code
         serving: list[threading.Thread] = []
         try:
             while True:
                 try:
+                    self._wait(deadline, watch)
                     reply = loads(receive_bytes(self.res, deadline))
                 except TimeoutError:
                     raise TimeLimitExceeded(f"time limit of {max(timeout - MARGIN_S, 0.05):.3g} s exceeded") from None
@@ -425,69 +457,12 @@ class LearnerProcess:
                     raise RemoteError("garbage", f"returned an object the grader cannot receive ({exc}): return "
                                                    "numpy arrays, numbers, strings, lists, tuples or dicts") from None
                 if reply.get("op") != "callback":
+                    if watch:
+                        self.check_quota()
                     return reply
                 self._dispatch_callback(reply, callbacks or [], serving, deadline)
         finally:
             self._join(serving, deadline)
-
-    def _dispatch_callback(self, request: dict, callbacks: list[Callable], serving: list, deadline: float) -> None:
-        """Serve one callback here, or in a thread of its own if its grader object asks to be served concurrently
-        (`served_concurrently`: 10.10's stages, whose concurrent calls are what the judge observes); at most
-        MAX_CONCURRENT at once, whatever the learner's code sends."""
-        try:
-            target = _callback_target(request, callbacks)
-        except IndexError:
-            target = None
-        if "attr" in request or not getattr(getattr(target, "__self__", target), "served_concurrently", False):
-            self._serve_callback(request, callbacks)
-            return
-        serving[:] = [t for t in serving if t.is_alive()]
-        if not self._slots.acquire(timeout=max(deadline - time.monotonic(), 0.0)):
-            raise TimeLimitExceeded("time limit exceeded (the grader's callbacks were never read)")
-
-        def serve() -> None:
-            try:
-                self._serve_callback(request, callbacks)
-            except OSError:       # the learner's process has ended: nobody to reply to
-                pass
-            finally:
-                self._slots.release()
-        thread = threading.Thread(target=serve, name="cv3d-callback", daemon=True)
-        thread.start()
-        serving.append(thread)
-
-    def _join(self, serving: list[threading.Thread], deadline: float) -> None:
-        """Every callback served in a thread has replied before the exchange ends (a late reply would land in the
-        next request's frames); one still writing past the deadline means the learner stopped reading: its
-        process ends (the reply's write then fails) and the next call starts a fresh one."""
-        for thread in serving:
-            thread.join(max(deadline - time.monotonic(), 0.0) + 1.0)
-        if any(t.is_alive() for t in serving):
-            try:
-                os.killpg(self.proc.pid, 9)      # first: a write blocked on its pipe then fails (EPIPE)
-            except (ProcessLookupError, PermissionError, AttributeError):
-                pass
-            for thread in serving:
-                thread.join()
-            self.stop()
-
-    def _serve_callback(self, request: dict, callbacks: list[Callable]) -> None:
-        try:
-            target = _callback_target(request, callbacks)
-            if "attr" in request:        # a public attribute of a grader object the case handed over
-                if request["attr"].startswith("_"):
-                    raise AttributeError(f"{type(target).__name__} has no public attribute {request['attr']!r}")
-                value = getattr(target, request["attr"])
-            else:
-                value = target(*tensors_back(request["args"]), **request["kwargs"])
-            reply = {"ok": True, "value": value}
-        except Exception as exc:   # the grader's callback failing on the learner's inputs: the learner's error
-            reply = {"ok": False, "error": f"{type(exc).__name__}: {exc}",
-                     "type": type(exc).__name__ if type(exc).__module__.startswith("graders") else ""}
-        with self._sending:      # the callback table and the pipe: one thread at a time
-            if reply["ok"]:
-                reply["value"] = swap_callables(reply["value"], callbacks)
-            send(self.req, dict(reply, op="reply", id=request.get("id")))
 
     def _death(self) -> str:
         try:
@@ -510,13 +485,6 @@ class LearnerProcess:
 
     def function(self, name: str, exercise: Any) -> "RemoteFunction":
         return RemoteFunction(self, name, exercise)
-
-
-def _callback_target(request: dict, callbacks: list[Callable]) -> Any:
-    index = request.get("index")
-    if not isinstance(index, int) or not 0 <= index < len(callbacks):
-        raise IndexError(f"no grader callback number {index!r}")
-    return callbacks[index]
 
 
 class RemoteFunction:

@@ -495,7 +495,13 @@ def _lock_down(config: dict) -> None:
     libc.sethostname(host, len(host))
     # An unprivileged user: it owns nothing but its home, so it can neither undo the mounts nor write the
     # cgroup that holds its process limit, nor read what root keeps private.
-    uid, gid = config["uid"], config["gid"]
+    _become(libc, config["uid"], config["gid"])
+    os.chdir(home)
+
+
+def _become(libc, uid: int, gid: int) -> None:
+    """From root to `uid`/`gid` for good: no supplementary groups, no capabilities (bounding set dropped too),
+    no-new-privileges (a setuid binary gives nothing back)."""
     PR_SET_NO_NEW_PRIVS, PR_CAPBSET_DROP = 38, 24
     libc.prctl(PR_SET_NO_NEW_PRIVS, 1, 0, 0, 0)
     for cap in range(64):
@@ -503,7 +509,8 @@ def _lock_down(config: dict) -> None:
     os.setgroups([])
     os.setresgid(gid, gid, gid)
     os.setresuid(uid, uid, uid)                # from root to another uid: every capability is cleared
-    os.chdir(home)
+    if os.getuid() == 0 or os.geteuid() == 0:
+        raise SystemExit("could not leave root")
 
 
 def _python_path(config: dict) -> None:
@@ -520,6 +527,9 @@ def main() -> None:
     if config["lockdown"]:
         _lock_down(config)
     else:
+        if config.get("drop"):                 # process level as root (a container without unshare): not root
+            import ctypes
+            _become(ctypes.CDLL(None, use_errno=True), config["uid"], config["gid"])
         os.chdir(config["home"])
     # The learner's prints are captured per call; anything written at the C level goes nowhere.
     devnull = os.open(os.devnull, os.O_WRONLY)

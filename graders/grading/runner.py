@@ -41,6 +41,7 @@ from typing import Callable
 from graders.core.chapters import READY
 from graders.core.engine import chapter
 from graders.grading.extract import extract, read_cells
+from graders.grading.quota import unmount_stale
 from graders.grading.scratch import GRADE_PREFIX, mark_grade_folder
 from graders.core.report import ExerciseResult, result_from_dict
 
@@ -226,6 +227,7 @@ def run_workers(source: str, exercises: list, seed: int, hard_limit: float = HAR
             finally:
                 _end_group(proc)
                 os.close(fd)
+                unmount_stale(str(scratch))     # a killed worker's learner quota tmpfs (graded mode as root)
             todo = grade.todo()
             if not todo or grade.stop_reason():
                 break
@@ -242,12 +244,16 @@ def run_workers(source: str, exercises: list, seed: int, hard_limit: float = HAR
 
 def isolation_note() -> str:
     """Said first in every graded result: how far the learner's code is kept from the grader here."""
-    from graders.grading.isolation import level
+    from graders.grading.isolation import level, unprivileged_process_level
     if level() == "namespaces":
         return ""
+    user = ("it runs as an unprivileged user" if unprivileged_process_level() else
+            "it runs as the grader's own user" + (" (root: no other user can read this machine's Python)"
+                                                   if os.geteuid() == 0 else ""))
     return ("weaker isolation: this machine cannot give your code its own file system view (that needs Linux "
-            "namespaces as root), so the grader's files stay readable to it; the from-scratch rules are enforced "
-            "by import stand-ins and a static check of your source instead")
+            f"namespaces as root), so the grader's files stay readable to it ({user}); the from-scratch rules are "
+            "enforced by import stand-ins and a static check of your source instead, and your disk quota is "
+            "measured by the grader in your own folder while your code runs rather than enforced by the OS as it writes")
 
 
 def check_file(path: str | Path, seed: int | None = None, only: list[str] | None = None,

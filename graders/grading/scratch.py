@@ -8,6 +8,8 @@ import stat
 import tempfile
 from pathlib import Path
 
+from graders.grading.quota import unmount_stale
+
 GRADE_PREFIX = "cv3d-grade-"      # a grade's temporary folder (the learner's code and scratch space)
 GRADE_MARKER = ".cv3d-grade-owner"
 
@@ -68,6 +70,7 @@ def clean_stale_grade_folders(root: str | Path | None = None) -> list[str]:
             continue
         if not shutil.rmtree.avoids_symlink_attacks:   # no fd-based walk on this platform: leave it
             continue
+        unmount_stale(entry.path)                      # its learners' quota tmpfs (graded mode as root)
         shutil.rmtree(entry.path, ignore_errors=True)
         removed.append(entry.name)
     return removed
