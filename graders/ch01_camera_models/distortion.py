@@ -109,5 +109,6 @@ UNDISTORT_HINTS = [
 register(
     Exercise(id="1.6", title="Iterative undistortion that converges", name="undistort_points", kind="code",
              points=4, cases=cases_undistort, hints=UNDISTORT_HINTS, fallback=cv_undistort,
+             datasets=("chessboard",),
              arg_names=("uv", "K", "dist")),
 )

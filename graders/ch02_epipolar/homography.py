@@ -111,5 +111,6 @@ HOMOGRAPHY_HINTS = [
 
 register(
     Exercise(id="2.15", title="Normalised DLT homography", name="homography_dlt", kind="code", points=3,
-             cases=cases_homography, hints=HOMOGRAPHY_HINTS, fallback=cv_homography, arg_names=("x1", "x2")),
+             cases=cases_homography, hints=HOMOGRAPHY_HINTS, fallback=cv_homography,
+             datasets=("homography",), arg_names=("x1", "x2")),
 )

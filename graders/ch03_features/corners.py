@@ -211,7 +211,8 @@ FAST_HINTS = [
 register(
     Exercise(id="3.5", title="Harris and Shi-Tomasi corners with non-maximum suppression", name="detect_corners",
              kind="code", points=3, cases=cases_corners, hints=CORNER_HINTS,
-             fallback=lambda img, n=500, method="harris", **kw: cv_corners(img, n, method), arg_names=("img1", "img2")),
+             fallback=lambda img, n=500, method="harris", **kw: cv_corners(img, n, method),
+             datasets=("homography",), arg_names=("img1", "img2")),
     Exercise(id="3.6", title="FAST-9 with non-maximum suppression", name="fast_detect", kind="code", points=3,
              cases=cases_fast, hints=FAST_HINTS, fallback=cv_fast, arg_names=("img", "threshold", "nms")),
 )

@@ -277,7 +277,9 @@ register(
     Exercise(id="3.9", title="Difference-of-Gaussians detector with sub-pixel refinement", name="dog_detect",
              kind="code", points=4, cases=cases_dog, hints=DOG_HINTS,
              fallback=lambda img, n_features=1000, **kw: cv_dog(img, n_features), timeout=20.0,
+             datasets=("homography",),
              arg_names=("img1", "img2")),
     Exercise(id="3.10", title="SIFT-lite descriptor", name="sift_descriptors", kind="code", points=4, cases=cases_sift,
-             hints=SIFT_HINTS, fallback=cv_sift_descriptors, timeout=20.0, arg_names=("img1", "img2")),
+             hints=SIFT_HINTS, fallback=cv_sift_descriptors, timeout=20.0,
+             datasets=("homography",), arg_names=("img1", "img2")),
 )

@@ -187,5 +187,6 @@ SFM_HINTS = [
 register(
     Exercise(id="4.14", title="Incremental SfM", name="incremental_sfm", kind="code", points=6,
              cases=cases_incremental_sfm, hints=SFM_HINTS, fallback=cv_incremental_sfm, timeout=60.0,
+             datasets=("sacre_coeur", "sceaux_castle"),
              arg_names=("problem",)),
 )

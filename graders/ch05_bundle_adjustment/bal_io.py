@@ -209,6 +209,7 @@ register(
         cases=cached(cases_read_bal),
         hints=READ_HINTS,
         fallback=gt_read_bal,
+        datasets=("bal",),
         arg_names=("path",),
     ),
     Exercise(

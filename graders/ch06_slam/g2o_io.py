@@ -275,6 +275,7 @@ register(Exercise(
     cases=cases_read_g2o,
     hints=HINTS,
     fallback=gt_read_g2o,
+    datasets=("posegraph",),
     arg_names=("path",),
 ))
 
@@ -553,5 +554,6 @@ register(Exercise(
     cases=cases_write_g2o,
     hints=WRITE_HINTS,
     fallback=gt_write_g2o,
+    datasets=("posegraph",),
     arg_names=("path", "graph"),
 ))

@@ -145,6 +145,7 @@ register(Exercise(
     hints=OPT_HINTS,
     fallback=gt_optimize_pose_graph,
     timeout=60.0,
+    datasets=("posegraph",),
     arg_names=("T", "edges", "Z", "info"),
 ))
 

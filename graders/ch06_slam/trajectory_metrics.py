@@ -256,6 +256,7 @@ register(
         cases=cases_trajectory_errors,
         hints=HINTS,
         fallback=fallback_trajectory_errors,
+        datasets=("trajectories",),
         arg_names=("stamps_est", "T_est", "stamps_gt", "T_gt"),
         timeout=20.0,
     ),

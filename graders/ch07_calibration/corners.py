@@ -84,4 +84,5 @@ CORNER_HINTS = [
 
 register(Exercise(
     id="7.17", title="Sub-pixel chessboard corners", name="refine_corners", kind="code", points=2, cases=_cases,
-    hints=CORNER_HINTS, fallback=cv_refine_corners, timeout=20.0, arg_names=("img", "corners", "half_win")))
+    hints=CORNER_HINTS, fallback=cv_refine_corners, timeout=20.0,
+    datasets=("chessboard",), arg_names=("img", "corners", "half_win")))

@@ -224,7 +224,8 @@ STEREO_HINTS = [
 
 register(Exercise(
     id="7.9", title="Stereo extrinsics through a shared board", name="stereo_extrinsics", kind="code", points=3,
-    cases=_extrinsics_cases, hints=STEREO_HINTS, fallback=cv_stereo_extrinsics, timeout=60.0, arg_names=ARGS_9))
+    cases=_extrinsics_cases, hints=STEREO_HINTS, fallback=cv_stereo_extrinsics, timeout=60.0,
+    datasets=("chessboard",), arg_names=ARGS_9))
 
 
 # ----------------------------------------------------------------- 7.10 stereo_rectify
@@ -433,4 +434,5 @@ RECTIFY_HINTS = [
 register(Exercise(
     id="7.10", title="Stereo rectification (R1, R2, P1, P2)", name="stereo_rectify", kind="code", points=3,
     cases=_rectify_cases, hints=RECTIFY_HINTS, fallback=cv_stereo_rectify, timeout=30.0,
+    datasets=("chessboard",),
     arg_names=("K1", "d1", "K2", "d2", "R", "t", "image_size")))

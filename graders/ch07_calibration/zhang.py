@@ -127,7 +127,8 @@ HOMOGRAPHY_HINTS = [
 
 register(Exercise(
     id="7.5", title="Board-to-image homography (normalised DLT)", name="board_homography", kind="code", points=2,
-    cases=_homography_cases, hints=HOMOGRAPHY_HINTS, fallback=gt_homography, arg_names=("X_xy", "uv")))
+    cases=_homography_cases, hints=HOMOGRAPHY_HINTS, fallback=gt_homography,
+    datasets=("chessboard",), arg_names=("X_xy", "uv")))
 
 
 # ----------------------------------------------------------------- 7.6 intrinsics_from_homographies
@@ -192,6 +193,7 @@ INTRINSICS_HINTS = [
 register(Exercise(
     id="7.6", title="Closed-form K from the homographies (V b = 0)", name="intrinsics_from_homographies",
     kind="code", points=2, cases=_intrinsics_cases, hints=INTRINSICS_HINTS, fallback=gt_intrinsics_from_homographies,
+    datasets=("chessboard",),
     arg_names=("Hs",)))
 
 
@@ -324,4 +326,5 @@ CALIBRATION_HINTS = [
 register(Exercise(
     id="7.8", title="Full LM refinement of K, distortion and every pose", name="refine_calibration", kind="code",
     points=4, cases=_calibration_cases, hints=CALIBRATION_HINTS, fallback=cv_refine_calibration, timeout=60.0,
+    datasets=("chessboard",),
     arg_names=("X", "uv", "K0", "dist0", "Rs0", "ts0")))

@@ -211,5 +211,6 @@ register(
              hints=HS_HINTS, fallback=gt_horn_schunck, arg_names=("I1", "I2", "alpha", "iters")),
     Exercise(id="9.13", title="Your coarse-to-fine dense flow (FlyingChairs against Farneback and one translation)", name="dense_flow",
              kind="code", points=4, cases=_dense_cases, hints=DENSE_HINTS, fallback=cv_dense_flow, timeout=60.0,
+             datasets=("flow",),
              arg_names=("I1", "I2")),
 )

@@ -231,5 +231,6 @@ FLOW_TOOLS_HINTS = [
 register(Exercise(
     id="9.9", title="Flow tools: .flo, backward warping, EPE and Fl", name="flow_tools", kind="code", points=3,
     cases=cases_flow_tools, hints=FLOW_TOOLS_HINTS, fallback=cv_flow_tools,
+    datasets=("flow",),
     arg_names=("flo", "flow", "I", "flow_gt"),
 ))

@@ -28,6 +28,7 @@ from graders.core.report import CaseResult, ExerciseResult
 from graders.core.memo import val
 from graders.core.sandbox import safe_call
 from graders.core.sealed import SealedChoice, SealedNumber
+from graders.kit.datasets import missing_note
 
 KINDS = ("concept", "code", "debug", "design", "frontier")
 LIBRARIES = ("cv2", "pycolmap", "kornia")    # what graded mode watches (graders.grading.policy, .learner)
@@ -156,6 +157,9 @@ class Exercise:
     # A question of the student release, whose model answer is sealed (graders.core.sealed): value -> the
     # explanation if that answer is right, else a note saying it is sealed. None: `explanation` is shown.
     reveal: Callable[[Any], str] | None = None
+    # The datasets (graders.kit.datasets names) its real-data cases come from: drawn only where a dataset is
+    # present, so without one a result says which it was judged without (a visible note, never a silent drop).
+    datasets: tuple[str, ...] = ()
 
     def __post_init__(self):
         assert self.kind in KINDS, f"{self.id}: kind {self.kind!r} is not one of {KINDS}"
@@ -394,6 +398,8 @@ def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None, hidden: bool 
     result.score = round(sum(r.points for r in result.cases), 6)
     result.status = ("passed" if all(r.passed for r in judged)
                      else "failed" if result.score == 0 else "partial")
+    if note := missing_note(ex.datasets):
+        result.message = f"{result.message}; {note}" if result.message else note
     if ex.explanation:
         result.explanation = ex.explanation
     elif ex.reveal is not None and ex.value:

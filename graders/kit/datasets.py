@@ -23,7 +23,7 @@ import sys
 import tempfile
 import urllib.request
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterable
 
 import numpy as np
 
@@ -131,8 +131,24 @@ def announce(dataset: str, real: str, stand_in: str) -> bool:
         print(f"Data: {real} ({root / info(dataset)['folder']}).")
     else:
         print(f"Data: {real} not found, so this notebook uses {stand_in}. For the real set: "
-              f"`python -m graders.datasets fetch {dataset}` (or `make fetch-data` for all), then restart the kernel.")
+              f"`{fetch_command(dataset)}` (or `make fetch-data` for all), then restart the kernel.")
     return root is not None
+
+
+def fetch_command(dataset: str) -> str:
+    """The shell command that puts `dataset` in the cache (what every "not found" line tells the learner)."""
+    return f"python -m graders.datasets fetch {dataset}"
+
+
+def missing_note(wanted: Iterable[str]) -> str:
+    """One line for a result judged without real data: which of the datasets `wanted` are missing and the
+    command that fetches each; '' when all are present (an exercise's real-data cases are then drawn)."""
+    missing = [d for d in wanted if not available(d)]
+    if not missing:
+        return ""
+    commands = " and ".join(f"`{fetch_command(d)}`" for d in missing)
+    return (f"its real-data cases were not run: {', '.join(repr(d) for d in missing)} not found "
+            f"({commands}, then restart the kernel)")
 
 
 def sha256(file: Path) -> str:
