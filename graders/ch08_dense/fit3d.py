@@ -10,10 +10,10 @@ transparent stray points (o = 0.002) that only pruning removes.
 The learner fits every parameter with Adam through their own `project_gaussians` (8.14) and `rasterize`
 (8.15), densifying and pruning, and returns the Gaussians; the grader renders them with its own renderer at the
 held-out cameras, whose images never reach the learner. Judged: (1) the held-out views' PSNR against a bar
-that the initialisation misses by ~10 dB, (2) the held-out views' depth (alpha-composited, as 3DGS renders
-depth): the Gaussians must have moved onto the surfaces, which a fit with frozen means misses although its
-images can pass (1) at 24 px; (3) densification (more Gaussians than the start), (4) the budget, (5) pruning;
-(3)-(5) count only with (1) met.
+that the initialisation misses by ~10 dB, (2) the held-out views' depth (gsplat's expected depth
+Σ w_i z_i / Σ w_i, rasterization(render_mode="ED")): the Gaussians must have moved onto the surfaces, which a fit
+with frozen means misses although its images can pass (1) at 24 px; (3) densification (more Gaussians than the
+start), (4) the budget, (5) pruning; (3)-(5) count only with (1) met.
 """
 from __future__ import annotations
 
