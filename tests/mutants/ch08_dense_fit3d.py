@@ -31,16 +31,26 @@ def fit3d_colours_only(views, init, steps=100, max_gaussians=72):
     return _fit(views, init, steps, max_gaussians, lr_mu=0.0, lr_shape=0.0)
 
 
+def fit3d_frozen_means(views, init, steps=100, max_gaussians=72):
+    """Fits rotations, scales, colours and opacities, densifying and pruning, but never updates the means: at 24 px
+    the reshaped Gaussians still render the held-out views above the PSNR bar on most seeds."""
+    return _fit(views, init, steps, max_gaussians, lr_mu=0.0)
+
+
 def fit3d_untrained(views, init, steps=100, max_gaussians=72):
     """Returns the SfM initialisation with the strays dropped: no optimisation at all."""
     keep = np.asarray(init["opacity"]) >= 0.005
     return {k: np.asarray(v)[keep] for k, v in init.items()}
 
 
+# Not caught (a known gap): no densification, then one Gaussian copied at the end so the count row passes. Its
+# held-out PSNR reached the 26 dB bar on 1 of seeds 0-7 (seed 1: 27.8 dB), where its depth (7.9 cm) is under the
+# 8 cm bar: full marks on seed 1. Only a quality bar the reference's tail allows can catch it (see DEPTH_BAR).
 MUTANTS: list[tuple] = [
     ("8.25", "no densification", fit3d_no_densify, "no more than the"),
     ("8.25", "no pruning", fit3d_no_prune, "prune them"),
     ("8.25", "no budget", fit3d_no_budget, "cap densification"),
     ("8.25", "colours only, frozen positions", fit3d_colours_only, "not fitted either"),
+    ("8.25", "frozen means", fit3d_frozen_means, "depth is off"),
     ("8.25", "untrained", fit3d_untrained, "not fitted either"),
 ]
