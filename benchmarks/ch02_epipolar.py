@@ -29,9 +29,8 @@ import cv2
 import numpy as np
 import pycolmap
 
-import time
 
-from benchmarks.timing import table
+from benchmarks.timing import table, taking_turns
 from graders import ch02_epipolar as ch2
 from graders.kit import datasets
 from graders.core.compare import max_angle_deg, rotation_angle_deg, sampson_rms_px
@@ -108,17 +107,7 @@ def wall_and_cpu(methods: dict, repeat: int = 9) -> dict[str, tuple[float, float
     after the other, the H row's ratio to USAC_MAGSAC (a ~1 ms call) moved by ±10 % between runs at a
     load of ~2, more than the changes being measured. 9 rounds (5 until issue 20's last round): the
     median's spread shrinks roughly as 1/sqrt(repeat)."""
-    for fn in methods.values():
-        fn()
-    wall = {name: [] for name in methods}
-    cpu = {name: [] for name in methods}
-    for _ in range(repeat):
-        for name, fn in methods.items():
-            w, c = time.perf_counter(), time.process_time()
-            fn()
-            wall[name].append(time.perf_counter() - w)
-            cpu[name].append(time.process_time() - c)
-    return {name: (float(np.median(wall[name])), float(np.median(cpu[name]))) for name in methods}
+    return taking_turns(methods, repeat)[1]      # benchmarks/timing.py: warm-up, then rounds taking turns
 
 
 def _add_times(per: dict, times: dict) -> None:
