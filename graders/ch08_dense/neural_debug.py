@@ -3,7 +3,7 @@
 The colleague fits a picture with 2D Gaussians (8.16's model) and gets a soft, blotchy image. The case holds
 the target, the initial Gaussians, the run's settings, its fitted Gaussians, its log (the Gaussian count per
 round stays at 9) and metrics. The learner names the cause (graded once, from CAUSES) and returns a fit of
-the same target, judged with the grader's renderer: at least 1 dB above the colleague's PSNR (densifying
+the same target, judged with the grader's renderer: at least GAIN_DB = 0.5 dB above the colleague's PSNR (densifying
 gains 2-5 dB on these pictures), more Gaussians than the initialisation, within the budget.
 """
 from __future__ import annotations
@@ -57,6 +57,9 @@ def _psnr(out, case):
     return fit2d.psnr(fit2d.render_splats(**out["gaussians"], H=t.shape[0], W=t.shape[1]), t)
 
 
+GAIN_DB = 0.5    # the PSNR a repaired fit must gain over the colleague's (see _cases)
+
+
 @cached    # the same draw for every grade of a seed: its oracle runs once per process
 def _cases(rng: np.random.Generator):
     case, truth = debug_blurry(rng)
@@ -66,10 +69,11 @@ def _cases(rng: np.random.Generator):
     call = shared_run(learner)
     yield Case("the cause you named", (case,), truth, lambda o, t: float(o["cause"] != t["cause"]), 0, "wrong",
                convert=_convert, call=call, key="cause", tags=("cause",), weight=2.0)    # half the points
-    # 1 dB: densifying within the same budget gained 2.3-5.0 dB over the run without it on 6 measured draws (the
-    # fairness run checks the reference on 200); a fit without densification cannot pass the count case.
-    yield Case(f"PSNR of your fit ≥ the colleague's {truth['psnr_broken']:.1f} dB + 1 dB", (case,), truth,
-               lambda o, t, c=case: max(0.0, t["psnr_broken"] + 1.0 - _psnr(o, c)), 0, "dB", convert=_convert,
+    # GAIN_DB: densifying within the same budget gained 2.3-5.0 dB over the run without it on 6 measured draws, but
+    # only 0.97 dB on fairness seed 2488965823 (1 of 240 failed a 1 dB bar); a fit without densification cannot pass
+    # the count case, and every mutant in the catalogue fails on the cause or the count, not here.
+    yield Case(f"PSNR of your fit ≥ the colleague's {truth['psnr_broken']:.1f} dB + {GAIN_DB} dB", (case,), truth,
+               lambda o, t, c=case: max(0.0, t["psnr_broken"] + GAIN_DB - _psnr(o, c)), 0, "dB", convert=_convert,
                call=call, key="psnr")
     yield Case(f"more Gaussians than the {truth['n_init']} of the initialisation, at most {truth['budget']}", (case,),
                truth, lambda o, t: float(not (t["n_init"] < len(o["gaussians"]["means"]) <= t["budget"])), 0, "",
