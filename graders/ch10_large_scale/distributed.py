@@ -37,6 +37,7 @@ import numpy as np
 from graders.kit import scene
 from graders.core.convert import OutputError
 from graders.core.engine import Case, Exercise, Hint, raised, register, shared_run
+from graders.core.sandbox import learner_of
 
 STALE = {"pairs": [[0, 1, -1]], "note": "the previous run's result"}
 
@@ -307,18 +308,13 @@ def gt_run_pipeline(image_paths, pairs, stages, out_path, address=None, n_worker
 JUDGE_BATCH = 2       # the judge's batch_size: 9 pairs -> 5 batches, enough for order and resume to show
 
 
-def _learner_of(fn):
-    """The learner's process in graded mode (graders.grading.isolation.LearnerProcess), None in self-study."""
-    return getattr(fn, "learner", None) or getattr(getattr(fn, "parent", None), "learner", None)
-
-
 def _folders_for(fn) -> tuple[str, str]:
     """(folder, scratch): where the learner's process may write — a folder its user owns in its private folder in
     graded mode (the judge sees the same path), a fresh temporary folder otherwise — and where the stages keep
     their markers. In graded mode the stages run here, in the judge, and their markers go to a folder of the
     judge's that the learner's code cannot write (it could otherwise delete or forge them); in self-study they
     run in the learner's workers, beside the images."""
-    learner = _learner_of(fn)
+    learner = learner_of(fn)
     if learner is None:
         folder = tempfile.mkdtemp(prefix="cv3d-10.10-")
         return folder, folder
@@ -376,7 +372,7 @@ def _run_and_inspect(fn, images, pairs, flaky_kinds: tuple[str, ...]) -> dict:
             old_text = reader.read()
         return {"rows": rows, "old_intact": old_text == json.dumps(STALE),
                 "replaced": os.stat(out_path).st_ino != inode if os.path.exists(out_path) else False,
-                **_after_run(folder, scratch, out_path, _learner_of(fn) is not None)}
+                **_after_run(folder, scratch, out_path, learner_of(fn) is not None)}
     finally:
         shutil.rmtree(folder, ignore_errors=True)
         shutil.rmtree(scratch, ignore_errors=True)
@@ -401,7 +397,7 @@ def _crash_and_resume(fn, images, pairs) -> dict:
         rows = fn(paths, list(pairs), PipelineStages(scratch=scratch, paths=tuple(paths)), out_path,
                   batch_size=JUDGE_BATCH)
         return {"rows": rows, "crashed": crashed, "pairs": m, "verified": _runs(scratch, "verify") - before,
-                **_after_run(folder, scratch, out_path, _learner_of(fn) is not None)}
+                **_after_run(folder, scratch, out_path, learner_of(fn) is not None)}
     finally:
         shutil.rmtree(folder, ignore_errors=True)
         shutil.rmtree(scratch, ignore_errors=True)

@@ -203,7 +203,7 @@ def safe_call(fn: Callable, args: tuple = (), kwargs: dict | None = None,
 
 # ------------------------------------------------------------------ files the learner's code writes for the judge
 
-def _learner_of(fn: Callable) -> Any:
+def learner_of(fn: Callable) -> Any:
     """The learner process behind a graded-mode function (graders.grading.isolation.RemoteFunction), or None."""
     return getattr(fn, "learner", None) or getattr(getattr(fn, "parent", None), "learner", None)
 
@@ -215,7 +215,7 @@ def folder_for_learner(fn: Callable, prefix: str):
     what it left there only through `copy_out` / `read_text_no_link`, never following a link."""
     import shutil
     import tempfile
-    learner = _learner_of(fn)
+    learner = learner_of(fn)
     folder = learner.writable_folder(prefix) if learner is not None else tempfile.mkdtemp(prefix=prefix)
     try:
         yield folder
