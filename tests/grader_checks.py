@@ -34,18 +34,27 @@ _GRADES: dict[tuple, tuple] = {}     # (exercise id, row filter, fn, seed) -> (f
 MAX_GRADES = 512
 
 
-def graded(ex: Exercise, fn: Any, seed: int):
-    """`grade(ex, fn, seed=seed)`, once per test process: the contract's rows and a chapter's own tests grade the same
-    implementation on the same seed (4.14's reference, library row and mutants on its photo sets, minutes each), and
-    conftest.py's `worker_group` puts such tests on one worker. Exercises are told apart by id and row filter
-    (`without`); the learner's code is not seeded by the engine, so a second grade could only differ by its own
-    randomness, which these tests do not measure."""
-    key = (ex.id, getattr(ex.cases, "rows_left_out", None), id(fn), seed)
+def graded(ex: Exercise, fn: Any, seed: int, until: Callable | None = None):
+    """`grade(ex, fn, seed=seed, until=until)`, once per test process: the contract's rows and a chapter's own tests
+    grade the same implementation on the same seed (4.14's reference, library row and mutants on its photo sets,
+    minutes each), and conftest.py's `worker_group` puts such tests on one worker. Exercises are told apart by id and
+    row filter (`without`); the learner's code is not seeded by the engine, so a second grade could only differ by
+    its own randomness, which these tests do not measure."""
+    key = (ex.id, getattr(ex.cases, "rows_left_out", None), id(fn), seed, until)
+    whole = _GRADES.get(key[:-1] + (None,))
+    if until is not None and key not in _GRADES and whole is not None:     # a whole grade answers a stopped one
+        return _stopped(whole[1], until)
     if key not in _GRADES:
         if len(_GRADES) >= MAX_GRADES:
             _GRADES.pop(next(iter(_GRADES)))
-        _GRADES[key] = (fn, grade(ex, fn, seed=seed))     # fn kept alive: its id stays its own
+        _GRADES[key] = (fn, grade(ex, fn, seed=seed, until=until))     # fn kept alive: its id stays its own
     return _GRADES[key][1]
+
+
+def _stopped(result, until: Callable):
+    """`result` as if its grade had stopped at the first row satisfying `until` (rows are judged one by one)."""
+    n = next((k + 1 for k, row in enumerate(result.cases) if until(row)), len(result.cases))
+    return dataclasses.replace(result, cases=result.cases[:n])
 
 
 def show(result) -> str:
@@ -113,31 +122,46 @@ def without(ex: Exercise, rows: Callable[[Case], bool] | None) -> Exercise:
     return dataclasses.replace(ex, cases=cases)
 
 
-def grade_seeds(ex: Exercise, fn: Any, seeds: Sequence[int], seed_free: Callable[[Case], bool] | None = None) -> list:
-    """The grades of `fn` on each seed. Rows for which `seed_free(case)` is True (real data whose input does not
-    depend on the seed: 4.14's photo sets) are judged with the first seed only: on every later seed they would
-    repeat the same computation on the same input (the engine does not seed the learner's randomness)."""
-    return [graded(ex if k == 0 else without(ex, seed_free), fn, seed) for k, seed in enumerate(seeds)]
+def grade_seeds(ex: Exercise, fn: Any, seeds: Sequence[int], seed_free: Callable[[Case], bool] | None = None,
+                until: Callable | None = None) -> list:
+    """The grades of `fn` on each seed (each stopped by `until`, see `grade`). Rows for which `seed_free(case)` is
+    True (real data whose input does not depend on the seed: 4.14's photo sets) are judged with the first seed only:
+    on every later seed they would repeat the same computation on the same input (the engine does not seed the
+    learner's randomness)."""
+    return [graded(ex if k == 0 else without(ex, seed_free), fn, seed, until) for k, seed in enumerate(seeds)]
 
 
 def assert_mutant_caught(ex: Exercise, name: str, mutant: Callable, hint: str | None, seeds: Sequence[int],
                          seed_free: Callable[[Case], bool] | None = None) -> None:
-    """The mutant loses points with every seed, and where the catalogue names a hint, a hint or the
-    message of an output check (e.g. "F has rank 3") says it. A seed-free row (see `grade_seeds`) judged with
-    the first seed counts for every seed: it is the same row on every draw."""
-    results = grade_seeds(ex, mutant, seeds, seed_free)
+    """With every seed the mutant fails a row, and where the catalogue names a hint, a failing row's hint or
+    message (e.g. "F has rank 3") says it. Each seed's grade stops at the first such row (`caught`): the cases after
+    it could not un-fail it, and in the slow exercises each costs a reconstruction or a training run. A seed-free row
+    (see `grade_seeds`) judged with the first seed counts for every seed: it is the same row on every draw, so with
+    seed-free rows the first seed's grade is whole (a later seed may be caught only there)."""
+    caught = _caught_by(hint)
+    results = [graded(ex, mutant, seeds[0], None if seed_free else caught)]
+    results += grade_seeds(without(ex, seed_free), mutant, seeds[1:], until=caught)
     later = {row.key for result in results[1:] for row in result.cases}
     fixed = [row for row in results[0].cases if row.key not in later] if seed_free and len(results) > 1 else []
     for seed, result in zip(seeds, results):
         rows = result.cases + (fixed if seed != seeds[0] else [])
-        assert result.score < ex.points or any(not row.passed for row in fixed), \
-            f"mutant '{name}' scored full marks with seed {seed}"
         # A mutant that cannot even be called (its signature lags the exercise's) proves nothing.
         broken = [row.message for row in rows if _SIGNATURE_ERROR.search(row.message + row.traceback)]
         assert not broken, f"mutant '{name}' fails on a signature mismatch, not on its bug: {broken[0]}"
+        assert any(not row.passed for row in rows), f"mutant '{name}' scored full marks with seed {seed}"
         if hint:
-            said = [row.hint + " " + row.message for row in rows]
-            assert any(hint in s for s in said), f"hint '{hint}' did not fire with seed {seed}:{show(result)}"
+            assert any(map(caught, rows)), f"hint '{hint}' did not fire with seed {seed}:{show(result)}"
+
+
+def _caught_by(hint: str | None) -> Callable:
+    """A row that catches a mutant: it fails, and says `hint` (in its hint or its message) where one is named.
+    One predicate per hint text, so `graded` keys the grades it stops by what they stop on."""
+    if hint not in _CAUGHT:
+        _CAUGHT[hint] = lambda row: not row.passed and (hint is None or hint in row.hint + " " + row.message)
+    return _CAUGHT[hint]
+
+
+_CAUGHT: dict[str | None, Callable] = {}
 
 
 def assert_enough_mutants(exercises: dict[str, Exercise], mutants: Sequence[tuple]) -> None:

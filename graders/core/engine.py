@@ -335,9 +335,14 @@ def _not_attempted(value: Any) -> bool:
     return value is None or value is Ellipsis
 
 
-def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None, hidden: bool = False) -> ExerciseResult:
+def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None, hidden: bool = False,
+          until: Callable[[CaseResult], bool] | None = None) -> ExerciseResult:
     """Judge `fn_or_value` on fresh hidden cases drawn with `seed` (random if None). Never raises.
-    hidden: the instructor's grade, which adds the exercise's `hidden_cases` to the usual ones."""
+    hidden: the instructor's grade, which adds the exercise's `hidden_cases` to the usual ones.
+    until: stop at the first row for which it is True, the result holding only the rows judged so far (the test
+    suite's mutant checks: a mutant caught with its hint on one row needs no further case, and each later case of
+    a slow exercise is a reconstruction or a training run). Each row is judged on its own case, so a row is the
+    same whether or not the grade goes on."""
     seed = secrets.randbits(32) if seed is None else int(seed)
     result = ExerciseResult(id=ex.id, title=ex.title, name=ex.name, kind=ex.kind,
                             max_score=ex.points, seed=seed, replayable=not ex.value)
@@ -386,6 +391,9 @@ def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None, hidden: bool 
         row, kind = judged
         result.cases.append(row)
         weights.append(case.weight)
+        if until is not None and until(row):
+            result.message = f"stopped after case {len(result.cases)}: the caller asked for no more"
+            break
         if kind == "timeout":
             result.timed_out = True
             # One endless loop costs one time limit, not one per case: the rest are reported, not run.

@@ -26,6 +26,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")  # a learner's plt.show() must not bl
 from graders.core.engine import get, grade  # noqa: E402
 from graders.core.report import ExerciseResult  # noqa: E402
 from graders.core.sandbox import safe_call  # noqa: E402
+from graders.kit import diskcache  # noqa: E402
 
 LOAD_TIMEOUT = 60.0  # seconds for the learner's imports and definitions to run
 
@@ -204,6 +205,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--graded", action="store_true")
     ap.add_argument("--hidden-fd", type=int)
     args = ap.parse_args(argv)
+    if args.graded:     # the judge's oracles are its own computation, never a file the learner could have written
+        diskcache.disable()
     seed = int(os.environ.pop("CV3D_SEED", "0"))
     hidden = _read_hidden(args.hidden_fd)
     hide = tuple(p for p in os.environ.pop("CV3D_HIDE_PATHS", "").split(os.pathsep) if p)
