@@ -246,7 +246,7 @@ def filter_speckles(D: np.ndarray, max_size: int, max_diff: float) -> np.ndarray
     return np.where(size <= max_size, np.nan, D)
 
 
-def sgm_volume(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3, P1: float = 6.0, P2: float = 48.0,
+def sgm_volume(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3, P1: float = 8.0, P2: float = 32.0,
                paths: int = 8) -> np.ndarray:
     """The aggregated costs of sgm_stereo as planes, S: (H, d_max + 1, W) int16: 7×7 census, SGM over `paths`,
     the worst cost where x < d (no partner in the right view)."""
@@ -266,13 +266,14 @@ def disparities(S: np.ndarray, max_lr_diff: float = 1.0, uniqueness: float = 10.
     return filter_speckles(D, speckle_size, speckle_range) if speckle_size > 0 else D
 
 
-def sgm_stereo(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3, P1: float = 6.0, P2: float = 48.0,
+def sgm_stereo(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3, P1: float = 8.0, P2: float = 32.0,
                paths: int = 8, max_lr_diff: float = 1.0, median: bool = True, uniqueness: float = 10.0,
                speckle_size: int = 100, speckle_range: float = 2.0) -> np.ndarray:
     """The full matcher of the benchmark: 7×7 census costs, SGM (int16) over 8 paths by default (4 for speed, 16
     optional), WTA + sub-pixel + left-right check + uniqueness test, the NaN-aware 3×3 median of the kept
-    disparities, the speckle filter. The post-filter values are OpenCV StereoSGBM's in the benchmark
-    (uniquenessRatio 10, disp12MaxDiff 1, speckleWindowSize 100, speckleRange 2), chosen on the motorcycle pair and
-    six synthetic scenes together (benchmarks/ch08_dense.py, post_filter_sweep). Returns D: (H, W), NaN = none."""
+    disparities, the speckle filter. P1, P2 in census bits (of 48): P2 = 4 P1 as OpenCV's recommended 8 and 32 cn B²;
+    the post-filter values are OpenCV StereoSGBM's in the benchmark (uniquenessRatio 10, disp12MaxDiff 1,
+    speckleWindowSize 100, speckleRange 2). All chosen on the motorcycle pair and six synthetic scenes together,
+    worst case over the 7 (benchmarks/ch08_dense.py, post_filter_sweep). Returns D: (H, W), NaN = none."""
     S = sgm_volume(I_l, I_r, d_max, r, P1, P2, paths)
     return disparities(S, max_lr_diff, uniqueness, median, speckle_size, speckle_range)
