@@ -77,3 +77,19 @@ def test_uniqueness_rejects_an_ambiguous_winner_only():
     D = _wta_subpixel_lr(C, max_lr_diff=8, uniqueness=10)
     assert np.isnan(D[0, 9]) and np.isfinite(D[0, 3:9]).all() and np.isfinite(D[0, 10:]).all()
     assert np.isfinite(_wta_subpixel_lr(C, max_lr_diff=8, uniqueness=5)[0, 9])      # 54 * 95 >= 50 * 100
+
+
+def test_synthetic_scene_ground_truth_is_exact():
+    """benchmarks.ch08_scenes: every left pixel that the right view sees (not occluded) has the right image's value
+    at x - d_gt (up to the added noise), and the textureless patches are flat in the left view."""
+    from benchmarks.ch08_scenes import scene_pair
+    p = scene_pair(np.random.default_rng(4), H=60, W=120, d_max=24, noise=0.0, contrast=(0.15, 0.15))
+    yy, xx = np.mgrid[0:60, 0:120].astype(float)
+    warped = ndimage.map_coordinates(p["I_r"], [yy, xx - p["D_gt"]], order=3, mode="nearest")
+    seen = ~p["occluded"] & (xx - p["D_gt"] > 3) & (xx < 117)
+    assert p["occluded"].any() and seen.mean() > 0.6
+    assert np.median(np.abs(warped - p["I_l"])[seen]) < 0.01         # vs ~0.15 contrast: the right pixel
+    assert np.abs(warped - p["I_l"])[seen].mean() < 0.02
+    g = np.abs(ndimage.sobel(p["I_l"], 1))
+    core = ndimage.binary_erosion(p["flat"], iterations=3)
+    assert core.any() and g[core].mean() < 0.2 * g[~p["flat"]].mean()
