@@ -233,13 +233,13 @@ def filter_speckles(D: np.ndarray, max_size: int, max_diff: float) -> np.ndarray
     from scipy.sparse.csgraph import connected_components
     H, W = D.shape
     ids = np.arange(H * W).reshape(H, W)
-    edges = []
-    for a, b in ((D[:, :-1], D[:, 1:]), (D[:-1], D[1:])):             # right and down neighbours
+    i, j = [], []
+    for p, q in ((np.s_[:, :-1], np.s_[:, 1:]), (np.s_[:-1], np.s_[1:])):   # each pixel and its right / lower neighbour
         with np.errstate(invalid="ignore"):
-            linked = np.abs(a - b) <= max_diff                           # False where either is NaN
-        ia, ib = (ids[:, :-1], ids[:, 1:]) if a.shape[1] < W else (ids[:-1], ids[1:])
-        edges.append((ia[linked], ib[linked]))
-    i, j = np.concatenate([e[0] for e in edges]), np.concatenate([e[1] for e in edges])
+            linked = np.abs(D[p] - D[q]) <= max_diff                     # False where either is NaN
+        i.append(ids[p][linked])
+        j.append(ids[q][linked])
+    i, j = np.concatenate(i), np.concatenate(j)
     graph = coo_matrix((np.ones(i.size, np.int8), (i, j)), shape=(H * W, H * W))
     _, label = connected_components(graph, directed=False)
     size = np.bincount(label)[label].reshape(H, W)
