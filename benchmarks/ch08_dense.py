@@ -20,21 +20,22 @@ textureless patches; benchmarks/ch08_scenes.py), every parameter chosen on all o
 never on one pair; time <= 10 × SGBM.
 Before (issue 30's state: P1, P2 = 6, 48; left-right check, NaN-aware median, no uniqueness test, no speckle
 filter): motorcycle 5.1 % at 90.7 % vs SGBM 6.2 % at 85.0 %, both matched 4.11 % vs 4.71 %; on the 6 scenes below
-both matched 1.35 % vs 1.43 % (means) but the goal missed on 1 of 6 (a weak-texture scene: 1.81 % vs 0.60 %), and on
-a held-back Middlebury pair (issue 30: d up to 223) 3.4 % vs 2.6 % on the pixels both matched.
+both matched 1.56 % vs 1.53 % (means), the goal missed on 3 of 6; and on a held-back Middlebury pair (issue 30's
+author: d up to 223) 3.4 % vs 2.6 % on the pixels both matched.
 After (measured 2026-12-05, load average 18.6 before / 16.2 after, 2 CPUs): the defaults are OpenCV's post-filters
 (uniqueness 10 %, left-right tolerance 1 px, speckle filter 100 px / 2 px; opencv modules/stereo/src/stereosgbm.cpp)
 and P1, P2 = 8, 32 (P2 = 4 P1, OpenCV's ratio). Motorcycle: 3.2 % at 88.1 % vs SGBM 6.2 % at 85.0 %; both matched
 2.99 % vs 3.83 %; CPU 13.1 × SGBM's (time goal NOT met: census 0.55 s, aggregation 0.9 s, WTA + left-right +
-uniqueness 0.45 s, median + speckle 0.15 s). Scenes: 0.43 % at 88.1 % vs SGBM 2.05 % at 79.2 % (means), both
-matched 0.45 % vs 1.06 %, goal met on 6 of 6. The sweep: without the speckle filter no setting meets the goal on all
-7 pairs (worst both-matched ratio 1.6-4.0 × SGBM's, a weak-texture scene); with it, max_lr_diff 1 with any
-uniqueness, or 2 with uniqueness >= 5, meet it (worst ratio 0.78-0.99); max_lr_diff 0 loses 8-12 points of density to SGBM. Uniqueness 10 and
-15 tie on the worst ratio (0.78), 10 keeps more density (+3.1 vs +2.1 points): 10 kept, OpenCV's value. P1, P2 =
-4, 16 / 8, 24 / 8, 32 / 10, 40 / 6, 48: worst ratio 0.77 / 0.77 / 0.78 / 0.80 / 0.84 at a density margin of +0.2 /
-+2.2 / +3.1 / +3.7 / +3.2 points: 8, 32 kept. The NaN-aware median: worst ratio 0.78 with it, 0.79 without
-(density +3.1 / +3.0 points; speckle range 1 px: 0.78, +3.0): kept. 4 paths (3.0 % at 87.7 %, 11.1 ×) and 16 (3.4 % at 88.2 %, 17.0 ×)
-also meet the goal; 8 stays the default (Hirschmüller: at least 8).
+uniqueness 0.45 s, median + speckle 0.15 s). Scenes: 0.47 % at 87.4 % vs SGBM 2.24 % at 77.8 % (means), both matched
+0.51 % vs 1.11 %, goal met on 6 of 6 (the speckle filter alone: 6 of 6, the uniqueness test alone: 4 of 6). The
+sweep: without the speckle filter no setting meets the goal on all 7 pairs (worst both-matched ratio 1.1-1.7 ×
+SGBM's); with it, max_lr_diff 1 with any uniqueness, or 2 with uniqueness >= 5, meet it (worst ratio 0.78-0.90);
+max_lr_diff 0 loses 8-12 points of density to SGBM. Uniqueness 10 and 15 tie on the worst ratio (0.78), 10 keeps
+more density (+3.1 vs +2.1 points): 10 kept, OpenCV's value. P1, P2 = 4, 16 / 8, 24 / 8, 32 / 10, 40 / 6, 48: worst
+ratio 0.77 / 0.77 / 0.78 / 0.81 / 0.84 at a density margin of +0.2 / +2.2 / +3.1 / +3.7 / +3.2 points: 8, 32 kept.
+The NaN-aware median: worst ratio 0.78 with it, 0.79 without (density +3.1 / +3.0 points; speckle range 1 px: 0.78,
++3.0): kept. 4 paths (3.0 % at 87.7 %, 11.1 ×) and 16 (3.4 % at 88.2 %, 17.0 ×) also meet the goal; 8 stays the
+default (Hirschmüller: at least 8).
 """
 from __future__ import annotations
 

@@ -3,8 +3,9 @@ planes, occlusions and textureless patches, the cases on which a matcher's post-
 left-right check, speckle filter, median) decides what it keeps.
 
 A scene is a stack of planar layers, the background first: layer k covers a rectangle of the left image (the
-background covers all of it) and has the disparity d_k(x, y) = a_k + b_k x + c_k y (a slanted plane), larger
-than every layer behind it, so that where two layers overlap the later one is in front. Each layer carries its
+background covers all of it) and has the disparity d_k(x, y) = a_k + b_k x + c_k y (a slanted plane) inside its
+own band of disparities, above the bands of the layers behind it, so that where two layers overlap the later one
+is in front. Each layer carries its
 own band-limited texture in its own surface coordinates (the left pixel's (x, y)); the right view samples a
 layer at x_l = (x_r + a + c y) / (1 - b), the left point that lands on x_r, so both views see the same
 texture exactly (cubic-spline sampling of one grid). A textureless patch is a rectangle of a layer's texture
@@ -41,8 +42,9 @@ def scene_pair(rng: np.random.Generator, H: int = 240, W: int = 360, d_max: int 
     """A rectified pair (left pixel (x, y) matches right pixel (x - d, y)) of `layers` slanted planes.
 
     Each layer's texture has a std drawn from `contrast` (weak texture: a few grey levels in 8 bits); `noise`
-    is the std of the Gaussian noise added to each view. Returns I_l, I_r: (H, W) floats in ~[0, 1]; D_gt: (H, W) the left disparity (exact); occluded: (H, W) bool,
-    the left pixels hidden in the right view; flat: (H, W) bool, the left pixels inside a textureless patch."""
+    is the std of the Gaussian noise added to each view. Disparities lie in [2, d_max - 4]. Returns I_l, I_r:
+    (H, W) floats in ~[0, 1]; D_gt: (H, W) the left disparity (exact); occluded: (H, W) bool, the left pixels
+    hidden in the right view; flat: (H, W) bool, the left pixels inside a textureless patch."""
     yy, xx = np.mgrid[0:H, 0:W].astype(float)
     pad = 8
     lo = 2.0
@@ -51,18 +53,19 @@ def scene_pair(rng: np.random.Generator, H: int = 240, W: int = 360, d_max: int 
     front_r = np.full((H, W), -np.inf)                      # disparity of what the right view sees so far
     step = (d_max - 4.0 - lo) / layers
     for k in range(layers):
-        b, c = rng.uniform(-0.03, 0.03), rng.uniform(-0.03, 0.03)
-        d = lo + k * step + rng.uniform(0.2, 0.5) * step      # the plane's disparity at the image centre
-        a = d - b * W / 2 - c * H / 2
         if k == 0:
             x0, y0, x1, y1 = 0, 0, W, H
         else:
             w, h = int(rng.integers(W // 6, W // 3)), int(rng.integers(H // 5, H // 2))
             x0, y0 = int(rng.integers(d_max + 4, W - w - 4)), int(rng.integers(4, H - h - 4))
             x1, y1 = x0 + w, y0 + h
-            b = float(np.clip(b, -0.9 * step / (2 * w), 0.9 * step / (2 * w)))   # stays inside its band
-            c = float(np.clip(c, -0.9 * step / (2 * h), 0.9 * step / (2 * h)))
-            a = d - b * (x0 + x1) / 2 - c * (y0 + y1) / 2
+        # Layer k lives in the band lo + [k, k + 1) step: its centre at u of the band, its slopes small enough
+        # (|b| (x1 - x0) / 2 + |c| (y1 - y0) / 2 <= 0.9 min(u, 1 - u) step) that no pixel leaves the band, so a
+        # later layer is in front everywhere and every disparity is >= lo.
+        u = rng.uniform(0.3, 0.7)
+        room = 0.45 * min(u, 1.0 - u) * step
+        b, c = rng.uniform(-1, 1) * room / ((x1 - x0) / 2), rng.uniform(-1, 1) * room / ((y1 - y0) / 2)
+        a = lo + (k + u) * step - b * (x0 + x1) / 2 - c * (y0 + y1) / 2
         T, gain = _texture(rng, (H + 2 * pad, W + 2 * d_max + 2 * pad), patches if k < 2 else 0, flat,
                            std=rng.uniform(*contrast))
         inside = lambda X: (X >= x0) & (X < x1) & (yy >= y0) & (yy < y1)   # noqa: E731

@@ -87,7 +87,7 @@ def test_synthetic_scene_ground_truth_is_exact():
     yy, xx = np.mgrid[0:60, 0:120].astype(float)
     warped = ndimage.map_coordinates(p["I_r"], [yy, xx - p["D_gt"]], order=3, mode="nearest")
     seen = ~p["occluded"] & (xx - p["D_gt"] > 3) & (xx < 117)
-    assert p["occluded"].any() and seen.mean() > 0.6
+    assert p["occluded"].any() and seen.mean() > 0.6 and 2 <= p["D_gt"].min() and p["D_gt"].max() <= 24 - 4
     assert np.median(np.abs(warped - p["I_l"])[seen]) < 0.01         # vs ~0.15 contrast: the right pixel
     assert np.abs(warped - p["I_l"])[seen].mean() < 0.02
     g = np.abs(ndimage.sobel(p["I_l"], 1))
