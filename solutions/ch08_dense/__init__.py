@@ -12,9 +12,9 @@ from .questions import __all__ as _questions
 from .debug import fill_holes_with_planes, fix_textureless_holes
 from .fusion import fuse_depth_maps
 from .mvs import bilinear, plane_homography, plane_sweep, sweep_volume
-from .stereo import block_matching, census_volume, sad_volume, sgm, sgm_stereo
+from .stereo import block_matching, census_volume, filter_speckles, sad_volume, sgm, sgm_stereo
 
-__all__ = list(_questions) + ["block_matching", "census_volume", "sad_volume", "sgm", "sgm_stereo",
+__all__ = list(_questions) + ["block_matching", "census_volume", "filter_speckles", "sad_volume", "sgm", "sgm_stereo",
                               "bilinear", "plane_homography", "plane_sweep", "sweep_volume", "fuse_depth_maps",
                               "fill_holes_with_planes", "fix_textureless_holes"]
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["block_matching", "sgm", "sad_volume", "census_volume", "sgm_stereo"]
+__all__ = ["block_matching", "sgm", "sad_volume", "census_volume", "sgm_stereo", "filter_speckles"]
 
 
 def _box_sum(a: np.ndarray, r: int) -> np.ndarray:
@@ -63,8 +63,20 @@ def _argmin_planes(C: np.ndarray, right: bool = False) -> np.ndarray:
     return idx
 
 
-def _wta_subpixel_lr(C: np.ndarray, max_lr_diff: float) -> np.ndarray:
-    """WTA + parabola + left-right check on C: (H, D, W). Returns D: (H, W), NaN = rejected."""
+def _second_best(C: np.ndarray, d_l: np.ndarray) -> np.ndarray:
+    """min over d with |d - d_l| > 1 of C: (H, D, W) per pixel, (H, W) in C's dtype (the worst cost if there is
+    none): the best rival that is not a neighbour of the winner (the neighbours belong to the same minimum)."""
+    H, D, W = C.shape
+    rival = np.full((H, W), _worst(C), C.dtype)
+    for d in range(D):
+        np.minimum(rival, C[:, d], out=rival, where=np.abs(d_l - d) > 1)
+    return rival
+
+
+def _wta_subpixel_lr(C: np.ndarray, max_lr_diff: float, uniqueness: float = 0.0) -> np.ndarray:
+    """WTA + parabola + left-right check on C: (H, D, W). Returns D: (H, W), NaN = rejected.
+    uniqueness (percent, OpenCV's uniquenessRatio): also reject a pixel whose best rival d (|d - d_l| > 1)
+    costs less than C_min * 100 / (100 - uniqueness) — an ambiguous winner."""
     H, n, W = C.shape
     d_l = _argmin_planes(C)                                   # (H, W) integer winners
     d_r = _argmin_planes(C, right=True)
@@ -74,6 +86,9 @@ def _wta_subpixel_lr(C: np.ndarray, max_lr_diff: float) -> np.ndarray:
     # Parabola through (d-1, d, d+1): vertex offset (C- - C+) / (2 (C- - 2 C0 + C+)), inner winners only.
     i = np.clip(d_l, 1, n - 2)[:, None, :]
     cm, c0, cp = (np.take_along_axis(C, i + o, axis=1)[:, 0].astype(float) for o in (-1, 0, 1))
+    if uniqueness > 0:
+        c_min = np.take_along_axis(C, d_l[:, None, :], axis=1)[:, 0].astype(float)
+        keep &= _second_best(C, d_l).astype(float) * (100.0 - uniqueness) >= 100.0 * c_min
     with np.errstate(invalid="ignore", divide="ignore"):
         curv = cm - 2.0 * c0 + cp
         delta = np.where((d_l > 0) & (d_l < n - 1) & (curv > 0), (cm - cp) / (2.0 * curv), 0.0)
@@ -210,15 +225,55 @@ def nan_median3(D: np.ndarray) -> np.ndarray:
     return np.where(np.isnan(D), D, 0.5 * (lo + hi))
 
 
-def sgm_stereo(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3, P1: float = 6.0, P2: float = 48.0,
-               paths: int = 8, max_lr_diff: float = 1.0, median: bool = True) -> np.ndarray:
-    """The full matcher of the benchmark: 7×7 census costs, SGM (int16) over 8 paths by default (4 for
-    speed, 16 optional), WTA + sub-pixel + left-right check, then the NaN-aware 3×3 median of the kept disparities.
-    Returns D: (H, W), NaN = none. On the motorcycle pair max_lr_diff 1 is the value that keeps the density
-    above SGBM's (0: bad > 2 px 3.9 % at 75 % density; 1: 5.1 % at 91 %; 2: 5.7 % at 92 %; SGBM 6.2 % at 85 %)."""
+def filter_speckles(D: np.ndarray, max_size: int, max_diff: float) -> np.ndarray:
+    """Rejects small islands of disparity, as cv2.filterSpeckles: two 4-neighbours belong to one region when both
+    are kept and their disparities differ by at most max_diff; every region of at most max_size pixels becomes
+    NaN. D: (H, W) -> (H, W). (A wrong match rarely has many consistent neighbours; a surface does.)"""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    H, W = D.shape
+    ids = np.arange(H * W).reshape(H, W)
+    i, j = [], []
+    for p, q in ((np.s_[:, :-1], np.s_[:, 1:]), (np.s_[:-1], np.s_[1:])):   # each pixel and its right / lower neighbour
+        with np.errstate(invalid="ignore"):
+            linked = np.abs(D[p] - D[q]) <= max_diff                     # False where either is NaN
+        i.append(ids[p][linked])
+        j.append(ids[q][linked])
+    i, j = np.concatenate(i), np.concatenate(j)
+    graph = coo_matrix((np.ones(i.size, np.int8), (i, j)), shape=(H * W, H * W))
+    _, label = connected_components(graph, directed=False)
+    size = np.bincount(label)[label].reshape(H, W)
+    return np.where(size <= max_size, np.nan, D)
+
+
+def sgm_volume(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3, P1: float = 8.0, P2: float = 32.0,
+               paths: int = 8) -> np.ndarray:
+    """The aggregated costs of sgm_stereo as planes, S: (H, d_max + 1, W) int16: 7×7 census, SGM over `paths`,
+    the worst cost where x < d (no partner in the right view)."""
     C = _census_planes(np.asarray(I_l, float), np.asarray(I_r, float), int(d_max), r)
-    S = _aggregate(C, np.int16(P1), np.int16(P2), paths)   # int16: sums <= 8 (48 + P2) < 2^15
+    S = _aggregate(C, np.int16(P1), np.int16(P2), paths)   # int16: sums <= paths (48 + P2) < 2^15
     for d in range(1, d_max + 1):
-        S[:, d, :d] = _worst(S)                                # x < d: no partner in the right view
-    D = _wta_subpixel_lr(S, max_lr_diff)
-    return nan_median3(D) if median else D
+        S[:, d, :d] = _worst(S)
+    return S
+
+
+def disparities(S: np.ndarray, max_lr_diff: float = 1.0, uniqueness: float = 10.0, median: bool = True,
+                speckle_size: int = 100, speckle_range: float = 2.0) -> np.ndarray:
+    """D: (H, W) from S: (H, D, W): WTA + parabola + left-right check + uniqueness test, the NaN-aware 3×3 median,
+    then the speckle filter (off if speckle_size is 0). NaN = no disparity."""
+    D = _wta_subpixel_lr(S, max_lr_diff, uniqueness)
+    D = nan_median3(D) if median else D
+    return filter_speckles(D, speckle_size, speckle_range) if speckle_size > 0 else D
+
+
+def sgm_stereo(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int = 3, P1: float = 8.0, P2: float = 32.0,
+               paths: int = 8, max_lr_diff: float = 1.0, median: bool = True, uniqueness: float = 10.0,
+               speckle_size: int = 100, speckle_range: float = 2.0) -> np.ndarray:
+    """The full matcher of the benchmark: 7×7 census costs, SGM (int16) over 8 paths by default (4 for speed, 16
+    optional), WTA + sub-pixel + left-right check + uniqueness test, the NaN-aware 3×3 median of the kept
+    disparities, the speckle filter. P1, P2 in census bits (of 48): P2 = 4 P1 as OpenCV's recommended 8 and 32 cn B²;
+    the post-filter values are OpenCV StereoSGBM's in the benchmark (uniquenessRatio 10, disp12MaxDiff 1,
+    speckleWindowSize 100, speckleRange 2). All chosen on the motorcycle pair and six synthetic scenes together,
+    worst case over the 7 (benchmarks/ch08_dense.py, post_filter_sweep). Returns D: (H, W), NaN = none."""
+    S = sgm_volume(I_l, I_r, d_max, r, P1, P2, paths)
+    return disparities(S, max_lr_diff, uniqueness, median, speckle_size, speckle_range)
