@@ -200,18 +200,36 @@ print(check("7.2", ["excellent", "acceptable", "acceptable"], seed=0).cases[0].h
 # ---------------------------------------------------------------- stand-ins that are a solution (graders.grading.standins)
 
 # The CODE exercises whose stand-in is the grader's own implementation (not a call to cv2/pycolmap/kornia, which
-# graded mode refuses) and which the release still ships. 56 of them are also what the local check computes its
-# expected values or hints with (7.6: the closed form on the real views; 6.17: imu._model, the hints' slip
-# models; 4.13: repairs.py's pair choice): taking one out needs that exercise's local check to run on precomputed
-# cases. The other 5 (5.7, 5.12, 6.15, 6.27, 10.10) are only stand-ins, but a notebook demo use()s each: they need
-# precomputed demo outputs or a refused library's twin, as 10.7 has (graders.grading.standins.TWINS). Only 4.11,
-# 4.13, 4.16, 5.13 and 6.9 feed no demo (7.11's stand-in takes its rotation log from cv2.Rodrigues, which graded
-# mode refuses there: a library stand-in, not a solution). A stand-in taken out must leave this list; a new one that is a
-# solution fails the test until it is taken out or listed here.
+# graded mode refuses) and which the release still ships: 56 (60 before 2.6, 2.8, 2.9 and 4.6 got their library twins).
+# Most are also what the local check computes its expected values or hints with (7.6: the closed form on the real
+# views; 6.17: imu._model, the hints' slip models; 4.13: repairs.py's pair choice): taking one out needs a twin that
+# agrees with it far inside the tolerance (graders.grading.standins.TWINS) or that exercise's local check on
+# precomputed cases. 5.7, 5.12, 6.15, 6.27 and 10.10 are only stand-ins, but a notebook demo use()s each: they need
+# precomputed demo outputs or a refused library's twin. Only 4.11, 4.13, 4.16, 5.13 and 6.9 feed no demo (7.11's
+# stand-in takes its rotation log from cv2.Rodrigues, which graded mode refuses there: a library stand-in, not a
+# solution). A stand-in taken out must leave this list; a new one that is a solution fails the test until it is
+# taken out or listed here.
 SHIPPED_SOLUTIONS = frozenset("""
-1.8 1.9 1.10 2.6 2.7 2.8 2.9 2.16 3.12 4.5 4.6 4.7 4.11 4.13 4.14 4.15 4.16 5.5 5.6 5.7 5.8 5.9 5.10 5.11 5.12 5.13
+1.8 1.9 1.10 2.7 2.16 3.12 4.5 4.7 4.11 4.13 4.14 4.15 4.16 5.5 5.6 5.7 5.8 5.9 5.10 5.11 5.12 5.13
 6.7 6.8 6.9 6.10 6.11 6.12 6.13 6.14 6.15 6.16 6.17 6.27 7.6 7.7 7.12 8.8 8.9 8.11 8.12 8.13 8.14 8.15 8.16
 9.12 9.14 9.15 9.16 10.8 10.9 10.10 11.5 11.6 11.7 11.8""".split())
+
+
+def test_every_twin_is_a_library_row_of_its_exercise():
+    """A twin (standins.TWINS) replaces, in the release, a stand-in that is often also the local check's oracle:
+    it must be one of its exercise's contract LIBRARY rows (tests/chapters/test_contract.py: full marks on every
+    case of the fixed seeds), so the release's demos and local checks see the same answer to the tolerance."""
+    import importlib
+    import inspect
+    from graders.core import engine
+    for (rel, name), twin in TWINS.items():
+        module = importlib.import_module(rel.removesuffix(".py").replace("/", "."))
+        prefix = rel.split("/")[1]
+        ch = next(c for c in READY if c.prefix == prefix)
+        ex = next(e for e in engine.chapter(ch.key)
+                  if e.fallback is not None and inspect.unwrap(e.fallback) is getattr(module, name))
+        library = importlib.import_module(f"mutants.{prefix}_contract").LIBRARY
+        assert any(row.exercise_id == ex.id and row.fn is getattr(module, twin) for row in library), (ex.id, twin)
 
 
 def test_release_ships_no_solution_standin_but_the_listed_ones(release):
