@@ -67,6 +67,16 @@ def colmap_essential(R: np.ndarray, t: np.ndarray) -> np.ndarray:
     return scale * np.asarray(pycolmap.essential_matrix_from_pose(pose))
 
 
+def kornia_fundamental(E: np.ndarray, K1: np.ndarray, K2: np.ndarray) -> np.ndarray:
+    """Stand-in on kornia: kornia.geometry.epipolar.fundamental_from_essential (K2⁻ᵀ E K1⁻¹ in float64),
+    scaled to unit Frobenius norm as gt_fundamental."""
+    import torch
+    from kornia.geometry.epipolar import fundamental_from_essential
+
+    E, K1, K2 = (torch.as_tensor(np.asarray(a, float))[None] for a in (E, K1, K2))
+    return unit(fundamental_from_essential(E, K1, K2)[0].numpy())
+
+
 def cv_sampson_lines(F: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
     """Stand-in on OpenCV, as gt_sampson (one F: (N,); a stack F: (M, 3, 3) -> (M, N)): the signed distances
     d1, d2 of each point to its cv2.computeCorrespondEpilines line (a² + b² = 1) in each image give the

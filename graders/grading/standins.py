@@ -118,13 +118,15 @@ def used_by_notebooks(root: Path) -> set[str]:
 # the same parameters: in the student release the stand-in's body becomes a call to the twin. Only where the twin
 # does what every demo asks of the stand-in and, where the stand-in is also the local check's oracle, agrees with it
 # far inside the exercise's tolerance (each twin is a Library row of its exercise's contract: full marks on every case):
-# 2.6 pycolmap.essential_matrix_from_pose times |t| and 2.8 cv2.computeCorrespondEpilines agree with the closed
-# forms to 6e-15 and 7e-13 (tolerance 1e-9); 2.9 the Sampson distance from both images' computeCorrespondEpilines
-# lines, |d1 d2| / sqrt(d1² + d2²), to 5e-13 px (1e-9 px exact, 1e-7 px noisy), also on stacks of F (the grader's
-# RANSAC residuals); 4.6 pycolmap.calculate_triangulation_angle to 1.3e-12° (tolerance 1e-6°) over 40 seeds;
-# 10.7: pycolmap's LO-RANSAC + one Umeyama refit on the notebook's near-planar problem gives the same scale and
-# held-out RMS, 0.1130, as the grader's own RANSAC.
+# 2.6 pycolmap.essential_matrix_from_pose times |t|, 2.7 kornia's fundamental_from_essential and 2.8
+# cv2.computeCorrespondEpilines agree with the closed forms to 6e-15, 1e-15 and 7e-13 (tolerance 1e-9); 2.9 the
+# Sampson distance from both images' computeCorrespondEpilines lines, |d1 d2| / sqrt(d1² + d2²), to 5e-13 px
+# (1e-9 px exact, 1e-7 px noisy), also on stacks of F (the grader's RANSAC residuals); 4.6
+# pycolmap.calculate_triangulation_angle to 1.3e-12° (tolerance 1e-6°), each over 6-40 seeds; 10.7: pycolmap's
+# LO-RANSAC + one Umeyama refit on the notebook's near-planar problem gives the same scale and held-out RMS,
+# 0.1130, as the grader's own RANSAC.
 TWINS = {("graders/ch02_epipolar/scenes.py", "gt_essential"): "colmap_essential",
+         ("graders/ch02_epipolar/scenes.py", "gt_fundamental"): "kornia_fundamental",
          ("graders/ch02_epipolar/basics.py", "gt_epipolar_lines"): "cv_epipolar_lines",
          ("graders/ch02_epipolar/scenes.py", "gt_sampson"): "cv_sampson_lines",
          ("graders/ch04_sfm/triangulation.py", "gt_triangulation_angles"): "colmap_triangulation_angles",

@@ -200,7 +200,7 @@ print(check("7.2", ["excellent", "acceptable", "acceptable"], seed=0).cases[0].h
 # ---------------------------------------------------------------- stand-ins that are a solution (graders.grading.standins)
 
 # The CODE exercises whose stand-in is the grader's own implementation (not a call to cv2/pycolmap/kornia, which
-# graded mode refuses) and which the release still ships: 56 (60 before 2.6, 2.8, 2.9 and 4.6 got their library twins).
+# graded mode refuses) and which the release still ships: 55 (60 before 2.6, 2.7, 2.8, 2.9 and 4.6 got their library twins).
 # Most are also what the local check computes its expected values or hints with (7.6: the closed form on the real
 # views; 6.17: imu._model, the hints' slip models; 4.13: repairs.py's pair choice): taking one out needs a twin that
 # agrees with it far inside the tolerance (graders.grading.standins.TWINS) or that exercise's local check on
@@ -210,7 +210,7 @@ print(check("7.2", ["excellent", "acceptable", "acceptable"], seed=0).cases[0].h
 # solution). A stand-in taken out must leave this list; a new one that is a solution fails the test until it is
 # taken out or listed here.
 SHIPPED_SOLUTIONS = frozenset("""
-1.8 1.9 1.10 2.7 2.16 3.12 4.5 4.7 4.11 4.13 4.14 4.15 4.16 5.5 5.6 5.7 5.8 5.9 5.10 5.11 5.12 5.13
+1.8 1.9 1.10 2.16 3.12 4.5 4.7 4.11 4.13 4.14 4.15 4.16 5.5 5.6 5.7 5.8 5.9 5.10 5.11 5.12 5.13
 6.7 6.8 6.9 6.10 6.11 6.12 6.13 6.14 6.15 6.16 6.17 6.27 7.6 7.7 7.12 8.8 8.9 8.11 8.12 8.13 8.14 8.15 8.16
 9.12 9.14 9.15 9.16 10.8 10.9 10.10 11.5 11.6 11.7 11.8""".split())
 
