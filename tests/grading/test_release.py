@@ -1,4 +1,4 @@
-"""Graded coursework: the student edition (no solutions; from a fresh venv every notebook sets up, and those it changes run whole), the
+"""Graded coursework: the student edition (no solutions; from a fresh venv every notebook sets up, and those it changes run to their last swapped demo), the
 Gradescope autograder (run as Gradescope runs it, valid results.json in every failure mode) and the
 batch grader (every row present, resumable)."""
 from __future__ import annotations
@@ -215,21 +215,29 @@ SHIPPED_SOLUTIONS = frozenset("""
 9.12 9.14 9.15 9.16 10.8 10.9 10.10 11.5 11.6 11.7 11.8""".split())
 
 
+def _twin_exercises() -> list[tuple[object, str, object]]:
+    """(chapter, exercise id, twin function) of each stand-in standins.TWINS swaps in the release."""
+    import importlib
+    import inspect
+    from graders.core import engine
+    out = []
+    for (rel, name), twin in TWINS.items():
+        module = importlib.import_module(rel.removesuffix(".py").replace("/", "."))
+        ch = next(c for c in READY if c.prefix == rel.split("/")[1])
+        ex = next(e for e in engine.chapter(ch.key)
+                  if e.fallback is not None and inspect.unwrap(e.fallback) is getattr(module, name))
+        out.append((ch, ex.id, getattr(module, twin)))
+    return out
+
+
 def test_every_twin_is_a_library_row_of_its_exercise():
     """A twin (standins.TWINS) replaces, in the release, a stand-in that is often also the local check's oracle:
     it must be one of its exercise's contract LIBRARY rows (tests/chapters/test_contract.py: full marks on every
     case of the fixed seeds), so the release's demos and local checks see the same answer to the tolerance."""
     import importlib
-    import inspect
-    from graders.core import engine
-    for (rel, name), twin in TWINS.items():
-        module = importlib.import_module(rel.removesuffix(".py").replace("/", "."))
-        prefix = rel.split("/")[1]
-        ch = next(c for c in READY if c.prefix == prefix)
-        ex = next(e for e in engine.chapter(ch.key)
-                  if e.fallback is not None and inspect.unwrap(e.fallback) is getattr(module, name))
-        library = importlib.import_module(f"mutants.{prefix}_contract").LIBRARY
-        assert any(row.exercise_id == ex.id and row.fn is getattr(module, twin) for row in library), (ex.id, twin)
+    for ch, ident, twin in _twin_exercises():
+        library = importlib.import_module(f"mutants.{ch.prefix}_contract").LIBRARY
+        assert any(row.exercise_id == ident and row.fn is twin for row in library), (ident, twin.__name__)
 
 
 def test_release_ships_no_solution_standin_but_the_listed_ones(release):
@@ -259,9 +267,11 @@ def test_release_installs_in_a_fresh_venv_and_every_notebook_sets_up(release, tm
                             "import solutions"], capture_output=True, text=True, cwd=tmp_path)
     assert "ModuleNotFoundError: No module named 'solutions'" in probe.stderr, probe.stderr + probe.stdout
     assert probe.stdout.startswith(str(release / "graders")), probe.stdout   # the release, not this checkout
-    changed = {c.notebook for c in READY if any(rel.startswith(f"graders/{c.prefix}/") for rel, _ in TWINS)}
+    changed: dict[str, list[str]] = {}           # notebook -> the exercises whose stand-in the release swapped
+    for ch, ident, _ in _twin_exercises():
+        changed.setdefault(str(release / ch.notebook), []).append(ident)
     env = dict(os.environ, MPLBACKEND="Agg", COURSE_STATIC_PLOTS="1")
-    out = subprocess.run([py, "-c", RELEASE_RUNNER, json.dumps(sorted(str(release / n) for n in changed)),
+    out = subprocess.run([py, "-c", RELEASE_RUNNER, json.dumps(changed),
                           *[str(release / c.notebook) for c in READY]], capture_output=True, text=True, timeout=900,
                          cwd=tmp_path, env=env)
     assert out.returncode == 0, out.stderr[-4000:]
@@ -272,23 +282,29 @@ def test_release_installs_in_a_fresh_venv_and_every_notebook_sets_up(release, tm
 # In the release's venv, each notebook's first code cell (its imports and set-up) runs, and every name the notebook
 # reads from a `graders` module must exist in the release: sealing drops the module-level names nothing in the release
 # uses, and a name only a notebook uses would otherwise fail in a learner's kernel. The notebooks of the chapters the
-# release changes beyond its questions (a stand-in swapped for its library twin) run whole. The untouched notebooks
+# release changes beyond its questions (a stand-in swapped for its library twin) run from the top to their last cell
+# that use()s a swapped exercise (02 to its end; 04 only to 4.6's demo: its Sacré-Cœur half never touches the twin
+# but for the grader's pair ranking, whose local checks on the twin the fairness sweep covers). The untouched notebooks
 # run whole against this repository's graders (nbval) and solved (tests/chapters/test_notebooks.py): the student
 # edition's graders differ only in their sealed questions (tested above) and twins.
 RELEASE_RUNNER = """
-import ast, importlib, json, sys, types
+import ast, importlib, json, re, sys, types
 import nbformat
 from nbclient import NotebookClient
 
 def code_of(cell):
     return "\\n".join(line for line in cell.source.splitlines() if not line.lstrip().startswith(("%", "!")))
 
-whole = set(json.loads(sys.argv[1]))
+swapped = json.loads(sys.argv[1])
 for path in sys.argv[2:]:
     nb = nbformat.read(path, as_version=4)
-    if path in whole:
+    if path in swapped:
+        uses = [i for i, c in enumerate(nb.cells) if c.cell_type == "code"
+                and any(re.search(r"use\\(\\s*[\\"']%s[\\"']" % re.escape(ident), c.source) for ident in swapped[path])]
+        assert uses, (path, swapped[path])
+        nb.cells = nb.cells[:uses[-1] + 1]
         NotebookClient(nb, timeout=120, kernel_name="python3", resources={"metadata": {"path": "."}}).execute()
-        print("RELEASE-RAN", path)
+        print("RELEASE-RAN", path, len(nb.cells))
         continue
     cells = [code_of(c) for c in nb.cells if c.cell_type == "code"]
     ns = {}
