@@ -7,7 +7,8 @@ mode accepts): then it, and the grader functions it calls, are a solution a lear
 through the module globals, into any `graders` module but the shared kit and core).
 
 `swap_twins` replaces, in a release, a stand-in by its twin on a refused library where that twin serves every
-demo (TWINS). Most of the others are also what the local check computes its expected values or hints with
+demo and, where the stand-in is also the local check's oracle, agrees with it far inside the tolerance (TWINS).
+Most of the others are also what the local check computes its expected values or hints with
 (the grader's oracle, e.g. gt_intrinsics_from_homographies for 7.6's real views; imu._model for 6.17's
 hints), and most feed a demo through `use()`: a release can drop those only once its local checks run on
 precomputed cases and its demos on precomputed outputs or a twin.
