@@ -32,7 +32,7 @@ from __future__ import annotations
 from graders.core.compare import sampson_rms_px
 from graders.kit.geometry import hartley
 from . import basics, debug, eight_point, frontier, homography, minimal, pose, questions, ransac  # noqa: F401 (register)
-from .basics import cv_sampson, gt_epipolar_lines
+from .basics import cv_epipolar_lines, cv_sampson, gt_epipolar_lines
 from .debug import (broken_pose_from_E, brute_force_matches, cv_fix_cheirality, cv_fix_garbage_F, cv_fix_matcher,
                     cv_fix_planar_scene, debug_case, debug_cheirality, debug_garbage_F, debug_matcher, debug_planar)
 from .demo import USAC_METHODS, usac_comparison, usac_table
@@ -43,7 +43,7 @@ from .minimal import cv_five_point, cv_seven_point, gt_seven_point
 from .pose import colmap_essential, cv_decompose_essential, cv_recover_pose, pose_error_deg
 from .ransac import inlier_f1, line_problem, run_ransac
 from .robust import gt_ransac, k_samples, refine_essential
-from .scenes import (condition_number, depths, design_matrix, graf_grid, graf_matches, gt_essential, gt_fundamental,
+from .scenes import (colmap_essential, condition_number, cv_sampson_lines, kornia_fundamental, depths, design_matrix, graf_grid, graf_matches, gt_essential, gt_fundamental,
                      gt_sampson, rms_transfer, to_normalised, transfer_px, two_view)
 
 __all__ = [
@@ -51,7 +51,7 @@ __all__ = [
     "two_view", "to_normalised", "depths", "design_matrix", "condition_number", "hartley", "sampson_rms_px",
     "transfer_px", "rms_transfer", "pose_error_deg", "graf_matches", "graf_grid", "inlier_f1", "k_samples",
     # ground-truth models and OpenCV/pycolmap-backed stand-ins
-    "gt_essential", "gt_fundamental", "gt_epipolar_lines", "gt_sampson", "cv_sampson", "cv_eight_point",
+    "gt_essential", "gt_fundamental", "gt_epipolar_lines", "gt_sampson", "cv_sampson", "colmap_essential", "kornia_fundamental", "cv_epipolar_lines", "cv_sampson_lines", "cv_eight_point",
     "gt_seven_point", "cv_seven_point", "cv_five_point", "cv_decompose_essential", "cv_recover_pose",
     "colmap_essential", "cv_homography", "gt_ransac", "refine_essential", "gt_weighted_eight_point",
     # RANSAC problems (2.16); the section 5 experiment with OpenCV's USAC estimators

@@ -18,6 +18,12 @@ def gt_epipolar_lines(F: np.ndarray, x1: np.ndarray) -> np.ndarray:
     return lines / np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
 
 
+def cv_epipolar_lines(F: np.ndarray, x1: np.ndarray) -> np.ndarray:
+    """Stand-in on OpenCV: cv2.computeCorrespondEpilines (image 1's points -> l2 = F x1, a² + b² = 1). (N, 3)."""
+    x1 = np.asarray(x1, float).reshape(-1, 1, 2)
+    return cv2.computeCorrespondEpilines(x1, 1, np.asarray(F, float)).reshape(-1, 3)
+
+
 def cv_sampson(F: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
     """OpenCV-backed Sampson distance in px: the square root of cv2.sampsonDistance, point by point."""
     F = np.asarray(F, float)

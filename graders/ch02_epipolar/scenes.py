@@ -54,6 +54,44 @@ def gt_sampson(F: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
     return np.abs(num) / np.sqrt(np.maximum(den, 1e-300))
 
 
+def colmap_essential(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Stand-in on pycolmap: essential_matrix_from_pose builds [t/|t|]x R (it normalises t); times |t| it is
+    gt_essential's E = [t]x R (rounding ~1e-16)."""
+    import pycolmap
+
+    t = np.asarray(t, float).reshape(3)
+    scale = np.linalg.norm(t)
+    if scale == 0:
+        return np.zeros((3, 3))       # no baseline: E = 0 (pycolmap would divide by |t| = 0)
+    pose = pycolmap.Rigid3d(pycolmap.Rotation3d(np.asarray(R, float)), t)
+    return scale * np.asarray(pycolmap.essential_matrix_from_pose(pose))
+
+
+def kornia_fundamental(E: np.ndarray, K1: np.ndarray, K2: np.ndarray) -> np.ndarray:
+    """Stand-in on kornia: kornia.geometry.epipolar.fundamental_from_essential (K2⁻ᵀ E K1⁻¹ in float64),
+    scaled to unit Frobenius norm as gt_fundamental."""
+    import torch
+    from kornia.geometry.epipolar import fundamental_from_essential
+
+    E, K1, K2 = (torch.as_tensor(np.asarray(a, float))[None] for a in (E, K1, K2))
+    return unit(fundamental_from_essential(E, K1, K2)[0].numpy())
+
+
+def cv_sampson_lines(F: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
+    """Stand-in on OpenCV, as gt_sampson (one F: (N,); a stack F: (M, 3, 3) -> (M, N)): the signed distances
+    d1, d2 of each point to its cv2.computeCorrespondEpilines line (a² + b² = 1) in each image give the
+    Sampson distance |d1 d2| / sqrt(d1² + d2²) (both are x2ᵀF x1 over one image's gradient norm)."""
+    F = np.asarray(F, float)
+    if F.ndim == 3:
+        return np.stack([cv_sampson_lines(f, x1, x2) for f in F])
+    x1h, x2h = to_h(x1), to_h(x2)
+    l2 = cv2.computeCorrespondEpilines(x1h[:, None, :2].copy(), 1, F).reshape(-1, 3)
+    l1 = cv2.computeCorrespondEpilines(x2h[:, None, :2].copy(), 2, F).reshape(-1, 3)
+    d1, d2 = np.sum(l1 * x1h, 1), np.sum(l2 * x2h, 1)
+    den = np.sqrt(d1 ** 2 + d2 ** 2)
+    return np.abs(d1 * d2) / np.where(den > 0, den, 1.0)        # on both lines: 0
+
+
 def transfer_px(H: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
     """|x2 - H x1| in px, (N,); points mapped to infinity count as 1e6 px."""
     y = to_h(x1) @ np.asarray(H, float).T

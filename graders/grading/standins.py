@@ -7,7 +7,8 @@ mode accepts): then it, and the grader functions it calls, are a solution a lear
 through the module globals, into any `graders` module but the shared kit and core).
 
 `swap_twins` replaces, in a release, a stand-in by its twin on a refused library where that twin serves every
-demo (TWINS). Most of the others are also what the local check computes its expected values or hints with
+demo and, where the stand-in is also the local check's oracle, agrees with it far inside the tolerance (TWINS).
+Most of the others are also what the local check computes its expected values or hints with
 (the grader's oracle, e.g. gt_intrinsics_from_homographies for 7.6's real views; imu._model for 6.17's
 hints), and most feed a demo through `use()`: a release can drop those only once its local checks run on
 precomputed cases and its demos on precomputed outputs or a twin.
@@ -116,9 +117,21 @@ def used_by_notebooks(root: Path) -> set[str]:
 
 # A stand-in that is a solution -> its twin in the same module, backed by a library graded mode refuses there, with
 # the same parameters: in the student release the stand-in's body becomes a call to the twin. Only where the twin
-# does what every demo asks of the stand-in (10.7: pycolmap's LO-RANSAC + one Umeyama refit on the notebook's
-# near-planar problem gives the same scale and held-out RMS, 0.1130, as the grader's own RANSAC).
-TWINS = {("graders/ch10_large_scale/sim3.py", "gt_sim3_ransac"): "cv_sim3_ransac"}
+# does what every demo asks of the stand-in and, where the stand-in is also the local check's oracle, agrees with it
+# far inside the exercise's tolerance (each twin is a Library row of its exercise's contract: full marks on every case):
+# 2.6 pycolmap.essential_matrix_from_pose times |t|, 2.7 kornia's fundamental_from_essential and 2.8
+# cv2.computeCorrespondEpilines agree with the closed forms to 6e-15, 1e-15 and 7e-13 (tolerance 1e-9); 2.9 the
+# Sampson distance from both images' computeCorrespondEpilines lines, |d1 d2| / sqrt(d1² + d2²), to 5e-13 px
+# (1e-9 px exact, 1e-7 px noisy), also on stacks of F (the grader's RANSAC residuals); 4.6
+# pycolmap.calculate_triangulation_angle to 1.3e-12° (tolerance 1e-6°), each over 6-40 seeds; 10.7: pycolmap's
+# LO-RANSAC + one Umeyama refit on the notebook's near-planar problem gives the same scale and held-out RMS,
+# 0.1130, as the grader's own RANSAC.
+TWINS = {("graders/ch02_epipolar/scenes.py", "gt_essential"): "colmap_essential",
+         ("graders/ch02_epipolar/scenes.py", "gt_fundamental"): "kornia_fundamental",
+         ("graders/ch02_epipolar/basics.py", "gt_epipolar_lines"): "cv_epipolar_lines",
+         ("graders/ch02_epipolar/scenes.py", "gt_sampson"): "cv_sampson_lines",
+         ("graders/ch04_sfm/triangulation.py", "gt_triangulation_angles"): "colmap_triangulation_angles",
+         ("graders/ch10_large_scale/sim3.py", "gt_sim3_ransac"): "cv_sim3_ransac"}
 
 
 def swap_twins(root: Path) -> list[str]:

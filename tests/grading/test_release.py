@@ -1,4 +1,4 @@
-"""Graded coursework: the student edition (no solutions; from a fresh venv every notebook sets up, and those it changes run whole), the
+"""Graded coursework: the student edition (no solutions; from a fresh venv every notebook sets up, and those it changes run to their last swapped demo), the
 Gradescope autograder (run as Gradescope runs it, valid results.json in every failure mode) and the
 batch grader (every row present, resumable)."""
 from __future__ import annotations
@@ -200,18 +200,44 @@ print(check("7.2", ["excellent", "acceptable", "acceptable"], seed=0).cases[0].h
 # ---------------------------------------------------------------- stand-ins that are a solution (graders.grading.standins)
 
 # The CODE exercises whose stand-in is the grader's own implementation (not a call to cv2/pycolmap/kornia, which
-# graded mode refuses) and which the release still ships. 56 of them are also what the local check computes its
-# expected values or hints with (7.6: the closed form on the real views; 6.17: imu._model, the hints' slip
-# models; 4.13: repairs.py's pair choice): taking one out needs that exercise's local check to run on precomputed
-# cases. The other 5 (5.7, 5.12, 6.15, 6.27, 10.10) are only stand-ins, but a notebook demo use()s each: they need
-# precomputed demo outputs or a refused library's twin, as 10.7 has (graders.grading.standins.TWINS). Only 4.11,
-# 4.13, 4.16, 5.13 and 6.9 feed no demo (7.11's stand-in takes its rotation log from cv2.Rodrigues, which graded
-# mode refuses there: a library stand-in, not a solution). A stand-in taken out must leave this list; a new one that is a
-# solution fails the test until it is taken out or listed here.
+# graded mode refuses) and which the release still ships: 55 (60 before 2.6, 2.7, 2.8, 2.9 and 4.6 got their library twins).
+# Most are also what the local check computes its expected values or hints with (7.6: the closed form on the real
+# views; 6.17: imu._model, the hints' slip models; 4.13: repairs.py's pair choice): taking one out needs a twin that
+# agrees with it far inside the tolerance (graders.grading.standins.TWINS) or that exercise's local check on
+# precomputed cases. 5.7, 5.12, 6.15, 6.27 and 10.10 are only stand-ins, but a notebook demo use()s each: they need
+# precomputed demo outputs or a refused library's twin. Only 4.11, 4.13, 4.16, 5.13 and 6.9 feed no demo (7.11's
+# stand-in takes its rotation log from cv2.Rodrigues, which graded mode refuses there: a library stand-in, not a
+# solution). A stand-in taken out must leave this list; a new one that is a solution fails the test until it is
+# taken out or listed here.
 SHIPPED_SOLUTIONS = frozenset("""
-1.8 1.9 1.10 2.6 2.7 2.8 2.9 2.16 3.12 4.5 4.6 4.7 4.11 4.13 4.14 4.15 4.16 5.5 5.6 5.7 5.8 5.9 5.10 5.11 5.12 5.13
+1.8 1.9 1.10 2.16 3.12 4.5 4.7 4.11 4.13 4.14 4.15 4.16 5.5 5.6 5.7 5.8 5.9 5.10 5.11 5.12 5.13
 6.7 6.8 6.9 6.10 6.11 6.12 6.13 6.14 6.15 6.16 6.17 6.27 7.6 7.7 7.12 8.8 8.9 8.11 8.12 8.13 8.14 8.15 8.16
 9.12 9.14 9.15 9.16 10.8 10.9 10.10 11.5 11.6 11.7 11.8""".split())
+
+
+def _twin_exercises() -> list[tuple[object, str, object]]:
+    """(chapter, exercise id, twin function) of each stand-in standins.TWINS swaps in the release."""
+    import importlib
+    import inspect
+    from graders.core import engine
+    out = []
+    for (rel, name), twin in TWINS.items():
+        module = importlib.import_module(rel.removesuffix(".py").replace("/", "."))
+        ch = next(c for c in READY if c.prefix == rel.split("/")[1])
+        ex = next(e for e in engine.chapter(ch.key)
+                  if e.fallback is not None and inspect.unwrap(e.fallback) is getattr(module, name))
+        out.append((ch, ex.id, getattr(module, twin)))
+    return out
+
+
+def test_every_twin_is_a_library_row_of_its_exercise():
+    """A twin (standins.TWINS) replaces, in the release, a stand-in that is often also the local check's oracle:
+    it must be one of its exercise's contract LIBRARY rows (tests/chapters/test_contract.py: full marks on every
+    case of the fixed seeds), so the release's demos and local checks see the same answer to the tolerance."""
+    import importlib
+    for ch, ident, twin in _twin_exercises():
+        library = importlib.import_module(f"mutants.{ch.prefix}_contract").LIBRARY
+        assert any(row.exercise_id == ident and row.fn is twin for row in library), (ident, twin.__name__)
 
 
 def test_release_ships_no_solution_standin_but_the_listed_ones(release):
@@ -241,9 +267,11 @@ def test_release_installs_in_a_fresh_venv_and_every_notebook_sets_up(release, tm
                             "import solutions"], capture_output=True, text=True, cwd=tmp_path)
     assert "ModuleNotFoundError: No module named 'solutions'" in probe.stderr, probe.stderr + probe.stdout
     assert probe.stdout.startswith(str(release / "graders")), probe.stdout   # the release, not this checkout
-    changed = {c.notebook for c in READY if any(rel.startswith(f"graders/{c.prefix}/") for rel, _ in TWINS)}
+    changed: dict[str, list[str]] = {}           # notebook -> the exercises whose stand-in the release swapped
+    for ch, ident, _ in _twin_exercises():
+        changed.setdefault(str(release / ch.notebook), []).append(ident)
     env = dict(os.environ, MPLBACKEND="Agg", COURSE_STATIC_PLOTS="1")
-    out = subprocess.run([py, "-c", RELEASE_RUNNER, json.dumps(sorted(str(release / n) for n in changed)),
+    out = subprocess.run([py, "-c", RELEASE_RUNNER, json.dumps(changed),
                           *[str(release / c.notebook) for c in READY]], capture_output=True, text=True, timeout=900,
                          cwd=tmp_path, env=env)
     assert out.returncode == 0, out.stderr[-4000:]
@@ -254,23 +282,29 @@ def test_release_installs_in_a_fresh_venv_and_every_notebook_sets_up(release, tm
 # In the release's venv, each notebook's first code cell (its imports and set-up) runs, and every name the notebook
 # reads from a `graders` module must exist in the release: sealing drops the module-level names nothing in the release
 # uses, and a name only a notebook uses would otherwise fail in a learner's kernel. The notebooks of the chapters the
-# release changes beyond its questions (a stand-in swapped for its library twin) run whole. The untouched notebooks
+# release changes beyond its questions (a stand-in swapped for its library twin) run from the top to their last cell
+# that use()s a swapped exercise (02 to its end; 04 only to 4.6's demo: its Sacré-Cœur half never touches the twin
+# but for the grader's pair ranking, whose local checks on the twin the fairness sweep covers). The untouched notebooks
 # run whole against this repository's graders (nbval) and solved (tests/chapters/test_notebooks.py): the student
 # edition's graders differ only in their sealed questions (tested above) and twins.
 RELEASE_RUNNER = """
-import ast, importlib, json, sys, types
+import ast, importlib, json, re, sys, types
 import nbformat
 from nbclient import NotebookClient
 
 def code_of(cell):
     return "\\n".join(line for line in cell.source.splitlines() if not line.lstrip().startswith(("%", "!")))
 
-whole = set(json.loads(sys.argv[1]))
+swapped = json.loads(sys.argv[1])
 for path in sys.argv[2:]:
     nb = nbformat.read(path, as_version=4)
-    if path in whole:
+    if path in swapped:
+        uses = [i for i, c in enumerate(nb.cells) if c.cell_type == "code"
+                and any(re.search(r"use\\(\\s*[\\"']%s[\\"']" % re.escape(ident), c.source) for ident in swapped[path])]
+        assert uses, (path, swapped[path])
+        nb.cells = nb.cells[:uses[-1] + 1]
         NotebookClient(nb, timeout=120, kernel_name="python3", resources={"metadata": {"path": "."}}).execute()
-        print("RELEASE-RAN", path)
+        print("RELEASE-RAN", path, len(nb.cells))
         continue
     cells = [code_of(c) for c in nb.cells if c.cell_type == "code"]
     ns = {}

@@ -95,10 +95,11 @@ def kornia_unweighted_normalisation(x1, x2, w):
 # exercise id -> [(name, function)]
 _BY_EXERCISE = {
     "2.5": [("kornia", kornia_skew)],
-    "2.6": [("kornia", kornia_essential)],
-    "2.7": [("kornia", kornia_fundamental)],
-    "2.8": [("kornia", kornia_lines)],
-    "2.9": [("OpenCV", ch2.cv_sampson), ("kornia", kornia_sampson)],
+    "2.6": [("kornia", kornia_essential), ("pycolmap (the release's stand-in)", ch2.colmap_essential)],
+    "2.7": [("kornia", kornia_fundamental), ("kornia, unit norm (the release's stand-in)", ch2.kornia_fundamental)],
+    "2.8": [("kornia", kornia_lines), ("OpenCV (the release's stand-in)", ch2.cv_epipolar_lines)],
+    "2.9": [("OpenCV", ch2.cv_sampson), ("kornia", kornia_sampson),
+            ("OpenCV epipolar lines (the release's stand-in)", ch2.cv_sampson_lines)],
     "2.10": [("OpenCV", ch2.cv_eight_point), ("kornia", kornia_eight_point)],
     "2.11": [("OpenCV", ch2.cv_seven_point), ("kornia", kornia_seven_point)],
     "2.12": [("OpenCV", ch2.cv_five_point), ("kornia", kornia_five_point)],
