@@ -57,14 +57,12 @@ def orb_descriptors(img: np.ndarray, kps: np.ndarray, pattern: np.ndarray) -> np
     kps = np.asarray(kps, float)[:, :2]
     theta = orientation_centroid(I, kps)
     c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]  # (N, 1)
-    pattern = np.asarray(pattern, float)
-
-    def sample(px, py):  # rotate the pattern points by theta, round, read the smoothed image
-        x = np.rint(kps[:, 0:1] + c * px - s * py).astype(int)  # (N, 256)
-        y = np.rint(kps[:, 1:2] + s * px + c * py).astype(int)
-        return S[np.clip(y, 0, I.shape[0] - 1) * I.shape[1] + np.clip(x, 0, I.shape[1] - 1)]
-
-    bits = sample(pattern[:, 0], pattern[:, 1]) < sample(pattern[:, 2], pattern[:, 3])  # (N, 256)
+    px, py = np.asarray(pattern, float).reshape(-1, 2).T  # (2 n,): a_0, b_0, a_1, b_1, ...
+    # rotate the pattern points by theta, round, read the smoothed image (all 2 n points at once)
+    x = np.clip(np.rint(kps[:, 0:1] + c * px - s * py).astype(int), 0, I.shape[1] - 1)  # (N, 2 n)
+    y = np.clip(np.rint(kps[:, 1:2] + s * px + c * py).astype(int), 0, I.shape[0] - 1)
+    v = S[y * I.shape[1] + x].reshape(len(kps), len(pattern), 2)  # (N, n, 2): (I_s(p + R a_i), I_s(p + R b_i))
+    bits = v[..., 0] < v[..., 1]  # (N, n)
     return np.packbits(bits, axis=1)
 
 
