@@ -8,6 +8,9 @@ brute-force matching (ratio test) against cv2.BFMatcher.knnMatch.
 
 Goals (issue 4): SIFT-lite >= 80 % of OpenCV SIFT's MMA@3px on graf; matching within 3x of BFMatcher.
 Goals (issue 20): ORB-like's MMA@3px on graf >= 0.9x OpenCV ORB's in <= 10x its time; SIFT-lite <= 2x SIFT's time.
+Goal (issue 32): ORB-like in <= 4x OpenCV ORB's time at an MMA@3px no lower than before (0.93x ORB's).
+ORB-like's MMA depends on its learned pattern: from one learning seed to the next, graf's MMA@3px
+moves by +-0.04 (learn_brief_pattern's docstring).
 """
 from __future__ import annotations
 
@@ -122,7 +125,7 @@ def run() -> list[dict]:
         ratio = graf["SIFT-lite"][0] / max(graf["OpenCV SIFT"][0], 1e-9)
         print(f"\nSIFT-lite / OpenCV SIFT MMA@3px on graf: {ratio:.0%} (goal >= 80 %)")
         for ours, lib, goal in (("SIFT-lite", "OpenCV SIFT", "time <= 2x"),
-                                ("ORB-like", "OpenCV ORB", "MMA >= 0.9x, time <= 10x")):
+                                ("ORB-like", "OpenCV ORB", "MMA >= 0.93x, time <= 4x")):
             (m1, w1, c1), (m2, w2, c2) = graf[ours], graf[lib]
             print(f"{ours} / {lib} on graf: MMA@3px {m1 / max(m2, 1e-9):.2f}x, wall {w1 / w2:.1f}x, CPU {c1 / c2:.1f}x "
                   f"(goal {goal})")
