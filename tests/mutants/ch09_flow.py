@@ -110,8 +110,9 @@ def _lk_with(gradients=None, sign=1.0, test="eig", swap=False, iters=None):
         d, ok = ref_lk._track_level(np.asarray(I1, float), I2s, Ix, Iy, P, np.zeros_like(P), win,
                                     iters if iters is not None else iters_, eps, -np.inf if test != "eig" else min_eig)
         if test == "det":
-            ox, oy = ref_lk._window(win)
-            X, Y = P[:, :1] + ox, P[:, 1:] + oy
+            h = (win - 1) / 2
+            oy, ox = np.mgrid[-h:h + 1, -h:h + 1]
+            X, Y = P[:, :1] + ox.ravel(), P[:, 1:] + oy.ravel()
             gx, gy = ref_tools.bilinear(Ix, X, Y), ref_tools.bilinear(Iy, X, Y)
             ok = (gx * gx).sum(1) * (gy * gy).sum(1) - (gx * gy).sum(1) ** 2 >= 1e-6
         out = P + d
