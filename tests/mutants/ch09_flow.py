@@ -255,8 +255,8 @@ def _c2f(I1, I2, double=True, levels=True, fuse=True):
             f = ref_dense._resize_flow(f, P1[L].shape) / (1 if double else 2)
         if fuse:
             f = ref_dense._fuse(P1[L], P2[L], f, ref_dense.affine_motion(f), 1.0).astype(np.float32)
-        for _ in range(3):
-            f = ref_dense._robust_warp_step(P1[L], P2[L], f, 4.0, 2.0, 0.2, 5.0, 0.7, 20)
+        for _ in range(3 if L > 1 else 2):
+            f = ref_dense._robust_warp_step(P1[L], P2[L], f, 4.0, 2.0, 0.2, 5.0, 0.7, 6, 1.5)
     f = ref_dense._resize_flow(f, I1.shape).astype(float)
     if not fuse:
         return f
