@@ -27,9 +27,11 @@ zero: 0000000 5.40 / 8.22 / 7.77 / 6.05; 0000001 1.44 / 1.59 / 2.75 / 4.51; 0000
 4.35; 0000003 1.26 / 1.32 / 2.31 / 6.00; 0000004 2.38 / 2.67 / 8.39 / 25.56; mean of 5 2.73 / 3.45 / 5.12 /
 9.29: the goal is met on every pair. CPU 4.7x Farneback's over the five pairs (4.5-5.3x per pair; DIS
 0.6x); 8 chairs-like 1.81 vs DIS 2.19, Farneback 4.57 (CPU 4.5x); 6 planes 0.07 vs DIS 0.08, Farneback 0.82
-(CPU 5.7x: smaller images, where fixed costs weigh more). Before issue 32 (Jacobi, same load): 5.42 / 1.46 /
-3.17 / 1.26 / 2.41, mean 2.74, Fl 23.4 / 10.4 / 5.7 / 6.6 / 10.2 (now 23.3 / 10.5 / 5.7 / 6.6 / 10.2),
-chairs-like 1.86, CPU 7.2x Farneback's. What bought the time: red-black SOR with each pixel's 2 x 2
+(CPU 5.7x: smaller images, where fixed costs weigh more). A second run (load 11-13): 5.2x over the five
+pairs (4.9-5.8x), chairs-like 4.7x, planes 6.3x: on a shared machine the ratio moves by ~10 %. Before issue
+32 (Jacobi; load 13-16): 5.42 / 1.46 / 3.17 / 1.26 / 2.41, mean 2.74, Fl 23.4 / 10.4 / 5.7 / 6.6 / 10.2 (now
+23.3 / 10.5 / 5.7 / 6.6 / 10.2: pair 0000001's Fl 10.41 -> 10.52 %, 0000004's 10.17 -> 10.20 %, the only
+columns not improved), chairs-like 1.86, CPU 7.9x Farneback's (7.2x at load 3-7). What bought the time: red-black SOR with each pixel's 2 x 2
 inverse computed once (6 sweeps reach a lower EPE than 20 Jacobi ones), one warp fewer at half resolution,
 the final full-resolution median only where a window holds dense flow (an affine field's median over a
 symmetric window is its centre value), float32 warps, a separable upsampling. The former reference before
@@ -37,7 +39,8 @@ that (dense LK with a constant dominant motion) scored 5.86 / 2.09 / 3.49 / 1.02
 lost to DIS on 0000001 and 0000002.
 Sparse LK vs cv2.calcOpticalFlowPyrLK: median |ours − OpenCV's| 0.005-0.007 px, 90th percentile
 0.013-0.021 px on the points both flag trackable (goal 0.05 met), status flags agree on 96.6-99.9 %, both
-~0.02 px from the exact flow; CPU 7.6-8.6x OpenCV's, wall 8.3-9.3x (load ~19; before issue 32 25-55x):
+~0.02 px from the exact flow; CPU 7.6-8.6x OpenCV's, wall 8.3-9.3x (load ~19; a second run at load 11-13:
+CPU 10.4-11.4x, wall 9.8-12.0x; before issue 32, load 13-16: CPU 38-53x, wall 42-60x):
 each window is one gather of (win + 1)^2 pixels interpolated with the point's own bilinear weights, in
 float32, with the points on the last axis, the converged points dropped.
 """
