@@ -1,5 +1,6 @@
 """Exercises 9.10-9.11: Lucas-Kanade, single-level and pyramidal (Bouguet's formulation, as
-cv2.calcOpticalFlowPyrLK), vectorised over all points: every array below has the points as its first axis.
+cv2.calcOpticalFlowPyrLK), vectorised over all points: every per-point array below has the points as its
+last axis (its first where it holds one value or one vector per point).
 
 Images (H, W) float grey levels; points (N, 2) = (x, y), pixel centres at integers. Gradients by Scharr's
 3x3 kernel divided by 32 (a unit ramp has gradient 1), the derivative OpenCV's LK uses.
@@ -8,8 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.ndimage import correlate, correlate1d
-
-from .tools import bilinear
 
 SCHARR = np.array([[-3.0, 0.0, 3.0], [-10.0, 0.0, 10.0], [-3.0, 0.0, 3.0]]) / 32.0
 
@@ -20,36 +19,70 @@ def gradients(I: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return correlate(I, SCHARR, mode="mirror"), correlate(I, SCHARR.T, mode="mirror")
 
 
-def _window(win: int) -> tuple[np.ndarray, np.ndarray]:
-    h = (win - 1) / 2
-    oy, ox = np.mgrid[-h:h + 1, -h:h + 1]
-    return ox.ravel(), oy.ravel()                      # (w*w,) offsets
+def _windows(images: np.ndarray, x: np.ndarray, y: np.ndarray, win: int) -> list[np.ndarray]:
+    """Every point's win x win window of each image, sampled bilinearly at (x, y) + offsets (x, y: (N,));
+    outside the image, the nearest border value. images: (C, H + 2m, W + 2m) float32, padded by m = win + 1
+    replicated pixels on each side (np.pad mode "edge"). -> C arrays (win * win, N) float32.
+
+    The window's pixels are one grid shifted by a fraction: they all share the bilinear weights of the point's
+    own fractional part (a, b). So one gather of the (win + 1)^2 integer pixels around the window and two
+    linear interpolations, along x then along y, replace a per-pixel bilinear lookup (as OpenCV does). The
+    points are the last axis: each operation runs over all of them at once. The padding is as wide as the
+    window: a window wholly outside the image, moved back to touch the padding's edge, still sees only
+    replicated border pixels, so only its corner needs clipping, not every pixel."""
+    m = win + 1
+    C, Hp, Wp = images.shape
+    x0, y0 = x - (win - 1) / 2, y - (win - 1) / 2                  # the window's top-left sample
+    c0, r0 = np.floor(x0), np.floor(y0)
+    a, b = (x0 - c0).astype(np.float32), (y0 - r0).astype(np.float32)   # (N,): the bilinear weights
+    c0 = np.clip(c0, -m, Wp - 2 * m - 1).astype(np.intp) + m       # column of the corner in the padded image
+    r0 = np.clip(r0, -m, Hp - 2 * m - 1).astype(np.intp) + m
+    k = np.arange(win + 1)
+    flat = (k[:, None] * Wp + k)[:, :, None] + (r0 * Wp + c0)       # (win + 1, win + 1, N) pixel numbers
+    out = []
+    for I in images:
+        P = np.take(I, flat)                                        # (win + 1, win + 1, N): one gather
+        Q = P[:, 1:] - P[:, :-1]                                    # along x: P_left + a (P_right - P_left)
+        Q *= a
+        Q += P[:, :-1]                                              # (win + 1, win, N)
+        R = Q[1:] - Q[:-1]                                          # along y: Q_top + b (Q_bottom - Q_top)
+        R *= b
+        R += Q[:-1]                                                 # (win, win, N)
+        out.append(R.reshape(win * win, len(x)))
+    return out
+
+
+def _padded(*images: np.ndarray, win: int) -> np.ndarray:
+    """The images stacked (C, H + 2m, W + 2m) in float32, each padded by m = win + 1 replicated pixels."""
+    return np.stack([np.pad(np.asarray(I, np.float32), win + 1, mode="edge") for I in images])
 
 
 def _track_level(I1, I2, Ix, Iy, pts, d0, win, iters, eps, min_eig):
     """One pyramid level: the displacement d (N, 2) that aligns each window of I1 around pts with I2 at
-    pts + d, starting from d0, by Gauss-Newton on sum_w (I2(x + d) - I1(x))^2; and the eigenvalue status."""
-    ox, oy = _window(win)
-    X = pts[:, :1] + ox                                 # (N, w*w) window pixel coordinates in I1
-    Y = pts[:, 1:] + oy
-    T, gx, gy = bilinear(I1, X, Y), bilinear(Ix, X, Y), bilinear(Iy, X, Y)
-    G11, G12, G22 = (gx * gx).sum(1), (gx * gy).sum(1), (gy * gy).sum(1)      # the structure tensor (N,)
-    n = ox.size
+    pts + d, starting from d0, by Gauss-Newton on sum_w (I2(x + d) - I1(x))^2; and the eigenvalue status.
+    Windows in float32: grey levels to 1e-5, the sums over them to 1e-6 of their size."""
+    T, gx, gy = _windows(_padded(I1, Ix, Iy, win=win), pts[:, 0], pts[:, 1], win)   # (w*w, N) each
+    dot = lambda p, q: np.einsum("kn,kn->n", p, q)                 # noqa: E731  sum over each window
+    G11, G12, G22 = (dot(p, q).astype(float) for p, q in ((gx, gx), (gx, gy), (gy, gy)))   # structure tensor
+    n = win * win
     lam_min = (G11 + G22 - np.sqrt((G11 - G22) ** 2 + 4 * G12 ** 2)) / (2 * n)
     det = G11 * G22 - G12 ** 2
     ok = (lam_min >= min_eig) & (det > 1e-12 * np.maximum(G11 + G22, 1.0) ** 2)
     d = np.array(d0, float)
-    active = ok.copy()
+    a = np.flatnonzero(ok)                                          # the points still iterating
+    T, gx, gy, G11, G12, G22, det = (q[..., a] for q in (T, gx, gy, G11, G12, G22, det))
+    I2p = _padded(I2, win=win)
     for _ in range(iters):
-        if not active.any():
+        if not a.size:
             break
-        a = np.flatnonzero(active)
-        J = bilinear(I2, X[a] + d[a, :1], Y[a] + d[a, 1:])
-        e = T[a] - J                                    # -I_t at the current estimate
-        b1, b2 = (e * gx[a]).sum(1), (e * gy[a]).sum(1)
-        step = np.stack([G22[a] * b1 - G12[a] * b2, G11[a] * b2 - G12[a] * b1], 1) / det[a, None]
+        J = _windows(I2p, pts[a, 0] + d[a, 0], pts[a, 1] + d[a, 1], win)[0]
+        e = T - J                                                   # -I_t at the current estimate
+        b1, b2 = dot(e, gx), dot(e, gy)
+        step = np.stack([G22 * b1 - G12 * b2, G11 * b2 - G12 * b1], 1) / det[:, None]
         d[a] += step
-        active[a] = np.hypot(step[:, 0], step[:, 1]) >= eps
+        going = np.hypot(step[:, 0], step[:, 1]) >= eps
+        if not going.all():                                         # drop the converged points' windows
+            a, T, gx, gy, G11, G12, G22, det = (q[..., going] for q in (a, T, gx, gy, G11, G12, G22, det))
     return d, ok
 
 

@@ -27,15 +27,16 @@ def write_flo(flow: np.ndarray) -> bytes:
     return struct.pack("<fii", FLO_MAGIC, W, H) + np.ascontiguousarray(flow, dtype="<f4").tobytes()
 
 
-def bilinear(I: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """I: (H, W) sampled at real coordinates (x, y) of any (equal) shape; outside, the nearest border value."""
+def bilinear(I: np.ndarray, x: np.ndarray, y: np.ndarray, dtype=float) -> np.ndarray:
+    """I: (H, W) sampled at real coordinates (x, y) of any (equal) shape; outside, the nearest border value.
+    Computed in `dtype` (float32: half the memory traffic, coordinates to 3e-5 px on a 512 px image)."""
     H, W = I.shape
-    x = np.clip(np.asarray(x, float), 0, W - 1)
-    y = np.clip(np.asarray(y, float), 0, H - 1)
+    x = np.clip(np.asarray(x, dtype), 0, W - 1)
+    y = np.clip(np.asarray(y, dtype), 0, H - 1)
     x0 = np.minimum(x.astype(np.intp), W - 2)          # x >= 0 here: truncation is floor
     y0 = np.minimum(y.astype(np.intp), H - 2)
-    fx, fy = x - x0, y - y0
-    f = np.ascontiguousarray(I, float).ravel()           # flat gathers: ~4x faster than I[y0, x0]
+    fx, fy = (x - x0).astype(dtype), (y - y0).astype(dtype)
+    f = np.ascontiguousarray(I, dtype).ravel()           # flat gathers: ~4x faster than I[y0, x0]
     i = y0 * W + x0
     a, b, c, d = f[i], f[i + 1], f[i + W], f[i + W + 1]
     top = a + fx * (b - a)

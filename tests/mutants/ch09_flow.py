@@ -110,8 +110,9 @@ def _lk_with(gradients=None, sign=1.0, test="eig", swap=False, iters=None):
         d, ok = ref_lk._track_level(np.asarray(I1, float), I2s, Ix, Iy, P, np.zeros_like(P), win,
                                     iters if iters is not None else iters_, eps, -np.inf if test != "eig" else min_eig)
         if test == "det":
-            ox, oy = ref_lk._window(win)
-            X, Y = P[:, :1] + ox, P[:, 1:] + oy
+            h = (win - 1) / 2
+            oy, ox = np.mgrid[-h:h + 1, -h:h + 1]
+            X, Y = P[:, :1] + ox.ravel(), P[:, 1:] + oy.ravel()
             gx, gy = ref_tools.bilinear(Ix, X, Y), ref_tools.bilinear(Iy, X, Y)
             ok = (gx * gx).sum(1) * (gy * gy).sum(1) - (gx * gy).sum(1) ** 2 >= 1e-6
         out = P + d
@@ -254,8 +255,8 @@ def _c2f(I1, I2, double=True, levels=True, fuse=True):
             f = ref_dense._resize_flow(f, P1[L].shape) / (1 if double else 2)
         if fuse:
             f = ref_dense._fuse(P1[L], P2[L], f, ref_dense.affine_motion(f), 1.0).astype(np.float32)
-        for _ in range(3):
-            f = ref_dense._robust_warp_step(P1[L], P2[L], f, 4.0, 2.0, 0.2, 5.0, 0.7, 20)
+        for _ in range(3 if L > 1 else 2):
+            f = ref_dense._robust_warp_step(P1[L], P2[L], f, 4.0, 2.0, 0.2, 5.0, 0.7, 6, 1.5)
     f = ref_dense._resize_flow(f, I1.shape).astype(float)
     if not fuse:
         return f
