@@ -7,7 +7,7 @@ from solutions.geometry import rodrigues
 
 from .bal import compose_left, residuals
 from .jacobians import reprojection_jacobians
-from .linear_algebra import normal_equations, schur_solve
+from .linear_algebra import normal_equations, observation_index, schur_solve
 from .robust import robust_cost, robust_weights
 
 
@@ -77,6 +77,7 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
     fixed_cams = _gauge_mask(cams) if fix_gauge else np.zeros(cams.shape, bool)
     fixed = fixed_cams if fixed is None else fixed_cams | np.asarray(fixed, bool)
     fixed_pts = None if fixed_points is None or not np.any(fixed_points) else np.asarray(fixed_points, bool)
+    index = observation_index(cam_idx, pt_idx, nc, n_pts)  # who sees whom: fixed, so built once
     r = residuals(cams, pts, cam_idx, pt_idx, obs)
     cost = robust_cost(r, loss, scale)
     costs = [cost]
@@ -84,7 +85,7 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
     for it in range(max_iter):
         J_cam, J_pt = reprojection_jacobians(cams, pts, cam_idx, pt_idx)
         w = robust_weights(r, loss, scale)
-        U, V, W, g_c, g_p = normal_equations(J_cam, J_pt, r, cam_idx, pt_idx, nc, n_pts, weights=w)
+        U, V, W, g_c, g_p = normal_equations(J_cam, J_pt, r, cam_idx, pt_idx, nc, n_pts, weights=w, index=index)
         _hold(U, V, W, g_c, g_p, fixed, fixed_pts, cam_idx, pt_idx)
         if max(np.abs(g_c).max(), np.abs(g_p).max(initial=0.0)) < gtol:
             break
@@ -94,7 +95,7 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
             Ud, Vd = U.copy(), V.copy()
             Ud[:, np.arange(9), np.arange(9)] += lam * dU
             Vd[:, np.arange(3), np.arange(3)] += lam * dV
-            dc, dp = schur_solve(Ud, Vd, W, g_c, g_p, cam_idx, pt_idx, method=solver)
+            dc, dp = schur_solve(Ud, Vd, W, g_c, g_p, cam_idx, pt_idx, method=solver, index=index)
             dc[fixed] = 0.0
             if fixed_pts is not None:
                 dp[fixed_pts] = 0.0
