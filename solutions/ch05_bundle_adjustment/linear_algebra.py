@@ -138,9 +138,15 @@ def schur_solve(U, V, W, g_c, g_p, cam_idx, pt_idx, method: str = "auto", pcg_to
     rhs = -g_c.ravel() + _segment_sum(index.to_cams, (Y @ g_p[pt_idx, :, None])[:, :, 0], nc).ravel()
     Ysp = _bsr(Y, index.by_cam, index.cam_ptr, pt_idx, 3 * n_pts)                          # (9nc, 3np)
     WTsp = _bsr(W.transpose(0, 2, 1), index.by_point, index.point_ptr, cam_idx, 9 * nc)     # (3np, 9nc)
-    S = sp.bsr_matrix((U, np.arange(nc), np.arange(nc + 1)), shape=(9 * nc, 9 * nc)) - Ysp @ WTsp
+    WVW = Ysp @ WTsp                                           # W V^-1 W^T, block-sparse (9nc, 9nc)
     if method == "auto":
         method = "sparse" if 9 * nc <= 20_000 else "pcg"
+    if method == "dense":
+        S = -WVW.toarray()
+        cams = np.arange(nc)
+        S.reshape(nc, 9, nc, 9)[cams, :, cams, :] += U          # U is block-diagonal: camera c's block at (c, c)
+    else:
+        S = sp.bsr_matrix((U, np.arange(nc), np.arange(nc + 1)), shape=(9 * nc, 9 * nc)) - WVW
     if method == "pcg":
         dc = pcg_block_jacobi(S, rhs, 9, tol=pcg_tol, max_iter=max(100, 9 * nc))
     else:

@@ -65,8 +65,9 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
     Ceres), with Nielsen's update of lambda (Madsen, Nielsen & Tingleff 2004):
     accepted step (gain ratio rho > 0): lambda *= max(1/3, 1 - (2 rho - 1)^3), nu = 2;
     rejected: lambda *= nu, nu *= 2.
-    Stops when an accepted step lowers the cost by less than ftol * cost, the largest gradient
-    entry is below gtol, the step is below xtol (|x| + xtol), or after max_iter iterations.
+    Stops when an accepted step lowers the cost by at most ftol times the cost before it (Ceres'
+    function_tolerance: |cost change| <= ftol * cost), the largest gradient entry is below gtol,
+    the step is at most xtol (|x| + xtol), or after max_iter iterations.
     Returns (cameras (nc, 9), points (np, 3), costs: list of the cost after every iteration,
     costs[0] the initial cost).
     """
@@ -115,11 +116,11 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
                 return cams, pts, costs
         step = np.sqrt(np.sum(dc * dc) + np.sum(dp * dp))
         size = np.sqrt(np.sum(cams * cams) + np.sum(pts * pts))
-        decrease = cost - new_cost
+        decrease, previous = cost - new_cost, cost
         cams, pts, r, cost = new_cams, new_pts, r_new, new_cost
         costs.append(cost)
         if verbose:
             print(f"iter {it + 1:3d}  cost {cost:.6e}  lambda {lam:.2e}")
-        if decrease <= ftol * cost or step <= xtol * (size + xtol):
+        if decrease <= ftol * previous or step <= xtol * (size + xtol):
             break
     return cams, pts, costs
