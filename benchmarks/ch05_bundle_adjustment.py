@@ -232,7 +232,8 @@ def _measure(before_tree: str | None, repeat: int, with_scipy: bool) -> list[dic
             rows.append({"problem": name.split(" (")[0], "solver": method, "final cost": f"{cost:.5e}",
                          "cost / Ceres": f"{cost / ceres_cost:.4f}", "accepted steps": str(steps),
                          "wall s": f"{wall:.2f}", "CPU s": f"{cpu:.2f}",
-                         "wall / Ceres solve": f"{wall / solve:.2f}x", "CPU / Ceres CPU": f"{cpu / times[ceres_name][1]:.2f}x"})
+                         "wall / Ceres solve": f"{wall / solve:.2f}x", "CPU / Ceres CPU": f"{cpu / times[ceres_name][1]:.2f}x",
+                         "_cost": cost / ceres_cost, "_wall": wall / solve, "_cpu": cpu / times[ceres_name][1]})
         threads, kind = ceres_solve[0][1], ceres_solve[0][2]
         print(f"Ceres: {kind}, {threads} threads; its own solve time (summary.total_time_in_seconds, median) {solve:.2f} s; "
               f"load average after {os.getloadavg()[0]:.1f}", flush=True)
@@ -266,6 +267,11 @@ def run(before_tree: str | None = None, repeat: int = 3, with_scipy: bool = True
     print("accepted steps: iterations that lowered the cost (reference: len(costs) - 1; Ceres: successful steps; scipy: "
           "Jacobian evaluations - 1). Ceres' wall and CPU times include building the COLMAP reconstruction and reading "
           "it back; 'wall / Ceres solve' divides by Ceres' own solve time alone.")
+    for r in rows:
+        if r["solver"].startswith("reference ("):
+            met = r["_cost"] <= GOALS["cost vs Ceres"] and r["_wall"] <= GOALS["time vs Ceres"]
+            print(f"  goal ({r['problem']}): cost <= Ceres' and wall time <= Ceres' solve time: "
+                  f"{'met' if met else 'NOT MET'} (cost {r['_cost']:.4f}x, wall {r['_wall']:.2f}x, CPU {r['_cpu']:.2f}x)")
     return rows
 
 
