@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from solutions.geometry import rodrigues, skew
+from solutions.geometry import rodrigues
 
 
 def torch_ba_cost(cameras, points, cam_idx, pt_idx, obs):
