@@ -46,6 +46,8 @@ from benchmarks.timing import table
 
 FTOL, GTOL, XTOL, MAX_ITER = 1e-6, 1e-10, 1e-8, 50
 GOALS = {"time vs Ceres": 1.0, "cost vs Ceres": 1.0}
+COLUMNS = ["problem", "solver", "final cost", "cost / Ceres", "accepted steps", "wall s", "CPU s", "wall / Ceres solve",
+           "CPU / Ceres CPU"]
 
 
 def street_problem(seed: int = 7, n_cams: int = 300, n_points: int = 50_000, noise_px: float = 0.5,
@@ -234,6 +236,7 @@ def _measure(before_tree: str | None, repeat: int, with_scipy: bool) -> list[dic
                          "wall s": f"{wall:.2f}", "CPU s": f"{cpu:.2f}",
                          "wall / Ceres solve": f"{wall / solve:.2f}x", "CPU / Ceres CPU": f"{cpu / times[ceres_name][1]:.2f}x",
                          "_cost": cost / ceres_cost, "_wall": wall / solve, "_cpu": cpu / times[ceres_name][1]})
+        print(table([r for r in rows if r["problem"] == name.split(" (")[0]], COLUMNS), flush=True)
         threads, kind = ceres_solve[0][1], ceres_solve[0][2]
         print(f"Ceres: {kind}, {threads} threads; its own solve time (summary.total_time_in_seconds, median) {solve:.2f} s; "
               f"load average after {os.getloadavg()[0]:.1f}", flush=True)
@@ -262,8 +265,7 @@ def run(before_tree: str | None = None, repeat: int = 3, with_scipy: bool = True
         for k, v in saved.items():
             os.environ.pop(k) if v is None else os.environ.__setitem__(k, v)
     print()
-    print(table(rows, ["problem", "solver", "final cost", "cost / Ceres", "accepted steps", "wall s", "CPU s",
-                       "wall / Ceres solve", "CPU / Ceres CPU"]))
+    print(table(rows, COLUMNS))
     print("accepted steps: iterations that lowered the cost (reference: len(costs) - 1; Ceres: successful steps; scipy: "
           "Jacobian evaluations - 1). Ceres' wall and CPU times include building the COLMAP reconstruction and reading "
           "it back; 'wall / Ceres solve' divides by Ceres' own solve time alone.")
