@@ -119,8 +119,9 @@ def write_bal(path: str, cameras, points, cam_idx, pt_idx, obs) -> None:
         np.savetxt(f, np.r_[np.ravel(cameras), np.ravel(points)], fmt="%.16e")
 
 
-def _problems() -> dict:
-    """name -> (cameras, points, cam_idx, pt_idx, obs) of both problems (BAL-49 only if its data is there)."""
+def _problems(which: str = "bal,street") -> dict:
+    """name -> (cameras, points, cam_idx, pt_idx, obs) of the problems named in `which` ('bal', 'street';
+    BAL-49 only if its data is there)."""
     import tempfile
 
     from graders import ch05_bundle_adjustment as ch5
@@ -128,11 +129,15 @@ def _problems() -> dict:
     from solutions.ch05_bundle_adjustment import read_bal
 
     out = {}
-    if datasets.available("bal"):
+    if "bal" not in which:
+        pass
+    elif datasets.available("bal"):
         p = ch5.load_bal_problem()
         out["BAL problem-49-7776-pre"] = tuple(p[k] for k in ("cameras", "points", "cam_idx", "pt_idx", "obs"))
     else:
         print("BAL data not available: python -m graders.datasets fetch bal (or set COURSE_DATA)")
+    if "street" not in which:
+        return out
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "street-300.txt")
         write_bal(path, *(street_problem()[k] for k in ("cameras", "points", "cam_idx", "pt_idx", "obs")))
@@ -209,13 +214,13 @@ def _scipy_cookbook(args) -> tuple:
     return res.x[:9 * nc].reshape(nc, 9), res.x[9 * nc:].reshape(n_pts, 3), res.njev - 1, times
 
 
-def _measure(before_tree: str | None, repeat: int, with_scipy: bool) -> list[dict]:
+def _measure(before_tree: str | None, repeat: int, with_scipy: bool, which: str) -> list[dict]:
     """All rows, in this process (the caller gives it one BLAS thread)."""
     from benchmarks.timing import taking_turns
     from graders import ch05_bundle_adjustment as ch5
 
     rows = []
-    for name, args in _problems().items():
+    for name, args in _problems(which).items():
         nc, n_pts, m = len(args[0]), len(args[1]), len(args[4])
         print(f"\n{name}: {nc} cameras, {n_pts} points, {m} observations; initial cost {ch5.bal_cost(*args):.4e}; "
               f"load average {os.getloadavg()[0]:.1f}", flush=True)
@@ -243,11 +248,11 @@ def _measure(before_tree: str | None, repeat: int, with_scipy: bool) -> list[dic
     return rows
 
 
-def _child(before_tree, repeat, with_scipy, queue) -> None:
-    queue.put(_measure(before_tree, repeat, with_scipy))
+def _child(before_tree, repeat, with_scipy, which, queue) -> None:
+    queue.put(_measure(before_tree, repeat, with_scipy, which))
 
 
-def run(before_tree: str | None = None, repeat: int = 3, with_scipy: bool = True) -> list[dict]:
+def run(before_tree: str | None = None, repeat: int = 3, with_scipy: bool = True, which: str = "bal,street") -> list[dict]:
     """Measure in a child process whose BLAS runs one thread (set before numpy loads); print the table."""
     import multiprocessing
 
@@ -257,7 +262,7 @@ def run(before_tree: str | None = None, repeat: int = 3, with_scipy: bool = True
     try:
         ctx = multiprocessing.get_context("spawn")
         queue = ctx.Queue()
-        proc = ctx.Process(target=_child, args=(before_tree, repeat, with_scipy, queue))
+        proc = ctx.Process(target=_child, args=(before_tree, repeat, with_scipy, which, queue))
         proc.start()
         rows = queue.get()
         proc.join()
@@ -282,5 +287,6 @@ if __name__ == "__main__":
     parser.add_argument("--before", help="a checkout whose solutions/ch05_bundle_adjustment to time as well")
     parser.add_argument("--repeat", type=int, default=3, help="timing rounds after the warm-up (BAL-49; street-300: 1)")
     parser.add_argument("--no-scipy", action="store_true", help="skip the SciPy cookbook run (~15-40 s)")
+    parser.add_argument("--problems", default="bal,street", help="which problems: bal, street or both")
     a = parser.parse_args()
-    run(a.before, a.repeat, not a.no_scipy)
+    run(a.before, a.repeat, not a.no_scipy, a.problems)
