@@ -33,6 +33,17 @@ Ceres keeps its own 2 threads. The load average is printed before and after.
 `--before DIR`: also time the reference as it is in DIR (a checkout of an older commit).
 Final costs: 0.5 sum |r|^2 over ALL observations with the BAL formula (COLMAP drops observations
 behind a camera: 31 of BAL-49's).
+
+Measured 2026-12-05 on the shared 2-core machine (load average 3-9 during BAL-49, 15-80 during street-300;
+`--before` = commit a44ceac):
+  BAL-49, 3 rounds: CPU s before 7.11 (1.78x Ceres' CPU), now 5.65 (1.41x), Ceres 4.00; wall 20.9 / 16.8 /
+  10.8 (Ceres' own solve 9.67); costs 1.33443e4 (both references, 32 steps) vs Ceres' 1.33712e4 (31 steps).
+  street-300, 1 round: CPU s before 105.8, now 77.7, Ceres 26.6; both references stop at max_iter = 50 at
+  cost 1.34642e8. Ceres' BAL cost there is 8e40: with 1 % uniform outliers under plain least squares, points
+  are pushed behind cameras, whose observations COLMAP drops while the BAL formula keeps them, so this
+  problem's cost column compares nothing; run it with outliers=0 (or a robust loss in both) for a fair row.
+Goal (time <= Ceres' at a cost <= Ceres') NOT met: the block-sparse product W V^-1 W^T (scipy's BSR
+matmat, one 9x3 @ 3x9 product per pair of observations of a point) is ~40 % of an iteration.
 """
 from __future__ import annotations
 
