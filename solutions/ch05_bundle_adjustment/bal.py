@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from solutions.geometry import rodrigues
 
 
 def read_bal(path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -79,8 +80,10 @@ def bal_project(cameras: np.ndarray, points: np.ndarray, cam_idx: np.ndarray, pt
     cameras (nc, 9) = (w, t, f, k1, k2); points (np, 3); cam_idx, pt_idx (M,). Returns (M, 2) pixels.
     The depth sign is ignored, as in BAL's own evaluation: a point behind the camera still projects.
     """
-    c = np.asarray(cameras, float)[cam_idx]
-    P = rotate(c[:, :3], np.asarray(points, float)[pt_idx]) + c[:, 3:6]
+    cameras = np.asarray(cameras, float)
+    c = cameras[cam_idx]
+    R = rodrigues(cameras[:, :3])                                   # (nc, 3, 3): Rodrigues once per camera
+    P = (R[cam_idx] @ np.asarray(points, float)[pt_idx, :, None])[:, :, 0] + c[:, 3:6]
     p = -P[:, :2] / P[:, 2:3]
     r2 = np.sum(p * p, axis=1)
     return (c[:, 6] * (1.0 + r2 * (c[:, 7] + c[:, 8] * r2)))[:, None] * p

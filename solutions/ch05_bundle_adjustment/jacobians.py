@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from solutions.geometry import rodrigues, skew
+from solutions.geometry import rodrigues
 
 
 def torch_ba_cost(cameras, points, cam_idx, pt_idx, obs):
@@ -52,22 +52,23 @@ def reprojection_jacobians(cameras: np.ndarray, points: np.ndarray, cam_idx: np.
     """
     cameras, points = np.asarray(cameras, float), np.asarray(points, float)
     c = cameras[cam_idx]
-    R = rodrigues(cameras[:, :3])[cam_idx]                      # (M, 3, 3)
-    RX = np.einsum("mij,mj->mi", R, points[pt_idx])            # (M, 3)
+    R = rodrigues(cameras[:, :3])[cam_idx]                      # one R per camera, then (M, 3, 3)
+    RX = (R @ points[pt_idx, :, None])[:, :, 0]                 # (M, 3)
     P = RX + c[:, 3:6]
     z = P[:, 2]
     p = -P[:, :2] / z[:, None]                                  # (M, 2)
     r2 = np.sum(p * p, axis=1)
     f, k1, k2 = c[:, 6], c[:, 7], c[:, 8]
     d = 1.0 + r2 * (k1 + k2 * r2)
-    du_dp = (f * d)[:, None, None] * np.eye(2) + (2 * f * (k1 + 2 * k2 * r2))[:, None, None] * np.einsum(
-        "mi,mj->mij", p, p)                                     # (M, 2, 2)
-    dp_dP = np.zeros((len(z), 2, 3))
-    dp_dP[:, 0, 0] = dp_dP[:, 1, 1] = -1.0 / z
-    dp_dP[:, :, 2] = -p / z[:, None]
-    du_dP = du_dp @ dp_dP                                       # (M, 2, 3)
+    e = 2 * f * (k1 + 2 * k2 * r2)
+    du_dp = (f * d)[:, None, None] * np.eye(2) + e[:, None, None] * (p[:, :, None] * p[:, None, :])  # (M, 2, 2)
+    # du/dP = du/dp dp/dP = -(1 / z) [du/dp, du/dp p], and du/dp p = (f d + e r^2) p.
+    du_dP = np.empty((len(z), 2, 3))
+    du_dP[:, :, :2] = du_dp
+    du_dP[:, :, 2] = (f * d + e * r2)[:, None] * p
+    du_dP *= -1.0 / z[:, None, None]
     J_cam = np.empty((len(z), 2, 9))
-    J_cam[:, :, 0:3] = -du_dP @ skew(RX)
+    J_cam[:, :, 0:3] = np.cross(RX[:, None, :], du_dP)          # -du/dP [RX]x, row by row: RX x (row)
     J_cam[:, :, 3:6] = du_dP
     J_cam[:, :, 6] = d[:, None] * p
     J_cam[:, :, 7] = (f * r2)[:, None] * p

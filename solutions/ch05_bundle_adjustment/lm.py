@@ -7,7 +7,7 @@ from solutions.geometry import rodrigues
 
 from .bal import compose_left, residuals
 from .jacobians import reprojection_jacobians
-from .linear_algebra import normal_equations, schur_solve
+from .linear_algebra import normal_equations, observation_index, schur_solve
 from .robust import robust_cost, robust_weights
 
 
@@ -65,8 +65,9 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
     Ceres), with Nielsen's update of lambda (Madsen, Nielsen & Tingleff 2004):
     accepted step (gain ratio rho > 0): lambda *= max(1/3, 1 - (2 rho - 1)^3), nu = 2;
     rejected: lambda *= nu, nu *= 2.
-    Stops when an accepted step lowers the cost by less than ftol * cost, the largest gradient
-    entry is below gtol, the step is below xtol (|x| + xtol), or after max_iter iterations.
+    Stops when an accepted step lowers the cost by at most ftol times the cost before it (Ceres'
+    function_tolerance: |cost change| <= ftol * cost), the largest gradient entry is below gtol,
+    the step is at most xtol (|x| + xtol), or after max_iter iterations.
     Returns (cameras (nc, 9), points (np, 3), costs: list of the cost after every iteration,
     costs[0] the initial cost).
     """
@@ -77,6 +78,7 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
     fixed_cams = _gauge_mask(cams) if fix_gauge else np.zeros(cams.shape, bool)
     fixed = fixed_cams if fixed is None else fixed_cams | np.asarray(fixed, bool)
     fixed_pts = None if fixed_points is None or not np.any(fixed_points) else np.asarray(fixed_points, bool)
+    index = observation_index(cam_idx, pt_idx, nc, n_pts)  # who sees whom: fixed, so built once
     r = residuals(cams, pts, cam_idx, pt_idx, obs)
     cost = robust_cost(r, loss, scale)
     costs = [cost]
@@ -84,7 +86,7 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
     for it in range(max_iter):
         J_cam, J_pt = reprojection_jacobians(cams, pts, cam_idx, pt_idx)
         w = robust_weights(r, loss, scale)
-        U, V, W, g_c, g_p = normal_equations(J_cam, J_pt, r, cam_idx, pt_idx, nc, n_pts, weights=w)
+        U, V, W, g_c, g_p = normal_equations(J_cam, J_pt, r, cam_idx, pt_idx, nc, n_pts, weights=w, index=index)
         _hold(U, V, W, g_c, g_p, fixed, fixed_pts, cam_idx, pt_idx)
         if max(np.abs(g_c).max(), np.abs(g_p).max(initial=0.0)) < gtol:
             break
@@ -94,7 +96,7 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
             Ud, Vd = U.copy(), V.copy()
             Ud[:, np.arange(9), np.arange(9)] += lam * dU
             Vd[:, np.arange(3), np.arange(3)] += lam * dV
-            dc, dp = schur_solve(Ud, Vd, W, g_c, g_p, cam_idx, pt_idx, method=solver)
+            dc, dp = schur_solve(Ud, Vd, W, g_c, g_p, cam_idx, pt_idx, method=solver, index=index)
             dc[fixed] = 0.0
             if fixed_pts is not None:
                 dp[fixed_pts] = 0.0
@@ -114,11 +116,11 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
                 return cams, pts, costs
         step = np.sqrt(np.sum(dc * dc) + np.sum(dp * dp))
         size = np.sqrt(np.sum(cams * cams) + np.sum(pts * pts))
-        decrease = cost - new_cost
+        decrease, previous = cost - new_cost, cost
         cams, pts, r, cost = new_cams, new_pts, r_new, new_cost
         costs.append(cost)
         if verbose:
             print(f"iter {it + 1:3d}  cost {cost:.6e}  lambda {lam:.2e}")
-        if decrease <= ftol * cost or step <= xtol * (size + xtol):
+        if decrease <= ftol * previous or step <= xtol * (size + xtol):
             break
     return cams, pts, costs

@@ -169,3 +169,28 @@ def test_stopping_early_passes_held_out_but_not_the_converged_cost():
     result = grade(EXERCISES["5.17"], fix_too_slow_three_iterations, seed=0)
     held_out, cost = result.cases
     assert held_out.passed and not cost.passed and "above the converged cost" in cost.hint
+
+
+def test_reference_schur_solvers_agree_with_the_full_system():
+    """The reference's three ways to solve the reduced camera system (dense Cholesky, SuperLU, PCG), with
+    and without a prebuilt ObservationIndex, give the step of the full damped normal equations solved
+    densely (one small problem: 6 cameras, 80 points): the direct ones to 1e-6 relative, PCG (stopped at a
+    relative residual of 1e-10 on an ill-conditioned S) by the residual of the full system."""
+    from solutions.ch05_bundle_adjustment.linear_algebra import observation_index
+
+    p = ch5.make_problem(np.random.default_rng(11), n_cams=6, n_points=80)
+    cams, pts, ci, pi, obs = ch5.problem_args(p)
+    J_cam, J_pt = bundle_adjustment.reprojection_jacobians(cams, pts, ci, pi)
+    r = bundle_adjustment.residuals(cams, pts, ci, pi, obs)
+    U, V, W, g_c, g_p = bundle_adjustment.normal_equations(J_cam, J_pt, r, ci, pi, len(cams), len(pts))
+    U, V = U + 1e-3 * np.eye(9), V + 1e-3 * np.eye(3)
+    H, minus_g = ch5.full_normal_equations(U, V, W, g_c, g_p, ci, pi)
+    truth = np.linalg.solve(H.toarray(), minus_g)
+    index = observation_index(ci, pi, len(cams), len(pts))
+    for method in ("dense", "sparse", "pcg"):
+        for idx in (None, index):
+            dc, dp = bundle_adjustment.schur_solve(U, V, W, g_c, g_p, ci, pi, method=method, index=idx)
+            step = np.r_[dc.ravel(), dp.ravel()]
+            assert np.linalg.norm(H @ step - minus_g) <= 1e-8 * np.linalg.norm(minus_g), method
+            if method != "pcg":
+                assert np.linalg.norm(step - truth) <= 1e-6 * np.linalg.norm(truth), method

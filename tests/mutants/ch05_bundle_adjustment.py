@@ -13,7 +13,6 @@ mutant differs from a correct implementation in exactly one mistake.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 
 from solutions import ch05_bundle_adjustment as ref
 from solutions.ch05_bundle_adjustment import debug as ref_debug
@@ -231,8 +230,9 @@ def _schur(U, V, W, g_c, g_p, cam_idx, pt_idx, use_V=False, sign=1.0, back=1.0, 
     if with_U:
         for c in range(nc):
             S[9 * c:9 * c + 9, 9 * c:9 * c + 9] = U[c]
-    Ysp = sp.bsr_matrix(ref_la._bsr_by_rows(Y, cam_idx, pt_idx, nc, 3 * n_pts))
-    WTsp = ref_la._bsr_by_rows(W.transpose(0, 2, 1), pt_idx, cam_idx, n_pts, 9 * nc)
+    index = ref_la.observation_index(cam_idx, pt_idx, nc, n_pts)
+    Ysp = ref_la._bsr(Y, index.by_cam, index.cam_ptr, pt_idx, 3 * n_pts)
+    WTsp = ref_la._bsr(W.transpose(0, 2, 1), index.by_point, index.point_ptr, cam_idx, 9 * nc)
     S -= (Ysp @ WTsp).toarray()
     rhs = -g_c.ravel() + ref_la._segment_sum(cam_idx, np.einsum("mij,mj->mi", Y, g_p[pt_idx]), nc).ravel()
     dc = (sign * np.linalg.lstsq(S, rhs, rcond=None)[0]).reshape(nc, 9)
