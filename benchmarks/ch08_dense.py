@@ -16,7 +16,7 @@ taking_turns), on the same loaded 2-core machine, the load average printed; the 
 carries over to another machine.
 Goal (issue 30, item 4): on the pixels both match, our SGM's bad > 2 px at or below SGBM's, at a density at or above
 SGBM's, on the motorcycle pair AND on synthetic scenes (synthetic_table: slanted planes, occlusions, weak texture,
-textureless patches; benchmarks/ch08_scenes.py), every parameter chosen on all of them together (post_filter_sweep),
+textureless patches; benchmarks/ch08_dense_scenes.py), every parameter chosen on all of them together (post_filter_sweep),
 never on one pair; time <= 10 × SGBM.
 Before (issue 30's state: P1, P2 = 6, 48; left-right check, NaN-aware median, no uniqueness test, no speckle
 filter): motorcycle 5.1 % at 90.7 % vs SGBM 6.2 % at 85.0 %, both matched 4.11 % vs 4.71 %; on the 6 scenes below
@@ -140,12 +140,12 @@ def stereo_table(repeat: int = 3) -> str:
 
 
 def scenes(n: int = 6, seed: int = 830) -> list[dict]:
-    """The synthetic scenes of synthetic_table and post_filter_sweep (benchmarks.ch08_scenes.scene_pair): 240 × 360,
+    """The synthetic scenes of synthetic_table and post_filter_sweep (benchmarks.ch08_dense_scenes.scene_pair): 240 × 360,
     d 0..48, 3-4 slanted planes (occlusions at each step), weak textures (std 0.03-0.15 of the grey range, 8-bit
     quantised for OpenCV), two textureless patches on each of the two back layers, noise 0.006."""
     import numpy as np
 
-    from benchmarks.ch08_scenes import scene_pair
+    from benchmarks.ch08_dense_scenes import scene_pair
     rng = np.random.default_rng(seed)
     return [scene_pair(rng, layers=int(rng.integers(3, 5)), contrast=(0.03, 0.15), noise=0.006, flat=0.02)
             for _ in range(n)]

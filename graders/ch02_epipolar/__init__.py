@@ -43,7 +43,7 @@ from .minimal import cv_five_point, cv_seven_point, gt_seven_point
 from .pose import colmap_essential, cv_decompose_essential, cv_recover_pose, pose_error_deg
 from .ransac import inlier_f1, line_problem, run_ransac
 from .robust import gt_ransac, k_samples, refine_essential
-from .scenes import (colmap_essential, condition_number, cv_sampson_lines, kornia_fundamental, depths, design_matrix, graf_grid, graf_matches, gt_essential, gt_fundamental,
+from .scenes import (colmap_essential_from_pose, condition_number, cv_sampson_lines, kornia_fundamental, depths, design_matrix, graf_grid, graf_matches, gt_essential, gt_fundamental,
                      gt_sampson, rms_transfer, to_normalised, transfer_px, two_view)
 
 __all__ = [
@@ -51,7 +51,7 @@ __all__ = [
     "two_view", "to_normalised", "depths", "design_matrix", "condition_number", "hartley", "sampson_rms_px",
     "transfer_px", "rms_transfer", "pose_error_deg", "graf_matches", "graf_grid", "inlier_f1", "k_samples",
     # ground-truth models and OpenCV/pycolmap-backed stand-ins
-    "gt_essential", "gt_fundamental", "gt_epipolar_lines", "gt_sampson", "cv_sampson", "colmap_essential", "kornia_fundamental", "cv_epipolar_lines", "cv_sampson_lines", "cv_eight_point",
+    "gt_essential", "gt_fundamental", "gt_epipolar_lines", "gt_sampson", "cv_sampson", "colmap_essential_from_pose", "kornia_fundamental", "cv_epipolar_lines", "cv_sampson_lines", "cv_eight_point",
     "gt_seven_point", "cv_seven_point", "cv_five_point", "cv_decompose_essential", "cv_recover_pose",
     "colmap_essential", "cv_homography", "gt_ransac", "refine_essential", "gt_weighted_eight_point",
     # RANSAC problems (2.16); the section 5 experiment with OpenCV's USAC estimators

@@ -54,7 +54,7 @@ def gt_sampson(F: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
     return np.abs(num) / np.sqrt(np.maximum(den, 1e-300))
 
 
-def colmap_essential(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+def colmap_essential_from_pose(R: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Stand-in on pycolmap: essential_matrix_from_pose builds [t/|t|]x R (it normalises t); times |t| it is
     gt_essential's E = [t]x R (rounding ~1e-16)."""
     import pycolmap

@@ -126,7 +126,7 @@ def used_by_notebooks(root: Path) -> set[str]:
 # pycolmap.calculate_triangulation_angle to 1.3e-12° (tolerance 1e-6°), each over 6-40 seeds; 10.7: pycolmap's
 # LO-RANSAC + one Umeyama refit on the notebook's near-planar problem gives the same scale and held-out RMS,
 # 0.1130, as the grader's own RANSAC.
-TWINS = {("graders/ch02_epipolar/scenes.py", "gt_essential"): "colmap_essential",
+TWINS = {("graders/ch02_epipolar/scenes.py", "gt_essential"): "colmap_essential_from_pose",
          ("graders/ch02_epipolar/scenes.py", "gt_fundamental"): "kornia_fundamental",
          ("graders/ch02_epipolar/basics.py", "gt_epipolar_lines"): "cv_epipolar_lines",
          ("graders/ch02_epipolar/scenes.py", "gt_sampson"): "cv_sampson_lines",

@@ -80,9 +80,9 @@ def test_uniqueness_rejects_an_ambiguous_winner_only():
 
 
 def test_synthetic_scene_ground_truth_is_exact():
-    """benchmarks.ch08_scenes: every left pixel that the right view sees (not occluded) has the right image's value
+    """benchmarks.ch08_dense_scenes: every left pixel that the right view sees (not occluded) has the right image's value
     at x - d_gt (up to the added noise), and the textureless patches are flat in the left view."""
-    from benchmarks.ch08_scenes import scene_pair
+    from benchmarks.ch08_dense_scenes import scene_pair
     p = scene_pair(np.random.default_rng(4), H=60, W=120, d_max=24, noise=0.0, contrast=(0.15, 0.15))
     yy, xx = np.mgrid[0:60, 0:120].astype(float)
     warped = ndimage.map_coordinates(p["I_r"], [yy, xx - p["D_gt"]], order=3, mode="nearest")

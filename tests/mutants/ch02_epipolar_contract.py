@@ -95,7 +95,7 @@ def kornia_unweighted_normalisation(x1, x2, w):
 # exercise id -> [(name, function)]
 _BY_EXERCISE = {
     "2.5": [("kornia", kornia_skew)],
-    "2.6": [("kornia", kornia_essential), ("pycolmap (the release's stand-in)", ch2.colmap_essential)],
+    "2.6": [("kornia", kornia_essential), ("pycolmap (the release's stand-in)", ch2.colmap_essential_from_pose)],
     "2.7": [("kornia", kornia_fundamental), ("kornia, unit norm (the release's stand-in)", ch2.kornia_fundamental)],
     "2.8": [("kornia", kornia_lines), ("OpenCV (the release's stand-in)", ch2.cv_epipolar_lines)],
     "2.9": [("OpenCV", ch2.cv_sampson), ("kornia", kornia_sampson),
