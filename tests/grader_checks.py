@@ -122,25 +122,18 @@ def without(ex: Exercise, rows: Callable[[Case], bool] | None) -> Exercise:
     return dataclasses.replace(ex, cases=cases)
 
 
-def grade_seeds(ex: Exercise, fn: Any, seeds: Sequence[int], seed_free: Callable[[Case], bool] | None = None,
-                until: Callable | None = None) -> list:
-    """The grades of `fn` on each seed (each stopped by `until`, see `grade`). Rows for which `seed_free(case)` is
-    True (real data whose input does not depend on the seed: 4.14's photo sets) are judged with the first seed only:
-    on every later seed they would repeat the same computation on the same input (the engine does not seed the
-    learner's randomness)."""
-    return [graded(ex if k == 0 else without(ex, seed_free), fn, seed, until) for k, seed in enumerate(seeds)]
-
-
 def assert_mutant_caught(ex: Exercise, name: str, mutant: Callable, hint: str | None, seeds: Sequence[int],
                          seed_free: Callable[[Case], bool] | None = None) -> None:
     """With every seed the mutant fails a row, and where the catalogue names a hint, a failing row's hint or
     message (e.g. "F has rank 3") says it. Each seed's grade stops at the first such row (`caught`): the cases after
-    it could not un-fail it, and in the slow exercises each costs a reconstruction or a training run. A seed-free row
-    (see `grade_seeds`) judged with the first seed counts for every seed: it is the same row on every draw, so with
-    seed-free rows the first seed's grade is whole (a later seed may be caught only there)."""
+    it could not un-fail it, and in the slow exercises each costs a reconstruction or a training run. Rows for which
+    `seed_free(case)` is True (real data whose input does not depend on the seed: 4.14's photo sets) are judged with
+    the first seed only (on a later seed they would repeat the same computation on the same input: the engine does
+    not seed the learner's randomness) and count for every seed; so with seed-free rows the first seed's grade is
+    whole (a later seed may be caught only there)."""
     caught = _caught_by(hint)
     results = [graded(ex, mutant, seeds[0], None if seed_free else caught)]
-    results += grade_seeds(without(ex, seed_free), mutant, seeds[1:], until=caught)
+    results += [graded(without(ex, seed_free), mutant, seed, caught) for seed in seeds[1:]]
     later = {row.key for result in results[1:] for row in result.cases}
     fixed = [row for row in results[0].cases if row.key not in later] if seed_free and len(results) > 1 else []
     for seed, result in zip(seeds, results):
