@@ -145,10 +145,12 @@ def escaped() -> list[str]:
 
 
 def run_batch(subs: Path, grades: Path, workers: int, secret_file: Path | None = None,
-              tmpdir: Path | None = None) -> float:
+              tmpdir: Path | None = None, only: list[str] | None = None) -> float:
     cmd = [sys.executable, "-m", "graders", "batch", str(subs), "--out", str(grades), "--workers", str(workers)]
     if secret_file:
         cmd += ["--secret-file", str(secret_file)]
+    if only:
+        cmd += ["--only", ",".join(only)]
     # The reference and mutant submissions import the course's `solutions` and tests/mutants, which graded
     # work may not: CV3D_GRADE_REFERENCE lets exactly those in (graders/grading/isolation.py).
     env = dict(os.environ, CV3D_GRADE_REFERENCE="1", **({"TMPDIR": str(tmpdir)} if tmpdir else {}))
