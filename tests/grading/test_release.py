@@ -366,9 +366,7 @@ def test_gradescope_autograder_grades_a_solved_notebook_with_hidden_cases(tmp_pa
 @pytest.mark.parametrize("submission, phrase", [
     ({}, "No notebook"),
     ({"01_camera_models.ipynb": "{ not a notebook"}, "could not read"),
-    ({"01_camera_models.py": "def project_points(*a):\n    while True:\n        pass\n"
-                             "def undistort_points(*a):\n    while True:\n        pass\n"
-                             "def fisheye_project(*a):\n    while True:\n        pass\n"}, "time limit"),
+    ({"01_camera_models.py": "def project_points(*a):\n    while True:\n        pass\n"}, "time limit"),
 ], ids=["empty", "unparsable", "loops"])
 def test_gradescope_autograder_writes_valid_json_in_every_failure_mode(tmp_path, submission, phrase):
     doc = _autograder(tmp_path, submission, b"s", budget=60)
