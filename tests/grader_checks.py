@@ -129,12 +129,15 @@ def assert_mutant_caught(ex: Exercise, name: str, mutant: Callable, hint: str | 
     it could not un-fail it, and in the slow exercises each costs a reconstruction or a training run. Rows for which
     `seed_free(case)` is True (real data whose input does not depend on the seed: 4.14's photo sets) are judged with
     the first seed only (on a later seed they would repeat the same computation on the same input: the engine does
-    not seed the learner's randomness) and count for every seed; so with seed-free rows the first seed's grade is
-    whole (a later seed may be caught only there)."""
+    not seed the learner's randomness) and count for every seed; so when a later seed's own rows do not catch the
+    mutant, the first seed's grade goes on to its first catching seed-free row."""
     caught = _caught_by(hint)
-    results = [graded(ex, mutant, seeds[0], None if seed_free else caught)]
-    results += [graded(without(ex, seed_free), mutant, seed, caught) for seed in seeds[1:]]
-    later = {row.key for result in results[1:] for row in result.cases}
+    results = [graded(without(ex, seed_free), mutant, seed, caught) for seed in seeds[1:]]
+    later = {row.key for result in results for row in result.cases}   # all of a seed's own rows where not caught
+    if seed_free and not all(any(map(caught, result.cases)) for result in results):
+        results.insert(0, graded(ex, mutant, seeds[0], lambda row: caught(row) and row.key not in later))
+    else:
+        results.insert(0, graded(ex, mutant, seeds[0], caught))
     fixed = [row for row in results[0].cases if row.key not in later] if seed_free and len(results) > 1 else []
     for seed, result in zip(seeds, results):
         rows = result.cases + (fixed if seed != seeds[0] else [])
