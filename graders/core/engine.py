@@ -331,8 +331,36 @@ def get(exercise_id: str) -> Exercise:
 
 # ---------------------------------------------------------------- judging -----------
 
+def _as_function(ex: Exercise, fn_or_value: Any) -> tuple[Callable | None, str, str]:
+    """(the function to judge, "", "") or (None, status, message) for an answer no case needs to see."""
+    if ex.value:
+        if _not_attempted(fn_or_value):
+            return None, "not_attempted", f"`{ex.name}` is still None: not attempted"
+        return (lambda *a, **k: fn_or_value), "", ""    # a value answer is a function of nothing
+    if not callable(fn_or_value):
+        return None, "error", f"`{ex.name}` should be a function, got {type(fn_or_value).__name__}"
+    if _is_stub(fn_or_value):   # the notebook's stub, untouched: no case needs drawing (scenes, trainings)
+        return None, "not_attempted", "raises NotImplementedError: not attempted"
+    return fn_or_value, "", ""
+
+
 def _not_attempted(value: Any) -> bool:
     return value is None or value is Ellipsis
+
+
+# What `raise NotImplementedError` and `raise NotImplementedError("...")` compile to (CPython 3.11), docstring aside.
+_STUB_OPS = {"RESUME", "NOP", "CACHE", "PUSH_NULL", "LOAD_GLOBAL", "LOAD_CONST", "PRECALL", "CALL", "RAISE_VARARGS"}
+
+
+def _is_stub(fn: Any) -> bool:
+    """A plain function whose whole body raises NotImplementedError (the notebook's stub): it is not attempted,
+    whatever its arguments. Anything else (a wrapper, a graded-mode attempt, a body that computes first) is run."""
+    code = getattr(fn, "__code__", None)
+    if not isinstance(fn, types.FunctionType) or code is None or code.co_names != ("NotImplementedError",):
+        return False
+    import dis
+    ops = {ins.opname for ins in dis.get_instructions(code)}
+    return "RAISE_VARARGS" in ops and ops <= _STUB_OPS
 
 
 def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None, hidden: bool = False,
@@ -346,18 +374,10 @@ def grade(ex: Exercise, fn_or_value: Any, seed: int | None = None, hidden: bool 
     seed = secrets.randbits(32) if seed is None else int(seed)
     result = ExerciseResult(id=ex.id, title=ex.title, name=ex.name, kind=ex.kind,
                             max_score=ex.points, seed=seed, replayable=not ex.value)
-    if ex.value:
-        if _not_attempted(fn_or_value):
-            result.status, result.message = "not_attempted", f"`{ex.name}` is still None: not attempted"
-            return result
-        value = fn_or_value
-        fn = lambda *a, **k: value  # noqa: E731 — a value answer is a function of nothing
-    else:
-        if not callable(fn_or_value):
-            result.status = "error"
-            result.message = f"`{ex.name}` should be a function, got {type(fn_or_value).__name__}"
-            return result
-        fn = fn_or_value
+    fn, status, message = _as_function(ex, fn_or_value)
+    if fn is None:
+        result.status, result.message = status, message
+        return result
     # `cases` may return a list or yield its cases one by one: a generator builds an expensive case
     # (real photos, a library run) only once the learner's code has got that far.
     weights = []

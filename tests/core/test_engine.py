@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import sys
 
 import numpy as np
@@ -168,9 +169,37 @@ def test_cases_may_be_generated_lazily():
     def stub(x):
         raise NotImplementedError
 
-    assert grade(lazy, stub).status == "not_attempted" and built == [5]   # the second case was never built
+    def started(x):
+        x = x.T
+        raise NotImplementedError("the rest")
+
+    assert grade(lazy, stub).status == "not_attempted" and built == []    # the untouched stub: no case drawn
+    assert grade(lazy, started).status == "not_attempted" and built == [5]   # the second case was never built
     r = grade(lazy, good)
     assert r.status == "passed" and [c.max_points for c in r.cases] == [1.0, 1.0]
+
+
+def test_only_a_body_that_raises_nothing_but_not_implemented_is_an_untouched_stub():
+    from graders.core.engine import _is_stub
+
+    def stub(x, y):
+        """A docstring is no code."""
+        raise NotImplementedError
+
+    def with_message(x):
+        raise NotImplementedError("write me")
+
+    def conditional(x):
+        if x:
+            raise NotImplementedError
+        return x
+
+    def computes(x):
+        print(x)
+        raise NotImplementedError
+
+    assert _is_stub(stub) and _is_stub(with_message)
+    assert not any(map(_is_stub, (conditional, computes, good, print, lambda: None, functools.partial(stub, 1))))
 
 
 def test_a_case_generator_that_breaks_is_reported_as_our_error():

@@ -55,10 +55,10 @@ def test_loop_in_every_stub_grades_quickly_and_cleanly(ch, tmp_path):
     scratch = tmp_path / "tmp"      # the grade's own temp directory: whatever it leaves is its own
     scratch.mkdir()
     # Chapter 1 runs the default time-out budget (3 exercises) on its exercises' own time limits (10 s of CPU each).
-    # The other chapters stop after one time-out, struck by a wall-clock limit of 15 s (loading included): the same
-    # path (a time-out, then the rest "not run", nothing left behind) without burning a core for each chapter's own
-    # first limit (chapter 8's is 30 s of CPU, chapter 11's 20 s). Each exercise's limit is data, read by the same code.
-    budget = [] if ch.number == 1 else ["--max-timeouts", "1", "--hard-limit", "15"]
+    # The other chapters stop after one time-out: the first exercise's own limit, or a wall-clock limit of 20 s
+    # (loading included) where that limit is longer (chapter 8's is 30 s of CPU): the same path (a time-out, then the
+    # rest "not run", nothing left behind) at a third of chapter 1's cost.
+    budget = [] if ch.number == 1 else ["--max-timeouts", "1", "--hard-limit", "20"]
     start = time.monotonic()
     proc = subprocess.run([sys.executable, "-m", "graders", "check", str(tmp_path / path.name),
                            "--json", str(tmp_path / "r.json"), *budget], capture_output=True, text=True, timeout=600, cwd=ROOT,
@@ -69,8 +69,8 @@ def test_loop_in_every_stub_grades_quickly_and_cleanly(ch, tmp_path):
     assert doc["score"] == 0 and doc["max_score"] > 0
     assert len(doc["tests"]) == len(chapter(ch.key))
     outputs = "\n".join(t["output"] for t in doc["tests"])
-    stopped = "time limit" if ch.number == 1 else "took longer than 15 s"
-    assert stopped in outputs and "not run" in outputs, outputs[:3000]
+    stopped = ("time limit",) if ch.number == 1 else ("time limit", "took longer than 20 s")
+    assert any(s in outputs for s in stopped) and "not run" in outputs, outputs[:3000]
     # The time-out budget bounds the grade: its time limits, loading, and the questions.
     print(f"{ch.prefix}: loop in every stub graded in {seconds:.0f} s")
     bound = max(240.0, 2 * notebook_budget_s())    # wall clock: the limits count CPU, a loaded worker gets less of it
