@@ -31,8 +31,9 @@ def orientation_centroid(img: np.ndarray, kps: np.ndarray, radius: int = 15) -> 
     r = np.arange(-radius, radius + 1)
     dx, dy = np.meshgrid(r, r)  # (w, w)
     inside = dx ** 2 + dy ** 2 <= radius ** 2
-    v = squares.astype(np.float64)  # exact integer moments for a uint8 image
-    m10, m01 = v @ (dx * inside).ravel(), v @ (dy * inside).ravel()
+    # For a uint8 image every partial sum is an integer below 961 * 255 * 15 < 2^24, exact in float32.
+    v = squares.astype(np.float32 if I.dtype == np.uint8 else np.float64)
+    m10, m01 = (v @ np.c_[(dx * inside).ravel(), (dy * inside).ravel()].astype(v.dtype)).astype(np.float64).T
     return np.arctan2(m01, m10)
 
 
@@ -63,17 +64,14 @@ def orb_descriptors(img: np.ndarray, kps: np.ndarray, pattern: np.ndarray) -> np
     kps = np.asarray(kps, float)[:, :2]
     theta = orientation_centroid(I, kps)
     c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]  # (N, 1)
-    # The 2 n points a_0, b_0, a_1, b_1, ... repeat (a learned pattern of 256 tests has ~340 distinct
-    # points): each distinct point u_j is turned and read once; a_i = u[ia[i]], b_i = u[ib[i]].
-    points = np.asarray(pattern, float).reshape(-1, 2)  # (2 n, 2)
-    _, first, which = np.unique(points @ [1, 1j], return_index=True, return_inverse=True)  # x + iy: one number
-    ia, ib = which.reshape(-1, 2).T  # (n,), (n,)
-    px, py = points[first].T  # (U,)
-    # rotate the points by theta, round, read the smoothed image (all U points at once)
-    x = np.clip(np.rint(kps[:, 0:1] + c * px - s * py).astype(int), 0, I.shape[1] - 1)  # (N, U)
-    y = np.clip(np.rint(kps[:, 1:2] + s * px + c * py).astype(int), 0, I.shape[0] - 1)
-    v = S[y * I.shape[1] + x]  # (N, U): I_s(p + R u_j)
-    bits = v[:, ia] < v[:, ib]  # (N, n): I_s(p + R a_i) < I_s(p + R b_i)
+    px, py = np.asarray(pattern, float).reshape(-1, 2).T  # (2 n,): a_0, b_0, a_1, b_1, ...
+    # rotate the pattern points by theta, round, read the smoothed image (all 2 n points at once)
+    x = np.rint(kps[:, 0:1] + c * px - s * py).astype(np.int32)  # (N, 2 n)
+    y = np.rint(kps[:, 1:2] + s * px + c * py).astype(np.int32)
+    np.clip(x, 0, I.shape[1] - 1, out=x)  # in place: a fresh (N, 2 n) array costs more than the clip
+    np.clip(y, 0, I.shape[0] - 1, out=y)
+    v = S[y * I.shape[1] + x].reshape(len(kps), len(pattern), 2)  # (N, n, 2): (I_s(p + R a_i), I_s(p + R b_i))
+    bits = v[..., 0] < v[..., 1]  # (N, n)
     return np.packbits(bits, axis=1)
 
 
