@@ -126,8 +126,8 @@ def fast_detect(img: np.ndarray, threshold: int = 20, nms: bool = True) -> np.nd
     q = _fast_candidates(c, ring, threshold)
     x = (q + a) % W
     q = q[(x >= 3) & (x < W - 3)]  # 3 px or more from the left and right edges
-    # Blocks keep the (16, block) temporaries in the CPU cache (one block of 300,000 candidates is
-    # about twice as slow per candidate as 37 blocks of 8,192): the same scores either way.
+    # Blocks keep the (16, block) temporaries in the CPU cache (graf1's 34,000 candidates: 7.7 ms CPU
+    # in one block, 2.1 ms in blocks of 8,192): the same scores either way.
     score = np.concatenate([np.zeros(0, np.int16)] + [
         _arc_score(np.stack([r[qb] for r in ring]).astype(np.int16) - c[qb])
         for qb in np.split(q, range(FAST_BLOCK, len(q), FAST_BLOCK))])
