@@ -120,8 +120,9 @@ def _camera_blocks(wJ_cam: np.ndarray, J_cam: np.ndarray, r: np.ndarray, cam_ptr
 
     wJ_cam = w J_cam, J_cam (M, 2, 9), r (M, 2): sorted by camera, camera c's run at cam_ptr[c]:cam_ptr[c + 1].
     A camera's observations stacked are one (2 m_c x 9) matrix A_c, so U_c = (w A_c)^T A_c is a single
-    BLAS product per camera: ~10x less time than M batched 9x2 @ 2x9 products, whose (M, 9, 9)
-    result alone is 120 MB for M = 185,000. Returns U (nc, 9, 9), g_c (nc, 9).
+    BLAS product per camera: 5-8x less time (measured on the benchmark problems) than M batched
+    9x2 @ 2x9 products, whose (M, 9, 9) result alone is 120 MB for M = 185,000.
+    Returns U (nc, 9, 9), g_c (nc, 9).
     """
     n_cams = len(cam_ptr) - 1
     U, g_c = np.zeros((n_cams, 9, 9)), np.zeros((n_cams, 9))
@@ -138,7 +139,9 @@ def _wvw_blocks(YT: np.ndarray, WT: np.ndarray, index: ObservationIndex) -> np.n
     YT = (W V^-1)^T, WT = W^T: (M, 3, 9), one 3x9 block per observation. Block (a, b) = sum over the
     pairs (k, l) behind it of Y_k W_l^T: with the pairs' Y_k^T stacked into one (3n x 9) matrix and
     the W_l^T into another, that is a single BLAS product (9 x 3n) @ (3n x 9) per block instead of n
-    tiny 9x3 @ 3x9 ones, and only for the upper triangle (S is symmetric).
+    tiny 9x3 @ 3x9 ones, and only for the upper triangle (S is symmetric; Ceres' Schur eliminator
+    does the same: SchurEliminator::ChunkOuterProduct in internal/ceres/schur_eliminator_impl.h
+    updates S(i, j) only for j >= i among the cameras that see a point).
     """
     Yp = np.take(YT, index.pair_k, axis=0).reshape(-1, 9)      # (3P, 9): pair p's Y_k^T in rows 3p .. 3p + 2
     Wp = np.take(WT, index.pair_l, axis=0).reshape(-1, 9)
