@@ -6,15 +6,23 @@ Problems
 - street-300: a synthetic BAL problem made by `street_problem(seed=7)` (below), written to a BAL text
   file and read back with the chapter's `read_bal`: 300 cameras 1 m apart along a street, looking
   sideways at a facade 8-20 m away; 50,000 points, each tracked over 2-8 consecutive cameras that see
-  it; BAL cameras (f 500-700 px, k1, k2 small); Gaussian pixel noise sigma = 0.5 px and 1 % outliers
-  (uniform pixels >= 20 px off, `graders.kit.scene.add_outliers`); the start: the truth perturbed.
+  it; BAL cameras (f 500-700 px, k1, k2 small); Gaussian pixel noise sigma = 0.5 px, NO outliers (plain
+  least squares is then the right cost for both solvers); the start: the truth perturbed.
+  Why no outliers: with 1 % of them (uniform pixels >= 20 px off, `street_problem(outliers=0.01)`) the cost
+  column compares nothing. Under plain L2 Ceres' BAL cost ends at 8e40; under Huber with the same scale in
+  both solvers (2 px; pycolmap 4.2.1 exposes it: BundleAdjustmentOptions.ceres.loss_function_type = HUBER,
+  .loss_function_scale) Ceres' BAL cost still ends at 3e28 with 183 observations behind their camera: an
+  outlier on a point seen twice cannot be told from the point's depth, so the point may cross behind a
+  camera, where COLMAP drops the observation (zero residual) while the BAL formula keeps it.
 
 Solvers, each stopped the same way
 - reference: Levenberg-Marquardt with Marquardt's diagonal and Nielsen's damping update (Ceres'
   default LEVENBERG_MARQUARDT trust region does the same: radius 1e4 = 1 / lambda0, success
   radius /= max(1/3, 1 - (2 rho - 1)^3), failure radius /= v, v *= 2), Schur complement,
   reduced camera system by dense Cholesky up to 50 cameras and SuperLU beyond (COLMAP's
-  choice: DENSE_SCHUR up to 50 images, SPARSE_SCHUR up to 1,000).
+  choice: DENSE_SCHUR up to 50 images, SPARSE_SCHUR up to 1,000). S's upper-triangle blocks are
+  assembled one BLAS product per camera pair over the observation pairs behind it (the pairs listed
+  once per adjustment), U and g_c one product per camera.
 - Ceres through `pycolmap.create_default_bundle_adjuster(...).solve()`, gauge fixed as
   `pycolmap.bundle_adjustment` does (TWO_CAMS_FROM_WORLD), RADIAL cameras, principal point fixed.
 Tolerances, the same definitions in both (Ceres 2.2, internal/ceres/trust_region_minimizer.cc):
@@ -34,16 +42,29 @@ Ceres keeps its own 2 threads. The load average is printed before and after.
 Final costs: 0.5 sum |r|^2 over ALL observations with the BAL formula (COLMAP drops observations
 behind a camera: 31 of BAL-49's).
 
-Measured 2026-12-05 on the shared 2-core machine (load average 3-9 during BAL-49, 15-80 during street-300;
-`--before` = commit a44ceac):
-  BAL-49, 3 rounds: CPU s before 7.11 (1.78x Ceres' CPU), now 5.65 (1.41x), Ceres 4.00; wall 20.9 / 16.8 /
-  10.8 (Ceres' own solve 9.67); costs 1.33443e4 (both references, 32 steps) vs Ceres' 1.33712e4 (31 steps).
-  street-300, 1 round: CPU s before 105.8, now 77.7, Ceres 26.6; both references stop at max_iter = 50 at
-  cost 1.34642e8. Ceres' BAL cost there is 8e40: with 1 % uniform outliers under plain least squares, points
-  are pushed behind cameras, whose observations COLMAP drops while the BAL formula keeps them, so this
-  problem's cost column compares nothing; run it with outliers=0 (or a robust loss in both) for a fair row.
-Goal (time <= Ceres' at a cost <= Ceres') NOT met: the block-sparse product W V^-1 W^T (scipy's BSR
-matmat, one 9x3 @ 3x9 product per pair of observations of a point) is ~40 % of an iteration.
+Measured 2026-12-05 on the shared 2-core machine, CPU time the fair column (process time, all threads):
+  Earlier (before 11d4d3d, commit a44ceac as `--before`): BAL-49 CPU s 7.11 / 5.65 (1.41x Ceres' 4.00), costs
+  1.33443e4 vs Ceres' 1.33712e4; street-300 then had 1 % outliers and its cost column was void (see above).
+  Before this round (d5ac15b, street-300 already without outliers; load 56 -> 13 -> 31):
+    BAL-49, 3 rounds: reference 5.44 CPU s (1.44x Ceres' 3.77), wall 19.5 (Ceres 15.8, its solve 10.8);
+    street-300, 1 round: reference 12.03 CPU s (0.45x Ceres' 26.69), 10 steps vs Ceres' 40, both at 2.74539e4.
+  Now (11d4d3d + docstrings, `--before` = d5ac15b; load 9.5 at the start, 9.3 between, 14.2 at the end,
+  with chapter 5's fairness sweep running beside it):
+    BAL-49, 3 rounds: before 6.83 CPU s (1.59x; its default solver is SuperLU), now 4.90 (1.14x), Ceres 4.29;
+      costs 1.33443e4 (32 steps) vs Ceres' 1.33712e4 (31 steps); scipy cookbook 39.4 CPU s, 1.34089e4.
+    street-300, 1 round: before 14.20 CPU s (0.51x), now 10.50 (0.38x), Ceres 27.99 (40 steps);
+      final costs 27453.91 (reference, 10 steps) vs 27453.94 (Ceres).
+  Wall times this round are void for Ceres: under nice 19 on the loaded machine its 2 threads waited
+  (street-300: 241 s wall for 28 s CPU), so the printed "goal met" on wall says nothing; compare CPU.
+Goal (time <= Ceres' at a cost <= Ceres'): met on street-300 (0.38x CPU, lower cost); NOT met on BAL-49
+(1.14x CPU at a lower cost). Per BAL-49 iteration (~150 ms CPU; Ceres ~140 ms, both threads): assembling
+W V^-1 W^T ~50 ms (one BLAS product per camera pair, upper triangle, 123,086 observation pairs in 1,027
+blocks; the gathers of the pairs' 3x9 blocks are half of it), the normal equations ~25 ms, the Jacobians
+~25 ms, the rest of the Schur solve ~20 ms (cProfile with a process-time clock). Not tried this round:
+block-Jacobi PCG on the implicit S (Ceres' ITERATIVE_SCHUR), which skips the assembly; but one implicit
+product S x alone costs 6.8 ms in numpy on BAL-49 (measured), so ~7 CG iterations per step would
+already eat the 50 ms saved. On street-300, SuperLU on S (2,700 unknowns, 6,058 blocks) takes ~75 ms,
+less than assembling it, so PCG would not pay there either.
 """
 from __future__ import annotations
 
@@ -62,7 +83,7 @@ COLUMNS = ["problem", "solver", "final cost", "cost / Ceres", "accepted steps", 
 
 
 def street_problem(seed: int = 7, n_cams: int = 300, n_points: int = 50_000, noise_px: float = 0.5,
-                   outliers: float = 0.01, size: tuple[int, int] = (1024, 768)) -> dict:
+                   outliers: float = 0.0, size: tuple[int, int] = (1024, 768)) -> dict:
     """A synthetic street survey in BAL form (see the module docstring); deterministic in `seed`.
 
     Cameras (OpenCV convention, then BAL's via F = diag(1, -1, -1)) at x = 0, 1, ..., n_cams - 1 m,

@@ -83,7 +83,7 @@ def bal_project(cameras: np.ndarray, points: np.ndarray, cam_idx: np.ndarray, pt
     cameras = np.asarray(cameras, float)
     c = cameras[cam_idx]
     R = rodrigues(cameras[:, :3])                                   # (nc, 3, 3): Rodrigues once per camera
-    P = (R[cam_idx] @ np.asarray(points, float)[pt_idx, :, None])[:, :, 0] + c[:, 3:6]
+    P = np.einsum("mij,mj->mi", R[cam_idx], np.asarray(points, float)[pt_idx]) + c[:, 3:6]   # R X + t
     p = -P[:, :2] / P[:, 2:3]
     r2 = np.sum(p * p, axis=1)
     return (c[:, 6] * (1.0 + r2 * (c[:, 7] + c[:, 8] * r2)))[:, None] * p

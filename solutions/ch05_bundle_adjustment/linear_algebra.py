@@ -35,6 +35,9 @@ class ObservationIndex(NamedTuple):
     by_cam (M,): the observations sorted by camera, then point, and cam_ptr (nc + 1,) where each
     camera's run starts; by_point, point_ptr: the same sorted by point, then camera. These are the
     layouts of the block-sparse (BSR) matrices W V^-1 (block rows = cameras) and W^T (block rows = points).
+    pair_k, pair_l (P,), block_row, block_col (nb,), block_ptr (nb + 1,), diag_block (nc,): the blocks
+    (a, b), a <= b, of the reduced camera system's upper triangle and the observation pairs behind
+    each (see `_shared_point_pairs`); diag_block[c] is camera c's diagonal block.
     """
     to_cams: sp.csr_matrix
     to_points: sp.csr_matrix
@@ -42,15 +45,48 @@ class ObservationIndex(NamedTuple):
     cam_ptr: np.ndarray
     by_point: np.ndarray
     point_ptr: np.ndarray
+    pair_k: np.ndarray
+    pair_l: np.ndarray
+    block_row: np.ndarray
+    block_col: np.ndarray
+    block_ptr: np.ndarray
+    diag_block: np.ndarray
+
+
+def _shared_point_pairs(cam_idx: np.ndarray, by_point: np.ndarray, point_ptr: np.ndarray, n_cams: int) -> tuple:
+    """The observation pairs behind each block of the reduced camera system S = U - W V^-1 W^T.
+
+    Block (a, b) of W V^-1 W^T sums W_k V_j^-1 W_l^T over the pairs (k, l) of observations of a same
+    point j by cameras a = cam_idx[k] and b = cam_idx[l]. S is symmetric, so only blocks a <= b are
+    kept. Returns pair_k, pair_l (P,) grouped by block, and the blocks: block_row, block_col (nb,)
+    sorted by (row, column), block_ptr (nb + 1,) (block i's pairs are pair_k[block_ptr[i]:block_ptr[i + 1]]),
+    diag_block (nc,) (every camera's diagonal block is listed, even with no pair).
+    """
+    n = np.diff(point_ptr)                                      # observations of each point
+    n_pairs = n * n                                             # ordered pairs of each point
+    start = np.repeat(point_ptr[:-1], n_pairs)                  # where the pair's point starts in by_point
+    rank = np.arange(n_pairs.sum()) - np.repeat(np.cumsum(n_pairs) - n_pairs, n_pairs)
+    n_rep = np.repeat(n, n_pairs)
+    k, l = by_point[start + rank // n_rep], by_point[start + rank % n_rep]
+    keep = cam_idx[k] <= cam_idx[l]
+    k, l = k[keep], l[keep]
+    block = cam_idx[k] * n_cams + cam_idx[l]                    # a block's number: a nc + b
+    order = np.argsort(block, kind="stable")
+    k, l, block = k[order], l[order], block[order]
+    blocks = np.union1d(block, np.arange(n_cams) * (n_cams + 1))
+    block_ptr = np.r_[np.searchsorted(block, blocks), len(block)]
+    return k, l, blocks // n_cams, blocks % n_cams, block_ptr, np.searchsorted(blocks, np.arange(n_cams) * (n_cams + 1))
 
 
 def observation_index(cam_idx: np.ndarray, pt_idx: np.ndarray, n_cams: int, n_points: int) -> ObservationIndex:
     """Build the `ObservationIndex` of observations (cam_idx[k], pt_idx[k]), k < M."""
     cam_idx, pt_idx = np.asarray(cam_idx), np.asarray(pt_idx)
+    by_point = np.lexsort((cam_idx, pt_idx))
+    point_ptr = np.r_[0, np.cumsum(np.bincount(pt_idx, minlength=n_points))]
     return ObservationIndex(
         _summing_matrix(cam_idx, n_cams), _summing_matrix(pt_idx, n_points),
         np.lexsort((pt_idx, cam_idx)), np.r_[0, np.cumsum(np.bincount(cam_idx, minlength=n_cams))],
-        np.lexsort((cam_idx, pt_idx)), np.r_[0, np.cumsum(np.bincount(pt_idx, minlength=n_points))])
+        by_point, point_ptr, *_shared_point_pairs(cam_idx, by_point, point_ptr, n_cams))
 
 
 def normal_equations(J_cam, J_pt, r, cam_idx, pt_idx, n_cams, n_points, weights=None,
@@ -64,26 +100,79 @@ def normal_equations(J_cam, J_pt, r, cam_idx, pt_idx, n_cams, n_points, weights=
     """
     J_cam, J_pt, r = (np.asarray(a, float) for a in (J_cam, J_pt, r))
     w = np.ones(len(r)) if weights is None else np.asarray(weights, float)
-    wJcT = w[:, None, None] * J_cam.transpose(0, 2, 1)          # (M, 9, 2)
     wJpT = w[:, None, None] * J_pt.transpose(0, 2, 1)           # (M, 3, 2)
-    to_cams, to_points = (cam_idx, pt_idx) if index is None else (index.to_cams, index.to_points)
-    U = _segment_sum(to_cams, wJcT @ J_cam, n_cams)             # batched 9x2 @ 2x9, summed per camera
-    V = _segment_sum(to_points, wJpT @ J_pt, n_points)
-    W = wJcT @ J_pt                                             # (M, 9, 3)
-    g_c = _segment_sum(to_cams, (wJcT @ r[:, :, None])[:, :, 0], n_cams)
-    g_p = _segment_sum(to_points, (wJpT @ r[:, :, None])[:, :, 0], n_points)
+    if index is None:
+        cam_idx = np.asarray(cam_idx)
+        to_points, by_cam = pt_idx, np.argsort(cam_idx, kind="stable")
+        cam_ptr = np.r_[0, np.cumsum(np.bincount(cam_idx, minlength=n_cams))]
+    else:
+        to_points, by_cam, cam_ptr = index.to_points, index.by_cam, index.cam_ptr
+    wJ_cam = w[:, None, None] * J_cam
+    U, g_c = _camera_blocks(wJ_cam[by_cam], J_cam[by_cam], r[by_cam], cam_ptr)
+    V = _segment_sum(to_points, wJpT @ J_pt, n_points)         # batched 3x2 @ 2x3, summed per point
+    W = (wJpT @ J_cam).transpose(0, 2, 1)                       # (M, 9, 3), a view of W^T (M, 3, 9), which schur_solve uses
+    g_p = _segment_sum(to_points, np.einsum("mik,mk->mi", wJpT, r), n_points)
     return U, V, W, g_c, g_p
 
 
-def _bsr(blocks: np.ndarray, order: np.ndarray, ptr: np.ndarray, col_block: np.ndarray, n_col: int) -> sp.bsr_matrix:
-    """Block-sparse (BSR) matrix with dense blocks (K, a, b): row by row, block order[k] goes to block
-    column col_block[order[k]]; ptr (n_rows + 1,) says where each block row starts in `order`.
+def _camera_blocks(wJ_cam: np.ndarray, J_cam: np.ndarray, r: np.ndarray, cam_ptr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """U_c = sum_k w_k J_k^T J_k and g_c = sum_k w_k J_k^T r_k over each camera's observations k.
 
-    BSR stores each block contiguously, so scipy's BSR product multiplies 9x3 by 3x9 blocks in
-    a tight C loop: ~4x faster than the same product on scalar CSR entries.
+    wJ_cam = w J_cam, J_cam (M, 2, 9), r (M, 2): sorted by camera, camera c's run at cam_ptr[c]:cam_ptr[c + 1].
+    A camera's observations stacked are one (2 m_c x 9) matrix A_c, so U_c = (w A_c)^T A_c is a single
+    BLAS product per camera: 5-8x less time (measured on the benchmark problems) than M batched
+    9x2 @ 2x9 products, whose (M, 9, 9) result alone is 120 MB for M = 185,000.
+    Returns U (nc, 9, 9), g_c (nc, 9).
     """
-    K, a, b = blocks.shape
-    return sp.bsr_matrix((blocks[order], np.asarray(col_block)[order], ptr), shape=(a * (len(ptr) - 1), n_col))
+    n_cams = len(cam_ptr) - 1
+    U, g_c = np.zeros((n_cams, 9, 9)), np.zeros((n_cams, 9))
+    for c, (s, e) in enumerate(zip(cam_ptr[:-1].tolist(), cam_ptr[1:].tolist())):
+        wA_c = wJ_cam[s:e].reshape(-1, 9)                         # (2 m_c, 9): w A_c
+        U[c] = wA_c.T @ J_cam[s:e].reshape(-1, 9)
+        g_c[c] = wA_c.T @ r[s:e].ravel()
+    return U, g_c
+
+
+def _wvw_blocks(YT: np.ndarray, WT: np.ndarray, index: ObservationIndex) -> np.ndarray:
+    """The blocks (a, b), a <= b, of W V^-1 W^T listed in `index` (block_row, block_col): (nb, 9, 9).
+
+    YT = (W V^-1)^T, WT = W^T: (M, 3, 9), one 3x9 block per observation. Block (a, b) = sum over the
+    pairs (k, l) behind it of Y_k W_l^T: with the pairs' Y_k^T stacked into one (3n x 9) matrix and
+    the W_l^T into another, that is a single BLAS product (9 x 3n) @ (3n x 9) per block instead of n
+    tiny 9x3 @ 3x9 ones, and only for the upper triangle (S is symmetric; Ceres' Schur eliminator
+    does the same: SchurEliminator::ChunkOuterProduct in internal/ceres/schur_eliminator_impl.h
+    updates S(i, j) only for j >= i among the cameras that see a point).
+    """
+    Yp = np.take(YT, index.pair_k, axis=0).reshape(-1, 9)      # (3P, 9): pair p's Y_k^T in rows 3p .. 3p + 2
+    Wp = np.take(WT, index.pair_l, axis=0).reshape(-1, 9)
+    blocks = np.empty((len(index.block_row), 9, 9))
+    for b, (s, e) in enumerate(zip((3 * index.block_ptr[:-1]).tolist(), (3 * index.block_ptr[1:]).tolist())):
+        blocks[b] = Yp[s:e].T @ Wp[s:e]
+    return blocks
+
+
+def reduced_camera_system(U: np.ndarray, YT: np.ndarray, WT: np.ndarray, index: ObservationIndex,
+                          dense: bool) -> np.ndarray | sp.spmatrix:
+    """S = U - W V^-1 W^T (9 nc, 9 nc) from U (nc, 9, 9), YT = (W V^-1)^T and WT = W^T (M, 3, 9).
+
+    U is block-diagonal (camera c's block at (c, c)); W V^-1 W^T has a block wherever two cameras
+    share a point. The upper triangle's blocks are computed (`_wvw_blocks`), the lower one mirrors them.
+    dense: a numpy array (for a dense Cholesky), else a scipy.sparse matrix.
+    """
+    nc = len(U)
+    blocks = -_wvw_blocks(YT, WT, index)
+    blocks[index.diag_block] += U
+    a, b = index.block_row, index.block_col
+    off = a != b
+    if dense:
+        S = np.zeros((nc, 9, nc, 9))
+        S[a, :, b, :] = blocks
+        S[b[off], :, a[off], :] = blocks[off].transpose(0, 2, 1)   # S_ba = S_ab^T
+        return S.reshape(9 * nc, 9 * nc)
+    row_ptr = np.r_[0, np.cumsum(np.bincount(a, minlength=nc))]
+    upper = sp.bsr_matrix((blocks, b, row_ptr), shape=(9 * nc, 9 * nc))
+    strict = sp.bsr_matrix((blocks * off[:, None, None], b, row_ptr), shape=(9 * nc, 9 * nc))
+    return upper + strict.T
 
 
 def _solve_reduced(S: np.ndarray | sp.spmatrix, rhs: np.ndarray, method: str) -> np.ndarray:
@@ -106,6 +195,24 @@ def _solve_reduced(S: np.ndarray | sp.spmatrix, rhs: np.ndarray, method: str) ->
     raise ValueError(f"method must be auto, dense, sparse or pcg, not {method!r}")
 
 
+def inverse_3x3(V: np.ndarray) -> np.ndarray:
+    """Inverses of a stack of 3x3 matrices V (n, 3, 3): adj(V) / det(V), the adjugate's rows being
+    cross products of V's columns (Cramer's rule); 4x faster than np.linalg.inv's batched LU.
+
+    A singular V (a point no step can move along some direction: seen once, lambda ~ 0) gets its
+    pseudo-inverse instead.
+    """
+    c0, c1, c2 = V[:, :, 0], V[:, :, 1], V[:, :, 2]
+    adj = np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], axis=1)   # adj(V) V = det(V) I
+    det = np.sum(adj[:, 0] * c0, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        Vinv = adj / det[:, None, None]
+    bad = ~np.isfinite(Vinv).all(axis=(1, 2))
+    if bad.any():
+        Vinv[bad] = np.linalg.pinv(V[bad])
+    return Vinv
+
+
 def schur_solve(U, V, W, g_c, g_p, cam_idx, pt_idx, method: str = "auto", pcg_tol: float = 1e-10,
                 index: ObservationIndex | None = None):
     """Exercise 5.11: Solve [[U, W], [W^T, V]] [dc; dp] = -[g_c; g_p] by eliminating the points (Schur complement).
@@ -117,8 +224,8 @@ def schur_solve(U, V, W, g_c, g_p, cam_idx, pt_idx, method: str = "auto", pcg_to
         S dc = -g_c + W V^-1 g_p,   S = U - W V^-1 W^T   (the reduced camera system, 9 nc square)
         dp = V^-1 (-g_p - W^T dc)                         (back-substitution, point by point)
 
-    S is one product of two block-sparse matrices, (W V^-1) (9nc x 3np, a 9x3 block per
-    observation) times W^T (3np x 9nc): one 9x3 @ 3x9 product per pair of observations of a point.
+    S has a 9x9 block wherever two cameras share a point: block (a, b) sums W_k V_j^-1 W_l^T over the
+    pairs of observations (k by a, l by b) of the points they share (`reduced_camera_system`).
     method: 'dense' (Cholesky of S as a dense array, Ceres' DENSE_SCHUR), 'sparse' (SuperLU
     factorisation of S, one thread), 'pcg' (conjugate gradients with a block-Jacobi preconditioner,
     never factorising S), or 'auto': sparse up to 20,000 unknowns (2,200 cameras), PCG beyond.
@@ -130,29 +237,19 @@ def schur_solve(U, V, W, g_c, g_p, cam_idx, pt_idx, method: str = "auto", pcg_to
     cam_idx, pt_idx = np.asarray(cam_idx), np.asarray(pt_idx)
     nc, n_pts = len(U), len(V)
     index = observation_index(cam_idx, pt_idx, nc, n_pts) if index is None else index
-    try:
-        Vinv = np.linalg.inv(V)                                # np independent 3x3 inverses
-    except np.linalg.LinAlgError:  # a point no step can move along some direction (seen once, lambda ~ 0)
-        Vinv = np.linalg.pinv(V)
-    Y = W @ Vinv[pt_idx]                                       # (M, 9, 3): W_k V_j^-1
-    rhs = -g_c.ravel() + _segment_sum(index.to_cams, (Y @ g_p[pt_idx, :, None])[:, :, 0], nc).ravel()
-    Ysp = _bsr(Y, index.by_cam, index.cam_ptr, pt_idx, 3 * n_pts)                          # (9nc, 3np)
-    WTsp = _bsr(W.transpose(0, 2, 1), index.by_point, index.point_ptr, cam_idx, 9 * nc)     # (3np, 9nc)
-    WVW = Ysp @ WTsp                                           # W V^-1 W^T, block-sparse (9nc, 9nc)
+    Vinv = inverse_3x3(V)                                      # np independent 3x3 inverses
+    WT = np.ascontiguousarray(W.transpose(0, 2, 1))            # (M, 3, 9): W_k^T
+    YT = Vinv[pt_idx] @ WT                                     # (M, 3, 9): (W_k V_j^-1)^T = V_j^-1 W_k^T
+    rhs = -g_c.ravel() + _segment_sum(index.to_cams, (g_p[pt_idx, None, :] @ YT)[:, 0], nc).ravel()
     if method == "auto":
         method = "sparse" if 9 * nc <= 20_000 else "pcg"
-    if method == "dense":
-        S = -WVW.toarray()
-        cams = np.arange(nc)
-        S.reshape(nc, 9, nc, 9)[cams, :, cams, :] += U          # U is block-diagonal: camera c's block at (c, c)
-    else:
-        S = sp.bsr_matrix((U, np.arange(nc), np.arange(nc + 1)), shape=(9 * nc, 9 * nc)) - WVW
+    S = reduced_camera_system(U, YT, WT, index, dense=method == "dense")
     if method == "pcg":
         dc = pcg_block_jacobi(S, rhs, 9, tol=pcg_tol, max_iter=max(100, 9 * nc))
     else:
         dc = _solve_reduced(S, rhs, method)
     dc = dc.reshape(nc, 9)
-    WT_dc = _segment_sum(index.to_points, (W.transpose(0, 2, 1) @ dc[cam_idx, :, None])[:, :, 0], n_pts)  # (np, 3)
+    WT_dc = _segment_sum(index.to_points, (WT @ dc[cam_idx, :, None])[:, :, 0], n_pts)  # (np, 3)
     dp = (Vinv @ (-g_p - WT_dc)[:, :, None])[:, :, 0]
     return dc, dp
 

@@ -226,14 +226,9 @@ def _schur(U, V, W, g_c, g_p, cam_idx, pt_idx, use_V=False, sign=1.0, back=1.0, 
     nc, n_pts = len(U), len(V)
     Vi = V if use_V else np.linalg.inv(V)
     Y = W @ Vi[pt_idx]
-    S = np.zeros((9 * nc, 9 * nc))
-    if with_U:
-        for c in range(nc):
-            S[9 * c:9 * c + 9, 9 * c:9 * c + 9] = U[c]
     index = ref_la.observation_index(cam_idx, pt_idx, nc, n_pts)
-    Ysp = ref_la._bsr(Y, index.by_cam, index.cam_ptr, pt_idx, 3 * n_pts)
-    WTsp = ref_la._bsr(W.transpose(0, 2, 1), index.by_point, index.point_ptr, cam_idx, 9 * nc)
-    S -= (Ysp @ WTsp).toarray()
+    S = ref_la.reduced_camera_system(np.asarray(U, float) if with_U else np.zeros((nc, 9, 9)),
+                                     Y.transpose(0, 2, 1), W.transpose(0, 2, 1), index, dense=True)
     rhs = -g_c.ravel() + ref_la._segment_sum(cam_idx, np.einsum("mij,mj->mi", Y, g_p[pt_idx]), nc).ravel()
     dc = (sign * np.linalg.lstsq(S, rhs, rcond=None)[0]).reshape(nc, 9)
     WT_dc = ref_la._segment_sum(pt_idx, np.einsum("mij,mi->mj", W, dc[cam_idx]), n_pts)
