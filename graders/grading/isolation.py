@@ -50,12 +50,18 @@ from graders.core.sandbox import TimeLimitExceeded, current_cotangent
 from graders.grading.callbacks import MAX_CONCURRENT, CallbackServing
 from graders.grading.learner import receive_bytes, send
 from graders.grading import users
+from graders.grading.processes import PidsLimit, cpu_of, tree
 from graders.grading.policy import refusal
 from graders.grading.quota import DISK_GB, POLL_S, DiskQuota, empty, unmount_stale
 from graders.grading.transport import RemoteError, gradients_back, loads, swap_callables, tensors_back
 
 MARGIN_S = 5.0          # the judge waits this much longer than the learner's own time limit
 CPU_SECONDS = 1800      # CPU time of one learner process (it is restarted after every time-out)
+# A case's time limit counts the CPU time the kernel reports for the learner's processes, as the learner's own
+# sandbox counts it, not wall-clock time: on a busy machine (a batch on every core, the first `import torch`
+# beside a venv being installed) a correct answer must not lose its points. Waiting (sleep, a lock, a pipe
+# nobody writes) uses no CPU, so wall-clock time still ends a call at this many times its limit.
+WALL_FACTOR = 3.0
 
 
 # ------------------------------------------------------------------ the learner process
@@ -83,106 +89,7 @@ def level() -> str:
     return _LEVEL
 
 
-PIDS_CGROUP = "/sys/fs/cgroup/pids"   # cgroup v1 pids controller (v2: the unified hierarchy's pids.max)
-
-
-class _PidsLimit:
-    """At most `n` processes and threads for one learner process and everything it starts: a cgroup
-    where the OS offers one to us (a fork bomb then stays in its own box, also beside other
-    submissions graded at the same time), else RLIMIT_NPROC (per user, so only a rough bound)."""
-
-    def __init__(self, n: int):
-        self.n, self.path = n, None
-        for root in (PIDS_CGROUP, "/sys/fs/cgroup"):
-            if os.path.exists(os.path.join(root, "cgroup.procs")) and os.access(root, os.W_OK):
-                _remove_stale(root)
-                path = os.path.join(root, f"cv3d-learner-{os.getpid()}-{id(self)}-{time.monotonic_ns()}")
-                try:
-                    os.mkdir(path)
-                    with open(os.path.join(path, "pids.max"), "w") as f:
-                        f.write(str(n))
-                    self.path = path
-                    break
-                except OSError:
-                    shutil.rmtree(path, ignore_errors=True)
-
-    def enter(self) -> None:   # in the child, between fork and exec
-        if self.path:
-            with open(os.path.join(self.path, "cgroup.procs"), "w") as f:
-                f.write(str(os.getpid()))
-        else:
-            try:
-                resource.setrlimit(resource.RLIMIT_NPROC, (_processes_of_this_user() + self.n,) * 2)
-            except (ValueError, OSError):
-                pass
-
-    def members(self) -> set[int]:
-        try:
-            with open(os.path.join(self.path, "cgroup.procs")) as f:
-                return {int(p) for p in f.read().split()}
-        except (OSError, TypeError):
-            return set()
-
-    def kill_all_but(self, keep: set[int]) -> int:
-        """Stop the processes the learner's code started and left running; returns how many."""
-        stray = 0
-        for _ in range(200):          # until none is left: a fork bomb refills its slots as we kill
-            extra = self.members() - keep
-            if not extra:
-                break
-            for pid in extra:
-                try:
-                    os.kill(pid, 9)
-                    stray += 1
-                except OSError:
-                    pass
-            time.sleep(0.005)
-        return stray
-
-    def close(self) -> None:
-        if not self.path:
-            return
-        for _ in range(100):          # kill until empty: a fork bomb keeps making new members
-            try:
-                with open(os.path.join(self.path, "cgroup.procs")) as f:
-                    pids = [int(p) for p in f.read().split()]
-            except OSError:
-                break
-            if not pids:
-                break
-            for pid in pids:
-                try:
-                    os.kill(pid, 9)
-                except OSError:
-                    pass
-            time.sleep(0.02)
-        for _ in range(50):           # members that were just killed take a moment to leave
-            try:
-                os.rmdir(self.path)
-                break
-            except OSError:
-                time.sleep(0.02)
-        self.path = None
-
-
-def _remove_stale(root: str) -> None:
-    """Empty cgroups of learner processes whose grader has ended (a killed grader cannot remove its own)."""
-    for name in os.listdir(root):
-        if not name.startswith("cv3d-learner-"):
-            continue
-        try:
-            owner = int(name.split("-")[2])
-            os.kill(owner, 0)              # the grader that made it is still running: leave it
-        except ProcessLookupError:
-            try:
-                os.rmdir(os.path.join(root, name))
-            except OSError:
-                pass
-        except (ValueError, IndexError, PermissionError):
-            pass
-
-
-def _limits(memory_gb: float, pids: _PidsLimit, max_file_gb: float) -> Callable[[], None]:
+def _limits(memory_gb: float, pids: PidsLimit, max_file_gb: float) -> Callable[[], None]:
     def apply() -> None:   # in the child, between fork and exec
         resource.setrlimit(resource.RLIMIT_AS, (int(memory_gb * 2**30),) * 2)
         resource.setrlimit(resource.RLIMIT_FSIZE, (int(max_file_gb * 2**30),) * 2)
@@ -191,15 +98,14 @@ def _limits(memory_gb: float, pids: _PidsLimit, max_file_gb: float) -> Callable[
     return apply
 
 
-def _processes_of_this_user() -> int:
-    uid = os.getuid()
-    count = 0
-    for pid in filter(str.isdigit, os.listdir("/proc")):
-        try:
-            count += os.stat(f"/proc/{pid}").st_uid == uid
-        except OSError:
-            pass
-    return count
+def _late(timeout: float, cpu_budget: float | None, backstop: float | None, waited: float) -> str:
+    """Why the judge stopped waiting for an answer."""
+    if cpu_budget is None or backstop is None:
+        return f"time limit of {max(timeout - MARGIN_S, 0.05):.3g} s exceeded"
+    if waited >= backstop:
+        return (f"time limit exceeded: no answer after {max(backstop - MARGIN_S, 0.05):.3g} s of wall-clock time "
+                "(waiting, not computing?)")
+    return f"time limit of {max(cpu_budget - MARGIN_S, 0.05):.3g} s exceeded (counted in CPU time)"
 
 
 ENV_KEPT = ("PATH", "LANG", "LC_ALL", "LC_CTYPE", "TZ", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS",
@@ -364,7 +270,7 @@ class LearnerProcess(CallbackServing):
         cmd = [PYTHON, "-I", "-S", "-c", boot, json.dumps(config)]
         if config["lockdown"]:
             cmd = ["unshare", *UNSHARE] + cmd
-        self.pids = _PidsLimit(self.max_processes)
+        self.pids = PidsLimit(self.max_processes)
         self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                      stderr=None if os.environ.get("CV3D_LEARNER_STDERR") else subprocess.DEVNULL,
                                      pass_fds=(req_r, res_w), cwd=self.home,
@@ -412,14 +318,27 @@ class LearnerProcess(CallbackServing):
                 empty(folder)
         raise RemoteError("crash", self.quota.message())
 
-    def _wait(self, deadline: float, watch: bool) -> None:
-        """Until the learner's reply starts (or the deadline passes), looking at its disk use meanwhile."""
+    def _wait(self, deadline: float, watch: bool, later: Callable[[], float | None] | None = None) -> float:
+        """Until the learner's reply starts or the deadline passes, looking at its disk use meanwhile; returns
+        the deadline, which `later()` may push back when it passes (None: it stands)."""
         while True:
             left = deadline - time.monotonic()
-            if select.select([self.res], [], [], max(min(left, POLL_S), 0.0))[0] or left <= 0:
-                return
+            if select.select([self.res], [], [], max(min(left, POLL_S), 0.0))[0]:
+                return deadline
+            if left <= 0:
+                pushed = later() if later else None
+                if pushed is None:
+                    return deadline
+                deadline = pushed
             if watch:
                 self.check_quota()
+
+    def cpu_seconds(self) -> float:
+        """CPU time (user + system) the kernel has counted for the learner's processes: the live ones and the
+        children they have reaped. Read by the judge from /proc: the learner's code cannot report it."""
+        if self.proc is None:
+            return 0.0
+        return sum(map(cpu_of, self.pids.members() or tree(self.proc.pid)))
 
     def __enter__(self) -> "LearnerProcess":
         self.start()
@@ -434,23 +353,37 @@ class LearnerProcess(CallbackServing):
         self.start()
 
     # -- requests
-    def _exchange(self, request: dict, timeout: float, callbacks: list[Callable] | None = None) -> dict:
-        """Send a request; serve the learner's callbacks until its reply; raise on silence or death."""
+    def _exchange(self, request: dict, timeout: float, callbacks: list[Callable] | None = None,
+                  cpu_budget: float | None = None, backstop: float | None = None) -> dict:
+        """Send a request; serve the learner's callbacks until its reply; raise on silence or death.
+
+        `timeout` is wall-clock time; with `cpu_budget`, the wait goes on past it while the learner's processes
+        have used less CPU than that since the request, up to `backstop` seconds of wall-clock time."""
+        cpu0 = self.cpu_seconds() if cpu_budget is not None else 0.0
         try:
             with self._sending:
                 send(self.req, request)
         except (BrokenPipeError, OSError):
             raise RemoteError("crash", self._death()) from None
-        deadline = time.monotonic() + timeout
+        start = time.monotonic()
+        deadline = start + timeout
+
+        def later() -> float | None:
+            if cpu_budget is None or backstop is None:
+                return None
+            now, used = time.monotonic(), self.cpu_seconds() - cpu0
+            if used >= cpu_budget or now >= start + backstop:
+                return None
+            return min(now + max(cpu_budget - used, POLL_S), start + backstop)
         watch = request["op"] in ("load", "call")        # what runs the learner's code
         serving: list[threading.Thread] = []
         try:
             while True:
                 try:
-                    self._wait(deadline, watch)
+                    deadline = self._wait(deadline, watch, later)
                     reply = loads(receive_bytes(self.res, deadline))
                 except TimeoutError:
-                    raise TimeLimitExceeded(f"time limit of {max(timeout - MARGIN_S, 0.05):.3g} s exceeded") from None
+                    raise TimeLimitExceeded(_late(timeout, cpu_budget, backstop, time.monotonic() - start)) from None
                 except EOFError:
                     raise RemoteError("crash", self._death()) from None
                 except (pickle.UnpicklingError, ValueError, TypeError, AttributeError, IndexError) as exc:
@@ -496,7 +429,7 @@ class RemoteFunction:
                  parent: "RemoteFunction | None" = None):
         self.learner, self.__name__, self.exercise = learner, name, exercise
         self.handle, self.parent = handle, parent
-        self.deadline: float | None = None
+        self.case: tuple[float, float, float] | None = None     # (limit, CPU used, wall-clock start) of a case
         self._stdout, self._mutated, self._used = [], [], set()
         self.died = ""    # how its process ended, if a call ended it (os._exit, a crash): later calls fail at once
 
@@ -506,13 +439,11 @@ class RemoteFunction:
         return RemoteFunction(self.learner, f"{self.__name__}'s returned function", self.exercise, handle, self)
 
     def __call__(self, *args, **kwargs):
-        timeout = self.exercise.timeout
-        if self.deadline is not None:
-            timeout = max(self.deadline - time.monotonic(), 0.05)
-        table: list[Callable] = []
         owner = self.parent or self
-        if self.parent is not None:
-            self.deadline = self.parent.deadline
+        limit, cpu_used, wall0 = owner.case or (self.exercise.timeout, 0.0, time.monotonic())
+        timeout = max(limit - cpu_used, 0.05)                                   # CPU time left for this case
+        backstop = max(WALL_FACTOR * limit - (time.monotonic() - wall0), 0.05)  # wall-clock time left
+        table: list[Callable] = []
         request = {"op": "call", "name": self.__name__, "handle": self.handle, "args": swap_callables(args, table),
                    "kwargs": swap_callables(kwargs, table), "timeout": timeout, "names": self.exercise.arg_names,
                    "cotangent": current_cotangent()}
@@ -520,8 +451,10 @@ class RemoteFunction:
             raise RemoteError("crash", f"{owner.died} (on an earlier case; this one was not run)")
         if self.learner.proc is None:     # another exercise's code ended it: a fresh process for this one
             self.learner._restart()
+        cpu0 = self.learner.cpu_seconds()
         try:
-            reply = self.learner._exchange(request, timeout + MARGIN_S, table)
+            reply = self.learner._exchange(request, min(timeout, backstop) + MARGIN_S, table,
+                                           cpu_budget=timeout + MARGIN_S, backstop=backstop + MARGIN_S)
         except TimeLimitExceeded:
             self.learner._restart()       # it did not answer: a fresh process for the next case
             raise
@@ -535,6 +468,8 @@ class RemoteFunction:
         if self.learner.pids.kill_all_but(self.learner.residents):   # processes it started and left running
             reply.setdefault("stdout", "")
             reply["stdout"] += "\n[the grader stopped processes your code started and left running]"
+        if owner.case:
+            owner.case = (limit, cpu_used + max(self.learner.cpu_seconds() - cpu0, 0.0), wall0)
         owner._stdout.append(reply.get("stdout", ""))
         owner._mutated += reply.get("mutated", [])
         owner._used |= set(reply.get("used", []))
@@ -559,7 +494,9 @@ class RemoteFunction:
         return out
 
     def begin_case(self, timeout: float) -> None:
-        self.deadline = time.monotonic() + timeout        # shared by every call this case makes
+        """Every call this case makes (and its returned functions make) shares `timeout` seconds of the
+        learner's CPU time and WALL_FACTOR times that of wall-clock time."""
+        self.case = (timeout, 0.0, time.monotonic())
 
     def end_case(self, exercise: Any) -> CaseReport:
         stdout, mutated, used = self.drain()

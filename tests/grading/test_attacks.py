@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from graders.grading import isolation, worker
+from graders.grading import isolation, processes, worker
 from graders.core.engine import Case, Exercise, get, shared_run
 from graders.grading.isolation import sandbox_level
 
@@ -332,6 +332,36 @@ def test_a_learner_that_ends_its_process_costs_one_start_not_one_per_case(level)
         assert learner.restarts == 1 and len(alive.cases) > 1 and "exit status" not in text(alive), text(alive)
     finally:
         graded.close()
+
+
+# ------------------------------------------------------------------ a busy machine is not the learner's fault
+
+def test_a_correct_answer_late_on_a_busy_machine_keeps_its_points_and_waiting_still_ends(level):
+    """CI failed 1.18 (30 s, the first `import torch` of its learner process) beside a venv being installed: the
+    judge's limit was wall-clock time. It now counts the CPU time the kernel reports for the learner's processes;
+    waiting (here: the learner stopped, as a starved process is) ends at WALL_FACTOR times the limit."""
+    import signal
+    import threading
+    from types import SimpleNamespace
+    from graders.core.sandbox import TimeLimitExceeded
+    source = "import time\ndef quick(x):\n    return x + 1\ndef waits(x):\n    time.sleep(600)\n"
+    ex = SimpleNamespace(id="t.1", timeout=1.0, arg_names=None)
+    with isolation.LearnerProcess(source) as learner:
+        pids = learner.pids.members() or processes.tree(learner.proc.pid)
+        quick, stopped = learner.function("quick", ex), 1.0 + isolation.MARGIN_S + 1.0   # past the old wall limit
+        quick.begin_case(ex.timeout)
+        for pid in pids:
+            os.kill(pid, signal.SIGSTOP)
+        threading.Timer(stopped, lambda: [os.kill(pid, signal.SIGCONT) for pid in pids]).start()
+        t0 = time.monotonic()
+        assert quick(1) == 2 and time.monotonic() - t0 >= stopped - 0.5
+        if level == "process":       # one level suffices for the wall-clock end: it does not read /proc
+            waits = learner.function("waits", ex)
+            waits.begin_case(ex.timeout)
+            t0 = time.monotonic()
+            with pytest.raises(TimeLimitExceeded, match="wall-clock"):
+                waits(1)
+            assert time.monotonic() - t0 < isolation.WALL_FACTOR * ex.timeout + isolation.MARGIN_S + 2.0
 
 
 def test_hidden_seeds_reach_the_worker_through_a_pipe_not_its_environment_or_argv(tmp_path, monkeypatch):
