@@ -19,7 +19,8 @@ MAX_CONCURRENT = 8      # grader callbacks served at once for one learner proces
 
 class CallbackServing:
     """The callback half of `LearnerProcess`: it sets `_sending` (a lock on the request pipe and the callback
-    table), `_slots` (a BoundedSemaphore(MAX_CONCURRENT)), `req`, `proc` and `stop()`."""
+    table), `_slots` (a BoundedSemaphore(MAX_CONCURRENT)), `req` (non-blocking), `_write_by` (the deadline of its writes: a
+    learner that stops reading makes a reply fail with TimeoutError, never blocks the judge), `proc` and `stop()`."""
 
     def _dispatch_callback(self, request: dict, callbacks: list[Callable], serving: list, deadline: float) -> None:
         """Serve one callback here, or in a thread of its own if its grader object asks to be served concurrently
@@ -78,7 +79,7 @@ class CallbackServing:
         with self._sending:      # the callback table and the pipe: one thread at a time
             if reply["ok"]:
                 reply["value"] = swap_callables(reply["value"], callbacks)
-            send(self.req, dict(reply, op="reply", id=request.get("id")))
+            send(self.req, dict(reply, op="reply", id=request.get("id")), deadline=self._write_by)
 
 
 def _callback_target(request: dict, callbacks: list[Callable]) -> Any:

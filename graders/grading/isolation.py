@@ -50,7 +50,7 @@ from graders.core.sandbox import TimeLimitExceeded, current_cotangent
 from graders.grading.callbacks import MAX_CONCURRENT, CallbackServing
 from graders.grading.learner import receive_bytes, send
 from graders.grading import users
-from graders.grading.processes import PidsLimit, cpu_of, tree
+from graders.grading.processes import PidsLimit
 from graders.grading.policy import refusal
 from graders.grading.quota import DISK_GB, POLL_S, DiskQuota, empty, unmount_stale
 from graders.grading.transport import RemoteError, gradients_back, loads, swap_callables, tensors_back
@@ -98,14 +98,14 @@ def _limits(memory_gb: float, pids: PidsLimit, max_file_gb: float) -> Callable[[
     return apply
 
 
-def _late(timeout: float, cpu_budget: float | None, backstop: float | None, waited: float) -> str:
-    """Why the judge stopped waiting for an answer."""
-    if cpu_budget is None or backstop is None:
+def _late(timeout: float, limit: float | None, waited: float, backstop: float | None) -> str:
+    """Why the judge stopped waiting for an answer (`limit`: the case's, in CPU seconds; None: a plain wait)."""
+    if limit is None:
         return f"time limit of {max(timeout - MARGIN_S, 0.05):.3g} s exceeded"
-    if waited >= backstop:
-        return (f"time limit exceeded: no answer after {max(backstop - MARGIN_S, 0.05):.3g} s of wall-clock time "
-                "(waiting, not computing?)")
-    return f"time limit of {max(cpu_budget - MARGIN_S, 0.05):.3g} s exceeded (counted in CPU time)"
+    if backstop is not None and waited >= backstop:
+        return (f"time limit exceeded: no answer after {waited:.0f} s of wall-clock time, for a limit of {limit:g} s "
+                "of CPU time (waiting, not computing?)")
+    return f"time limit of {limit:g} s exceeded (counted in CPU time)"
 
 
 ENV_KEPT = ("PATH", "LANG", "LC_ALL", "LC_CTYPE", "TZ", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS",
@@ -279,6 +279,8 @@ class LearnerProcess(CallbackServing):
         os.close(req_r)
         os.close(res_w)
         self.req, self.res = req_w, res_r
+        os.set_blocking(self.req, False)   # every write has a deadline: a learner that stops reading cannot block us
+        self._write_by = time.monotonic() + 120.0
         try:
             reply = self._exchange({"op": "load", "source": self.source}, timeout=120.0)
             self.problem = "" if reply.get("ok") else reply.get("error", "your code failed to load")
@@ -319,26 +321,25 @@ class LearnerProcess(CallbackServing):
         raise RemoteError("crash", self.quota.message())
 
     def _wait(self, deadline: float, watch: bool, later: Callable[[], float | None] | None = None) -> float:
-        """Until the learner's reply starts or the deadline passes, looking at its disk use meanwhile; returns
-        the deadline, which `later()` may push back when it passes (None: it stands)."""
+        """Until the learner's next message starts, looking at its disk use meanwhile; returns the deadline, which
+        `later()` may push back when it passes (None: it stands, and TimeoutError). Checked before every message,
+        so a stream of callback requests cannot keep the call alive past it."""
         while True:
+            if time.monotonic() >= deadline:
+                pushed = later() if later else None
+                if pushed is None:
+                    raise TimeoutError
+                deadline = pushed
             left = deadline - time.monotonic()
             if select.select([self.res], [], [], max(min(left, POLL_S), 0.0))[0]:
                 return deadline
-            if left <= 0:
-                pushed = later() if later else None
-                if pushed is None:
-                    return deadline
-                deadline = pushed
             if watch:
                 self.check_quota()
 
     def cpu_seconds(self) -> float:
-        """CPU time (user + system) the kernel has counted for the learner's processes: the live ones and the
-        children they have reaped. Read by the judge from /proc: the learner's code cannot report it."""
-        if self.proc is None:
-            return 0.0
-        return sum(map(cpu_of, self.pids.members() or tree(self.proc.pid)))
+        """CPU time (user + system) the kernel has counted for the learner's processes (`PidsLimit.cpu_seconds`):
+        read by the judge, never reported by the learner's code."""
+        return 0.0 if self.proc is None else self.pids.cpu_seconds(self.proc.pid)
 
     def __enter__(self) -> "LearnerProcess":
         self.start()
@@ -354,36 +355,40 @@ class LearnerProcess(CallbackServing):
 
     # -- requests
     def _exchange(self, request: dict, timeout: float, callbacks: list[Callable] | None = None,
-                  cpu_budget: float | None = None, backstop: float | None = None) -> dict:
+                  cpu_budget: float | None = None, backstop: float | None = None, limit: float | None = None) -> dict:
         """Send a request; serve the learner's callbacks until its reply; raise on silence or death.
 
         `timeout` is wall-clock time; with `cpu_budget`, the wait goes on past it while the learner's processes
-        have used less CPU than that since the request, up to `backstop` seconds of wall-clock time."""
+        have used less CPU than that since the request, up to `backstop` seconds of wall-clock time (`limit`: the
+        case's limit, for the message)."""
         cpu0 = self.cpu_seconds() if cpu_budget is not None else 0.0
+        start = time.monotonic()
+        deadline, last = start + timeout, start + max(timeout, backstop or 0.0)
+        self._write_by = last              # the judge's writes (this request, callback replies) wait that long at most
         try:
             with self._sending:
-                send(self.req, request)
-        except (BrokenPipeError, OSError):
+                send(self.req, request, deadline=last)
+        except TimeoutError:
+            raise TimeLimitExceeded(_late(timeout, limit, time.monotonic() - start, backstop)) from None
+        except OSError:
             raise RemoteError("crash", self._death()) from None
-        start = time.monotonic()
-        deadline = start + timeout
 
         def later() -> float | None:
             if cpu_budget is None or backstop is None:
                 return None
             now, used = time.monotonic(), self.cpu_seconds() - cpu0
-            if used >= cpu_budget or now >= start + backstop:
+            if used >= cpu_budget or now >= last:
                 return None
-            return min(now + max(cpu_budget - used, POLL_S), start + backstop)
+            return min(now + max(cpu_budget - used, POLL_S), last)
         watch = request["op"] in ("load", "call")        # what runs the learner's code
         serving: list[threading.Thread] = []
         try:
             while True:
                 try:
                     deadline = self._wait(deadline, watch, later)
-                    reply = loads(receive_bytes(self.res, deadline))
+                    reply = loads(receive_bytes(self.res, max(deadline, last)))   # a started message: to the end
                 except TimeoutError:
-                    raise TimeLimitExceeded(_late(timeout, cpu_budget, backstop, time.monotonic() - start)) from None
+                    raise TimeLimitExceeded(_late(timeout, limit, time.monotonic() - start, backstop)) from None
                 except EOFError:
                     raise RemoteError("crash", self._death()) from None
                 except (pickle.UnpicklingError, ValueError, TypeError, AttributeError, IndexError) as exc:
@@ -393,7 +398,10 @@ class LearnerProcess(CallbackServing):
                     if watch:
                         self.check_quota()
                     return reply
-                self._dispatch_callback(reply, callbacks or [], serving, deadline)
+                try:
+                    self._dispatch_callback(reply, callbacks or [], serving, deadline)
+                except TimeoutError:       # it stopped reading the grader's replies
+                    raise TimeLimitExceeded(_late(timeout, limit, time.monotonic() - start, backstop)) from None
         finally:
             self._join(serving, deadline)
 
@@ -441,8 +449,10 @@ class RemoteFunction:
     def __call__(self, *args, **kwargs):
         owner = self.parent or self
         limit, cpu_used, wall0 = owner.case or (self.exercise.timeout, 0.0, time.monotonic())
-        timeout = max(limit - cpu_used, 0.05)                                   # CPU time left for this case
-        backstop = max(WALL_FACTOR * limit - (time.monotonic() - wall0), 0.05)  # wall-clock time left
+        # What is left of the case's limit (CPU) and of its backstop (wall clock), the margin once per case
+        timeout = max(limit - cpu_used, 0.05)
+        cpu_left = max(limit + MARGIN_S - cpu_used, 0.05)
+        wall_left = max(WALL_FACTOR * limit + MARGIN_S - (time.monotonic() - wall0), 0.05)
         table: list[Callable] = []
         request = {"op": "call", "name": self.__name__, "handle": self.handle, "args": swap_callables(args, table),
                    "kwargs": swap_callables(kwargs, table), "timeout": timeout, "names": self.exercise.arg_names,
@@ -453,8 +463,8 @@ class RemoteFunction:
             self.learner._restart()
         cpu0 = self.learner.cpu_seconds()
         try:
-            reply = self.learner._exchange(request, min(timeout, backstop) + MARGIN_S, table,
-                                           cpu_budget=timeout + MARGIN_S, backstop=backstop + MARGIN_S)
+            reply = self.learner._exchange(request, min(cpu_left, wall_left), table, cpu_budget=cpu_left,
+                                           backstop=wall_left, limit=limit)
         except TimeLimitExceeded:
             self.learner._restart()       # it did not answer: a fresh process for the next case
             raise

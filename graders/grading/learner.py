@@ -37,11 +37,20 @@ _safe_call: Callable | None = None   # graders.core.sandbox.safe_call, kept befo
 
 # ------------------------------------------------------------------ framing (shared with the judge)
 
-def send(fd: int, obj: Any) -> None:
+def send(fd: int, obj: Any, deadline: float | None = None) -> None:
+    """One frame. With a deadline (time.monotonic()), on a non-blocking fd: TimeoutError when the reader has not
+    taken it all by then (the judge's writes to a learner that stopped reading)."""
     data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
     view = memoryview(struct.pack("!Q", len(data)) + data)
     while view:
-        n = os.write(fd, view)
+        if deadline is not None:
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([], [fd], [], left)[1]:
+                raise TimeoutError("the reader stopped reading")
+        try:
+            n = os.write(fd, view)
+        except BlockingIOError:
+            continue
         view = view[n:]
 
 

@@ -1,5 +1,7 @@
 """The learner's processes as the judge sees them, from the kernel's side: a pids cgroup that bounds how many
-it may start (and lists them), and the CPU time they have used (/proc), which the learner cannot report falsely."""
+it may start (and lists them), and the CPU time they have used, which the learner cannot report falsely: a cgroup's
+CPU account (cgroup v1 cpuacct, v2 cpu.stat) counts every task that ever ran in it, also children that ended
+unreaped or were never waited for (SIGCHLD ignored); without one, /proc (live processes and what they reaped)."""
 from __future__ import annotations
 
 import os
@@ -8,6 +10,7 @@ import shutil
 import time
 
 PIDS_CGROUP = "/sys/fs/cgroup/pids"   # cgroup v1 pids controller (v2: the unified hierarchy's pids.max)
+CPUACCT_CGROUP = "/sys/fs/cgroup/cpuacct"   # cgroup v1 CPU accounting (v2: cpu.stat in the same cgroup)
 
 
 class PidsLimit:
@@ -16,11 +19,13 @@ class PidsLimit:
     submissions graded at the same time), else RLIMIT_NPROC (per user, so only a rough bound)."""
 
     def __init__(self, n: int):
-        self.n, self.path = n, None
+        self.n, self.path, self.cpu_path = n, None, None
+        self._seen: dict[tuple[int, int], float] = {}     # /proc fallback: (pid, start time) -> most CPU seen
+        name = f"cv3d-learner-{os.getpid()}-{id(self)}-{time.monotonic_ns()}"
         for root in (PIDS_CGROUP, "/sys/fs/cgroup"):
             if os.path.exists(os.path.join(root, "cgroup.procs")) and os.access(root, os.W_OK):
                 _remove_stale(root)
-                path = os.path.join(root, f"cv3d-learner-{os.getpid()}-{id(self)}-{time.monotonic_ns()}")
+                path = os.path.join(root, name)
                 try:
                     os.mkdir(path)
                     with open(os.path.join(path, "pids.max"), "w") as f:
@@ -29,8 +34,20 @@ class PidsLimit:
                     break
                 except OSError:
                     shutil.rmtree(path, ignore_errors=True)
+        if self.path and os.path.exists(os.path.join(self.path, "cpu.stat")):
+            self.cpu_path = self.path                     # v2: the same cgroup accounts its CPU
+        elif os.path.exists(os.path.join(CPUACCT_CGROUP, "cpuacct.usage")) and os.access(CPUACCT_CGROUP, os.W_OK):
+            _remove_stale(CPUACCT_CGROUP)
+            try:
+                os.mkdir(os.path.join(CPUACCT_CGROUP, name))
+                self.cpu_path = os.path.join(CPUACCT_CGROUP, name)
+            except OSError:
+                pass
 
     def enter(self) -> None:   # in the child, between fork and exec
+        if self.cpu_path and self.cpu_path != self.path:
+            with open(os.path.join(self.cpu_path, "cgroup.procs"), "w") as f:
+                f.write(str(os.getpid()))
         if self.path:
             with open(os.path.join(self.path, "cgroup.procs"), "w") as f:
                 f.write(str(os.getpid()))
@@ -39,6 +56,26 @@ class PidsLimit:
                 resource.setrlimit(resource.RLIMIT_NPROC, (processes_of_this_user() + self.n,) * 2)
             except (ValueError, OSError):
                 pass
+
+    def cpu_seconds(self, root: int) -> float:
+        """User + system CPU seconds of everything that ran in the learner's cgroups; without a CPU-accounting
+        cgroup, of `root`'s process tree as /proc shows it, each process counted at the most it was ever seen
+        using (a process that ended unreaped, or whose parent ignores SIGCHLD, leaves no trace in /proc, so its
+        CPU is lost there from the first look at it on: this count can then be low, never decrease)."""
+        if self.cpu_path:
+            try:
+                if self.cpu_path == self.path:
+                    with open(os.path.join(self.cpu_path, "cpu.stat")) as f:
+                        return next(int(line.split()[1]) for line in f if line.startswith("usage_usec")) / 1e6
+                with open(os.path.join(self.cpu_path, "cpuacct.usage")) as f:
+                    return int(f.read()) / 1e9
+            except (OSError, ValueError, StopIteration):
+                pass
+        for pid in self.members() or tree(root):
+            key, cpu = _stat(pid)
+            if key is not None:
+                self._seen[key] = max(self._seen.get(key, 0.0), cpu)
+        return sum(self._seen.values())
 
     def members(self) -> set[int]:
         try:
@@ -64,6 +101,9 @@ class PidsLimit:
         return stray
 
     def close(self) -> None:
+        if self.cpu_path and self.cpu_path != self.path:
+            _remove_when_empty(self.cpu_path)
+            self.cpu_path = None
         if not self.path:
             return
         for _ in range(100):          # kill until empty: a fork bomb keeps making new members
@@ -106,14 +146,26 @@ def _remove_stale(root: str) -> None:
             pass
 
 
-def cpu_of(pid: int) -> float:
-    """User + system CPU seconds of one process, its threads and its reaped children (/proc/<pid>/stat)."""
+def _stat(pid: int) -> tuple[tuple[int, int] | None, float]:
+    """((pid, start time), user + system CPU seconds of the process, its threads and its reaped children) from
+    /proc/<pid>/stat; (None, 0) when it is gone or unreadable (the wall-clock backstop then still holds)."""
     try:
         with open(f"/proc/{pid}/stat", "rb") as f:
-            fields = f.read().rsplit(b")", 1)[1].split()
-    except (OSError, IndexError):
-        return 0.0      # gone, or not ours to read (then the wall-clock backstop still holds)
-    return sum(int(v) for v in fields[11:15]) / _TICKS     # utime, stime, cutime, cstime (fields 14-17)
+            fields = f.read().rsplit(b")", 1)[1].split()   # after the name, which may hold ')' and spaces
+        return (pid, int(fields[19])), sum(int(v) for v in fields[11:15]) / _TICKS   # fields 22; 14-17
+    except (OSError, IndexError, ValueError):
+        return None, 0.0
+
+
+def _remove_when_empty(path: str) -> None:
+    for _ in range(50):               # its members were just killed (with the pids cgroup's): they take a moment
+        try:
+            os.rmdir(path)
+            return
+        except FileNotFoundError:
+            return
+        except OSError:
+            time.sleep(0.02)
 
 
 _TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100

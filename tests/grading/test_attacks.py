@@ -364,6 +364,60 @@ def test_a_correct_answer_late_on_a_busy_machine_keeps_its_points_and_waiting_st
             assert time.monotonic() - t0 < isolation.WALL_FACTOR * ex.timeout + isolation.MARGIN_S + 2.0
 
 
+HIDDEN_CPU = """
+import os, signal, time
+def work(x):
+    signal.signal(signal.SIGCHLD, signal.SIG_IGN)     # children vanish unreaped: /proc keeps no trace of their CPU
+    for _ in range(4):
+        if os.fork() == 0:
+            end = time.process_time() + 0.3
+            while time.process_time() < end:
+                pass
+            os._exit(0)
+    time.sleep(2.0)                                   # the main thread computes nothing: its own sandbox is quiet
+    return x
+"""
+
+
+def test_cpu_of_children_that_vanish_unreaped_is_counted(level):
+    """The judge counts the learner's CPU with a cgroup's CPU account, which keeps what its ended tasks used:
+    summing /proc over live processes lost children whose parent ignores SIGCHLD (reviewer's finding)."""
+    from types import SimpleNamespace
+    ex = SimpleNamespace(id="t.2", timeout=20.0, arg_names=None)
+    with isolation.LearnerProcess(HIDDEN_CPU) as learner:
+        if learner.pids.cpu_path is None:
+            pytest.skip("no CPU-accounting cgroup here: the /proc fallback cannot see these children")
+        fn = learner.function("work", ex)
+        fn.begin_case(ex.timeout)
+        before = learner.cpu_seconds()
+        assert fn(3) == 3
+        assert learner.cpu_seconds() - before >= 1.0, learner.cpu_seconds() - before      # 4 x 0.3 s burnt
+
+
+FLOOD = """
+import sys
+def flood(x):        # callback requests the judge must answer, and never a read of its replies
+    channel = sys.modules["cv3d_learner"]
+    for i in range(5000):
+        channel.send(channel._fds[1], {"op": "callback", "index": 10**6, "args": (), "kwargs": {}, "id": 10**9 + i})
+"""
+
+
+def test_a_learner_that_stops_reading_cannot_block_the_judge():
+    """Replies to its callback requests fill the pipe it never reads: the judge's writes have a deadline (they
+    blocked it until the runner's 120 s kill, reviewer's finding), and the call ends at the case's backstop."""
+    from types import SimpleNamespace
+    from graders.core.sandbox import TimeLimitExceeded
+    ex = SimpleNamespace(id="t.3", timeout=0.5, arg_names=None)
+    with isolation.LearnerProcess(FLOOD) as learner:
+        fn = learner.function("flood", ex)
+        fn.begin_case(ex.timeout)
+        t0 = time.monotonic()
+        with pytest.raises(TimeLimitExceeded):
+            fn(1)
+        assert time.monotonic() - t0 < isolation.WALL_FACTOR * ex.timeout + isolation.MARGIN_S + 3.0
+
+
 def test_hidden_seeds_reach_the_worker_through_a_pipe_not_its_environment_or_argv(tmp_path, monkeypatch):
     """A learner running as the grader's user could read /proc/<worker>/environ and every cmdline."""
     import subprocess
