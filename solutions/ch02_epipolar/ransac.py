@@ -432,12 +432,14 @@ def ransac_essential(x1: np.ndarray, x2: np.ndarray, K1: np.ndarray, K2: np.ndar
         return None, None, None, inl
     # Final polish: the projected 8-point refit is cheap but biased; minimise the Sampson distance
     # on the inliers, and once more if the better model changed the inlier set.
+    cost = np.minimum(residuals(E[None])[0] ** 2, threshold ** 2).sum()
     for _ in range(2):
         E_new = refine_essential(E, x1[inl], x2[inl], K1, K2)
         r = residuals(E_new[None])[0]
-        if np.minimum(r * r, threshold ** 2).sum() > np.minimum(residuals(E[None])[0] ** 2, threshold ** 2).sum():
+        cost_new = np.minimum(r * r, threshold ** 2).sum()
+        if cost_new > cost:
             break
-        E, unchanged = E_new, np.array_equal(inl, r < threshold)
+        E, cost, unchanged = E_new, cost_new, np.array_equal(inl, r < threshold)
         inl = r < threshold
         if unchanged:
             break
