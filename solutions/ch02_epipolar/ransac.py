@@ -360,7 +360,8 @@ def refine_essential(E: np.ndarray, x1: np.ndarray, x2: np.ndarray, K1: np.ndarr
     """Levenberg-Marquardt on the Sampson distance (px) over essential matrices E = [t]x R near E.
 
     Each step moves on the manifold of essential matrices: R <- Exp(w) R, and t <- t + b_1 u_1 + b_2 u_2
-    (then unit length), (u_1, u_2) a basis of the tangent plane of the unit sphere at t: 5 parameters
+    (then unit length), (u_1, u_2) spanning the tangent plane of the unit sphere at t (the plane at
+    the starting t, projected onto the current one: t moves little): 5 parameters
     p = (w, b). Their derivatives at p = 0 are exact and cheap: d E / d w_k = [t]x [e_k]x R,
     d E / d b_j = [u_j]x R, and through F = K2^-T E K1^-1 the Sampson distance's Jacobian follows in
     closed form (`_sampson_with_derivatives`). An 8-point fit projected onto the essential manifold is
@@ -370,15 +371,17 @@ def refine_essential(E: np.ndarray, x1: np.ndarray, x2: np.ndarray, K1: np.ndarr
     K1i, K2it = np.linalg.inv(K1), np.linalg.inv(K2).T
     x1t, x2t = to_h(x1).T.copy(), to_h(x2).T.copy()                # (3, N): the points as columns
 
+    R, t = decompose_essential(E)[0]
+    start = np.linalg.svd(t[None])[2][1:]                          # (2, 3): orthogonal to the first t
+
     def probe(R, t):           # residuals at (R, t) and their Jacobian in the 5 parameters, (N,), (N, 5)
-        tangent = np.linalg.svd(t[None])[2][1:]                    # (2, 3): u_1, u_2 orthogonal to t
+        tangent = start - (start @ t)[:, None] * t                  # u_1, u_2: the start's, projected on t's tangent plane
         S = skew(np.concatenate([t[None], tangent]))                # [t]x, [u_1]x, [u_2]x
         # E = [t]x R and its derivatives, all of the form L R: L = [t]x, [t]x [e_k]x (k = 0, 1, 2), [u_j]x
         L = np.concatenate([S[:1], S[0] @ _GENERATORS, S[1:]])      # (6, 3, 3)
         M = K2it @ L @ (R @ K1i)                                    # F = K2^-T E K1^-1 and its derivatives
         return _sampson_with_derivatives(M, x1t, x2t) + (tangent,)
 
-    R, t = decompose_essential(E)[0]
     r, J, tangent = probe(R, t)
     lam = 1e-3
     for _ in range(iters):
