@@ -24,12 +24,17 @@ def from_h(x: np.ndarray) -> np.ndarray:
 
 
 def skew(v: np.ndarray) -> np.ndarray:
-    """The cross-product matrix [v]x with [v]x @ u = v x u. v: (..., 3) -> (..., 3, 3)."""
+    """The cross-product matrix [v]x with [v]x @ u = v x u. v: (..., 3) -> (..., 3, 3).
+
+    [v]x is linear in v: v_0 [e_0]x + v_1 [e_1]x + v_2 [e_2]x, one product with the three generators
+    (exact: every entry is one v_k times 0 or ±1)."""
     v = np.asarray(v, float)
-    z = np.zeros(v.shape[:-1])
-    return np.stack([np.stack([z, -v[..., 2], v[..., 1]], -1),
-                     np.stack([v[..., 2], z, -v[..., 0]], -1),
-                     np.stack([-v[..., 1], v[..., 0], z], -1)], -2)
+    return (v @ _SKEW_GENERATORS).reshape(v.shape[:-1] + (3, 3))
+
+
+_SKEW_GENERATORS = np.array([[0, 0, 0, 0, 0, -1, 0, 1, 0],       # [e_0]x, [e_1]x, [e_2]x, row-major
+                             [0, 0, 1, 0, 0, 0, -1, 0, 0],
+                             [0, -1, 0, 1, 0, 0, 0, 0, 0]], float)
 
 
 def rodrigues(w: np.ndarray) -> np.ndarray:

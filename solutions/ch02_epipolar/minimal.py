@@ -38,18 +38,27 @@ def null_space(A: np.ndarray, dim: int) -> np.ndarray:
     return np.linalg.svd(A, full_matrices=True)[2][..., -dim:, :]
 
 
+_CUBIC_AT = np.array([0.0, 1.0, -1.0, 2.0])
+_CUBIC_FROM_VALUES = np.linalg.inv(np.vander(_CUBIC_AT, 4))      # a cubic's values at _CUBIC_AT -> its coefficients
+
+
 def _seven_point_rows(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The 7-point solver on the rows of A f = 0 (Hartley-normalised): A: (B, 7, 9) ->
     (Fn: (B, 3, 3, 3) in the normalised coordinates, valid: (B, 3))."""
-    N = null_space(A, 2)                                          # (B, 2, 9)
+    # Two vectors spanning the null space: fix f's last two entries to (1, 0) and (0, 1), and A f = 0
+    # leaves a 7 x 7 system for the other seven; one batched solve for both, ~3x cheaper than the
+    # orthonormal basis of `null_space` (a singular 7 x 7 block, rare, falls back to it).
+    try:
+        head = np.linalg.solve(A[:, :, :7], -A[:, :, 7:])             # (B, 7, 2)
+        N = np.concatenate([np.swapaxes(head, 1, 2), np.broadcast_to(np.eye(2), (len(A), 2, 2))], axis=2)
+    except np.linalg.LinAlgError:
+        N = null_space(A, 2)                                          # (B, 2, 9)
     F1, F2 = N[:, 1].reshape(-1, 3, 3), N[:, 0].reshape(-1, 3, 3)
     # det(a F1 + (1 - a) F2) = det(F2 + a D) is a cubic in a; its 4 coefficients follow exactly
     # from 4 evaluations (the Vandermonde system of a cubic through 4 points).
     D = F1 - F2
-    a = np.array([0.0, 1.0, -1.0, 2.0])
-    dets = np.linalg.det(F2[:, None] + a[None, :, None, None] * D[:, None])  # (B, 4)
-    V = np.vander(a, 4)                                           # columns a^3, a^2, a, 1
-    coeffs = np.linalg.solve(V, dets.T).T                         # (B, 4)
+    dets = np.linalg.det(F2[:, None] + _CUBIC_AT[None, :, None, None] * D[:, None])  # (B, 4)
+    coeffs = dets @ _CUBIC_FROM_VALUES.T                          # (B, 4)
     roots, valid = _real_cubic_roots(coeffs)
     return F2[:, None] + roots[:, :, None, None] * D[:, None], valid   # (B, 3, 3, 3)
 
