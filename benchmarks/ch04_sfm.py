@@ -200,5 +200,113 @@ def run() -> list[dict]:
     return [row for name in SETS for row in run_set(name)]
 
 
+# --- Issue 30 (item 2): sets that reproduce the pitfalls of unseen phone photos -----------------------------
+# `python -m benchmarks.ch04_sfm variants [NAME ...]`. Each variant is written into a temporary folder at run
+# time (nothing is copied into the repository): pycolmap and the reference run once each on it.
+#   sceaux, sacre_coeur   the two sets as they are
+#   sceaux_1280           Sceaux downscaled to 1280 px (EXIF kept): what a phone's "reduced size" export gives
+#   sceaux_noexif         EXIF stripped: nothing says the 11 photos share one camera
+#   sceaux_exif_off       EXIF focal length (and its 35 mm equivalent) written 40 % too long: a wrong prior
+#   sceaux_first5         the 5 consecutive photos 100_7100-7104 alone: walked along the facade, narrow baselines
+#   sceaux_burst          Sceaux plus two burst shots of 100_7105 (rotated 0.5 and 1 degree about the centre: no
+#                         baseline at all, and they are the best-matched pairs, so a naive initial pair takes them)
+VARIANTS = ("sceaux", "sacre_coeur", "sceaux_1280", "sceaux_noexif", "sceaux_exif_off", "sceaux_first5",
+            "sceaux_burst")
+
+
+def _save(im, dst: Path, exif) -> None:
+    im.save(dst, quality=95, **({"exif": exif} if exif is not None else {}))
+
+
+def make_variant(name: str, tmp: Path) -> tuple[Path, float | None]:
+    """Write variant `name` into tmp/name; returns (folder, true focal length in its pixels, or None)."""
+    from PIL import Image
+
+    from graders.kit import datasets
+
+    src = Path(datasets.path("sacre_coeur" if name == "sacre_coeur" else "sceaux_castle"))
+    if name in ("sceaux", "sacre_coeur"):
+        return src, known_focal(src)
+    out = tmp / name
+    out.mkdir()
+    f_true = known_focal(src)
+    paths = sorted(p for p in src.iterdir() if p.suffix.lower() in (".jpg", ".jpeg", ".png"))
+    if name == "sceaux_first5":
+        paths = paths[:5]
+    for p in paths:
+        with Image.open(p) as im:
+            exif = im.getexif()
+            if name == "sceaux_1280":
+                s = 1280 / max(im.size)
+                _save(im.resize((round(im.size[0] * s), round(im.size[1] * s)), Image.Resampling.LANCZOS),
+                      out / p.name, exif)
+                f_true_scaled = f_true * s
+            elif name == "sceaux_noexif":
+                _save(im.convert("RGB"), out / p.name, None)
+            elif name == "sceaux_exif_off":
+                ifd = exif.get_ifd(0x8769)
+                ifd[37386] = float(ifd[37386]) * 1.4             # focal length (mm)
+                if 41989 in ifd:                                  # and its 35 mm equivalent
+                    ifd[41989] = round(ifd[41989] * 1.4)
+                _save(im, out / p.name, exif)
+            else:
+                _save(im, out / p.name, exif)
+                if name == "sceaux_burst" and p.stem.endswith("7105"):
+                    for k, angle in enumerate((0.5, 1.0)):
+                        _save(im.rotate(angle, Image.Resampling.BICUBIC), out / f"{p.stem}b{k}{p.suffix}", exif)
+    return out, (f_true_scaled if name == "sceaux_1280" else f_true)
+
+
+def _focal_ratio(cams: dict, f_true: float | None, other: dict) -> str:
+    """Median (min-max) of f / f_true over the registered images, or of f / pycolmap's f where no truth."""
+    if f_true:
+        r = np.array([c["f"] / f_true for c in cams.values()])
+    else:
+        r = np.array([cams[n]["f"] / other[n]["f"] for n in sorted(set(cams) & set(other))])
+    return f"{np.median(r):.3f} ({r.min():.2f}-{r.max():.2f})" if len(r) else "-"
+
+
+def run_variant(name: str) -> list[dict]:
+    """pycolmap and the reference once each on one variant; one row per pipeline."""
+    with tempfile.TemporaryDirectory() as tmp:
+        folder, f_true = make_variant(name, Path(tmp))
+        n = len([p for p in folder.iterdir() if p.suffix.lower() in (".jpg", ".jpeg", ".png")])
+        load = os.getloadavg()[0]
+        col = run_pycolmap(folder)
+        ref = run_reference(folder)
+    agree = rotation_agreement(ref["cameras"], col["cameras"])
+    rows = []
+    for label, r in (("pycolmap", col), ("reference", ref)):
+        rows.append({"set": name, "pipeline": label, "registered": f"{len(r['cameras'])}/{n}",
+                     "rot vs pycolmap aligned median/max": "-" if r is col else
+                     f"{agree['aligned_median']:.2f}° / {agree['aligned_max']:.2f}°" if agree["common"] > 2 else "n/a",
+                     "f / truth" if f_true else "f / pycolmap": _focal_ratio(r["cameras"], f_true, col["cameras"]),
+                     "reproj px": f"{r['reproj']:.2f}", "total s": f"{r['timings']['total']:.1f}",
+                     "time / pycolmap": f"{r['timings']['total'] / col['timings']['total']:.2f}×",
+                     "load": f"{load:.1f}"})
+    left = ref["recon"].get("left_out")
+    if left:
+        rows[-1]["left out"] = "; ".join(f"{ref['recon']['names'][i]}: {why}" for i, why in left.items())
+    else:
+        rows[-1]["left out"] = ", ".join(sorted(set(col["cameras"]) - set(ref["cameras"]))) or "-"
+    return rows
+
+
+def run_variants(names=VARIANTS) -> list[dict]:
+    rows = []
+    for name in names:
+        rows += run_variant(name)
+        print(table(rows[-2:], list(rows[-1])), flush=True)
+    print("\nall variants (f / truth: K.txt scaled to the variant's pixels; Sacre Coeur: f / pycolmap's)")
+    cols = list(dict.fromkeys(k for r in rows for k in r))
+    print(table(rows, cols))
+    return rows
+
+
 if __name__ == "__main__":
-    run()
+    import sys
+
+    if len(sys.argv) > 1 and sys.argv[1] == "variants":
+        run_variants(sys.argv[2:] or VARIANTS)
+    else:
+        run()
