@@ -205,13 +205,15 @@ def run() -> list[dict]:
 # time (nothing is copied into the repository): pycolmap and the reference run once each on it.
 #   sceaux, sacre_coeur   the two sets as they are
 #   sceaux_1280           Sceaux downscaled to 1280 px (EXIF kept): what a phone's "reduced size" export gives
+#   sceaux_640            downscaled to 640 px: fewer features, fewer points per image for PnP
+#   sceaux_sparse         every other photo (6): less overlap, wider baselines, each image seen by fewer points
 #   sceaux_noexif         EXIF stripped: nothing says the 11 photos share one camera
 #   sceaux_exif_off       EXIF focal length (and its 35 mm equivalent) written 40 % too long: a wrong prior
 #   sceaux_first5         the 5 consecutive photos 100_7100-7104 alone: walked along the facade, narrow baselines
 #   sceaux_burst          Sceaux plus two burst shots of 100_7105 (rotated 0.5 and 1 degree about the centre: no
 #                         baseline at all, and they are the best-matched pairs, so a naive initial pair takes them)
 VARIANTS = ("sceaux", "sacre_coeur", "sceaux_1280", "sceaux_noexif", "sceaux_exif_off", "sceaux_first5",
-            "sceaux_burst")
+            "sceaux_burst", "sceaux_640", "sceaux_sparse")
 
 
 def _save(im, dst: Path, exif) -> None:
@@ -233,11 +235,13 @@ def make_variant(name: str, tmp: Path) -> tuple[Path, float | None]:
     paths = sorted(p for p in src.iterdir() if p.suffix.lower() in (".jpg", ".jpeg", ".png"))
     if name == "sceaux_first5":
         paths = paths[:5]
+    if name == "sceaux_sparse":
+        paths = paths[::2]
     for p in paths:
         with Image.open(p) as im:
             exif = im.getexif()
-            if name == "sceaux_1280":
-                s = 1280 / max(im.size)
+            if name in ("sceaux_1280", "sceaux_640"):
+                s = int(name[-4:].strip("_")) / max(im.size)
                 _save(im.resize((round(im.size[0] * s), round(im.size[1] * s)), Image.Resampling.LANCZOS),
                       out / p.name, exif)
                 f_true_scaled = f_true * s
@@ -254,7 +258,7 @@ def make_variant(name: str, tmp: Path) -> tuple[Path, float | None]:
                 if name == "sceaux_burst" and p.stem.endswith("7105"):
                     for k, angle in enumerate((0.5, 1.0)):
                         _save(im.rotate(angle, Image.Resampling.BICUBIC), out / f"{p.stem}b{k}{p.suffix}", exif)
-    return out, (f_true_scaled if name == "sceaux_1280" else f_true)
+    return out, (f_true_scaled if name in ("sceaux_1280", "sceaux_640") else f_true)
 
 
 def _focal_ratio(cams: dict, f_true: float | None, other: dict) -> str:

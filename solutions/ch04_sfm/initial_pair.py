@@ -63,8 +63,7 @@ def two_view_init(x1: np.ndarray, x2: np.ndarray, K1: np.ndarray, K2: np.ndarray
     candidate poses. The inliers are triangulated (DLT); points behind a camera or seen under an
     angle below min_angle_deg are marked outliers. ‖t‖ = 1; camera 1 is [I | 0].
     stats: optional dict, filled with the pair's n_matches, n_inliers_E, n_inliers_H and
-    median_angle_deg (the input of `rank_initial_pairs`), and forward_motion = |t_z| of the unit t (COLMAP's
-    init_max_forward_motion test: a baseline along the optical axis triangulates the centre of the image badly).
+    median_angle_deg (the input of `rank_initial_pairs`).
     Returns (R, t, X (M, 3), inliers (N,) bool) with M = inliers.sum().
     """
     x1, x2 = np.asarray(x1, float), np.asarray(x2, float)
@@ -95,7 +94,6 @@ def two_view_init(x1: np.ndarray, x2: np.ndarray, K1: np.ndarray, K2: np.ndarray
     R, t, X, keep, front_angles = best
     if stats is not None and len(front_angles):   # over all points in front: the baseline, unfiltered
         stats["median_angle_deg"] = float(np.median(front_angles))
-        stats["forward_motion"] = float(abs(t[2]) / max(np.linalg.norm(t), 1e-12))
     inliers = inl.copy()
     inliers[np.flatnonzero(inl)[~keep]] = False
     return R, t, X[keep], inliers

@@ -77,8 +77,11 @@ INIT_MAX_H_RATIO = 0.7      # COLMAP: 0.8 on its own two-view geometry. Our matc
 
                             # F-verified at 4 px, so H explains more of them; a pair whose parallax
                             # H cannot explain (low ratio) is what the initialisation needs
-INIT_MAX_TRIALS = 2         # initial pairs tried while the model holds fewer than half the images
-INIT_MAX_FORWARD = 0.95     # COLMAP: init_max_forward_motion = 0.95 (|t_z| of the unit baseline)
+                            # COLMAP also rejects a baseline along the optical axis (init_max_forward_motion:
+                            # |t_z| > 0.95 of the unit t); not here: landmark photos are taken from the front at
+                            # several distances, and on Sacre Coeur the test turned down the pair (|t_z| = 0.995,
+                            # 10.4 degrees) that registers all 10 photos for one that registers 5
+INIT_MAX_TRIALS = 2         # initial pairs tried while the model holds at most half the images
 FOCAL_FACTORS = np.geomspace(0.5, 3.0, 7)   # focal lengths tried for an uncalibrated image (x 1.2 max side)
 
 
@@ -288,8 +291,7 @@ def _initialise(m: _Model, keypoints, matches: dict, n_first: int = 3, n_partner
     verified matches overall (a pair inside a small, weakly attached cluster would strand the
     rest), each with its best-matched partners. The partners of a first image are scored with
     `two_view_init` (E and H inliers, median angle) and ranked by `rank_initial_pairs`; the
-    first pair passing all three of its tests, and COLMAP's forward-motion test, and giving >= 30 good points
-    is taken. If no pair passes, a second round with twice the first images and partners; then every scored pair
+    first pair passing all three of its tests and giving >= 30 good points is taken. If no pair passes, a second round with twice the first images and partners; then every scored pair
     is tried in rank order. Pairs in `exclude` (tried before) are skipped."""
     degree = np.zeros(m.n)
     for (i, j), mt in matches.items():
@@ -308,8 +310,7 @@ def _initialise(m: _Model, keypoints, matches: dict, n_first: int = 3, n_partner
 
     def passes(st):
         return (st["n_inliers_E"] >= INIT_MIN_INLIERS and st["median_angle_deg"] >= INIT_MIN_ANGLE_DEG
-                and st["n_inliers_H"] <= INIT_MAX_H_RATIO * st["n_inliers_E"]
-                and st.get("forward_motion", 0.0) <= INIT_MAX_FORWARD)
+                and st["n_inliers_H"] <= INIT_MAX_H_RATIO * st["n_inliers_E"])
 
     # COLMAP's order; when no pair passes, a wider round (more first images, more partners) before any pair
     # that fails a test: on a larger set the best-connected images can all be shots from one spot
@@ -474,7 +475,7 @@ def incremental_sfm(problem: dict, seed: int = 0, local_window: int = 6, global_
     K0 = m.K.copy()
     log = (lambda *a: print(f"[{time.perf_counter() - start:6.2f} s]", *a)) if verbose else (lambda *a: None)
     best, tried = None, set()
-    # A model that stops with fewer than half the images may have started from a poor pair (a narrow or
+    # A model that stops with at most half the images may have started from a poor pair (a narrow or
     # repeated-structure one): start again from the best pair not tried yet and keep the larger model
     # (COLMAP's init_max_reg_trials = 2 and its further models).
     for attempt in range(INIT_MAX_TRIALS):
@@ -492,7 +493,7 @@ def incremental_sfm(problem: dict, seed: int = 0, local_window: int = 6, global_
         log(f"done: {m.registered.sum()} images, {m.has_X.sum()} points")
         if best is None or m.registered.sum() > best.registered.sum():
             best = m
-        if 2 * best.registered.sum() >= best.n:
+        if 2 * best.registered.sum() > best.n:
             break
     if best is None:
         return {"cameras": {}, "points": np.zeros((0, 3)), "tracks": [],
