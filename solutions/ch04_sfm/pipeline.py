@@ -40,7 +40,7 @@ from ..ch05_bundle_adjustment import bundle_adjust
 from .initial_pair import rank_initial_pairs, self_calibrate, two_view_init
 from .model import _Model, default_intrinsics, distort, undistort  # noqa: F401  (distort, undistort: re-exported)
 from .pnp import pnp_ransac, refine_pose
-from .tracks import build_tracks
+from .tracks import consistent_tracks
 from .triangulation import triangulate_multiview
 
 
@@ -468,7 +468,7 @@ def incremental_sfm(problem: dict, seed: int = 0, local_window: int = 6, global_
     matches = {(i, j) if i < j else (j, i): (v if i < j else v[:, ::-1]) for (i, j), v in matches.items()}
     if not problem.get("verified", False):
         matches = _verify(keypoints, matches, K_list, seed)
-    tracks = build_tracks(matches)
+    tracks = consistent_tracks(matches)           # a conflicting component split, not dropped
     m = _Model(keypoints, tracks, K_list, sizes, problem.get("camera_ids"), problem.get("focal_prior"))
     if K_list is None and problem.get("self_calibrate", True):
         self_calibrate(m.K, keypoints, matches, min_matches=2 * MIN_PAIR_MATCHES, groups=problem.get("camera_ids"))
