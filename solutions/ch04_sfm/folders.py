@@ -198,7 +198,7 @@ def reconstruct_folder(folder, max_side: int = 1024, n_features: int = N_FEATURE
     ids, focals = camera_ids(paths, sizes)
     recon = incremental_sfm({"keypoints": [k[:, :2] for k in keypoints], "matches": matches, "image_sizes": sizes,
                              "K": None, "verified": True, "camera_ids": ids, "focal_prior": focals},
-                            seed=seed, verbose=verbose)
+                            seed=seed, verbose=verbose, split_tracks=True)
     timings["mapping"] = time.perf_counter() - t0
     timings["total"] = sum(timings.values())
     recon.update(names=[p.name for p in paths], keypoints=[k[:, :2] for k in keypoints], image_sizes=sizes,

@@ -65,7 +65,7 @@ def consistent_tracks(matches: dict) -> list[dict[int, int]]:
     rather than dropped whole: the matches are joined strongest image pair first (pairs ordered by their number
     of verified matches), and a union that would put two keypoints of one image into one track is refused,
     so the later, weaker match (the likelier wrong one) is the one left out (Kruskal's order with a conflict
-    test). Used by `incremental_sfm`; exercise 4.11 asks for `build_tracks`.
+    test). Used by `incremental_sfm(..., split_tracks=True)`; exercise 4.11 asks for `build_tracks`.
 
     Why: on a facade, repeated windows make a few wrong matches that pass F-RANSAC, and each one joins two
     tracks into an inconsistent component. `build_tracks` drops 28.5 % of the matched keypoints of the 11
