@@ -426,7 +426,7 @@ def _grow(m: _Model, seed: int, local_window: int, global_every: int, log) -> No
         if not _register(m, i, seed):
             failed_at[i] = int(visible[i])
             trials[i] += 1
-            log(f"image {i}: registration failed ({m.why[i]})")
+            log(f"image {i}: registration failed ({m.why.get(i, '')})")
             continue
         stalls = 0
         m.why.pop(i, None)
