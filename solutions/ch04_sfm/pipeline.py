@@ -490,9 +490,13 @@ def incremental_sfm(problem: dict, seed: int = 0, local_window: int = 6, global_
             break
         tried.add(tuple(m.order[:2]))
         log(f"initial pair {m.order}: {m.has_X.sum()} points")
-        _grow(m, seed, local_window, global_every, log)
-        for _ in range(2):
-            _refine_all(m, max_iter=50, refine="fk")
+        for _grow_round in range(2):   # the final refinement can bring an image to 30 visible points: grow once more
+            _grow(m, seed, local_window, global_every, log)
+            for _ in range(2):
+                _refine_all(m, max_iter=50, refine="fk")
+            visible = np.bincount(m.obs_img[m.has_X[m.obs_trk]], minlength=m.n)
+            if not np.any(~m.registered & (visible >= MIN_PNP_INLIERS)):
+                break
         log(f"done: {m.registered.sum()} images, {m.has_X.sum()} points")
         if best is None or m.registered.sum() > best.registered.sum():
             best = m
@@ -514,9 +518,9 @@ def _export(m: _Model) -> dict:
         by_trk.setdefault(int(m.obs_trk[s]), {})[int(m.obs_img[s])] = int(m.obs_kp[s])
     tracks = [by_trk.get(int(p), {}) for p in pts]
     visible = np.bincount(m.obs_img[m.has_X[m.obs_trk]], minlength=m.n)
-    left_out = {int(i): m.why.get(int(i), f"sees {visible[i]} triangulated points (< {MIN_PNP_INLIERS}): too few "
-                                          "verified matches with the registered images")
-                for i in np.flatnonzero(~m.registered)}
+    left_out = {int(i): m.why.get(int(i), f"sees {visible[i]} triangulated points" + (
+        f" (< {MIN_PNP_INLIERS}): too few verified matches with the registered images" if visible[i] < MIN_PNP_INLIERS
+        else " after the last refinement, not tried again")) for i in np.flatnonzero(~m.registered)}
     return {"cameras": cameras, "points": m.X[pts].copy(), "tracks": tracks, "left_out": left_out}
 
 
