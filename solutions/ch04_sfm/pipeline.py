@@ -18,9 +18,14 @@ The loop (Schönberger & Frahm, "Structure-from-Motion Revisited", CVPR 2016):
      >= 1.5 degrees with every observation within 4 px.
   4. local BA (the new image, its best-connected neighbours and the points it sees), then filter:
      observations over 4 px go, points left with fewer than 2 observations go.
-  5. every few images a global BA, filtering and track completion; when no image can be
-     registered, a "rescue" round (global BA, track completion, triangulation of every pending
-     track) and another try; two final rounds with f, k1, k2 refined.
+  5. every few images a global BA, filtering, track completion and retriangulation, after which
+     the images that failed are tried again (up to 3 failures each, COLMAP's max_reg_trials); when
+     no image can be registered, a "rescue" round (global BA, track completion, triangulation of
+     every pending track) and another try, for as long as rescues help; two final rounds with f,
+     k1, k2 refined, and one more growth if they brought an image to 30 visible points. A model
+     that ends with at most half the images is started again from the next initial pair.
+  Images of one camera (camera_ids) share f, k1, k2: the camera's first image estimates them in
+  PnP, the others reuse them, and BA's per-image copies are tied to their median.
 Bundle adjustment is Chapter 5's `bundle_adjust` (BAL camera: rotation, translation, f, k1, k2).
 
 Conventions: world-to-camera (R, t), OpenCV camera frame, pixels (x, y) with the centre of the
