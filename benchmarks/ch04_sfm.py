@@ -220,6 +220,13 @@ def run() -> list[dict]:
 #   sceaux_exif_off 11/11, 0.04° / 0.13°, 1.028 (pycolmap 1.025), 1.12x; sceaux_first5 5/5, 0.83° / 0.84°, 1.041
 #   (pycolmap 1.037), 0.83x; sceaux_burst 13/13, 0.03° / 0.15°, 1.027, 0.73x; sceaux_640 11/11, 0.23° / 0.32°,
 #   1.024, 1.66x; sceaux_sparse 6/6, 0.24° / 0.27°, 1.030 (pycolmap 1.027), 0.65x.
+# After (99b762d: shared cameras, retries, retriangulation, split tracks; load 4-11, the lead's suite beside it):
+#   sceaux 11/11, 0.04° / 0.20°, 1.027 (one f for all 11 now), 0.49x; sacre_coeur 10/10, 0.61° / 0.76°, f / pycolmap
+#   0.967, 1.41x (load 9); sceaux_1280 11/11, 0.08° / 0.21°, 1.025, 0.52x; sceaux_noexif 11/11, 0.04° / 0.10°, 1.028,
+#   1.57x; sceaux_exif_off 11/11, 0.08° / 0.15°, 1.028, 0.50x; sceaux_first5 5/5, 0.90° / 0.94°, 1.040, 1.20x;
+#   sceaux_burst 13/13, 0.08° / 0.23°, 1.027, 0.62x; sceaux_640 11/11, 0.33° / 0.40°, 1.026, 0.79x; sceaux_sparse
+#   6/6, 0.29° / 0.35°, 1.029, 1.31x. pycolmap's own run-to-run spread is ~0.05-0.1° here (sceaux_exif_off before,
+#   two runs: 0.07° / 0.11° and 0.04° / 0.13°); the time ratios are from one run each at a drifting load.
 VARIANTS = ("sceaux", "sacre_coeur", "sceaux_1280", "sceaux_noexif", "sceaux_exif_off", "sceaux_first5",
             "sceaux_burst", "sceaux_640", "sceaux_sparse")
 
