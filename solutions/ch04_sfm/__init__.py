@@ -7,7 +7,8 @@ following the notebook's sections:
     tracks              4.11 build_tracks
     initial_pair        4.12 two_view_init, 4.13 rank_initial_pairs (+ decompose_homography,
                         focal_from_fundamental)
-    pipeline            4.14 incremental_sfm (+ distort, undistort, default_intrinsics, reprojection_stats)
+    pipeline            4.14 incremental_sfm (+ reprojection_stats)
+    model               the reconstruction's state for 4.14 (+ distort, undistort, default_intrinsics)
     folders             reconstruct_folder: the pipeline on photos (Chapter 3's features, Chapter 2's RANSAC)
     rotation_averaging  4.15 rotation_averaging
     colmap_io           4.16 write_colmap_text, 4.17 read_colmap_text

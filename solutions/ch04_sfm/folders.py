@@ -139,25 +139,30 @@ def match_and_verify(keypoints: list, descriptors: list, ratio: float = 0.8, see
     return {p: m for p, m in results if m is not None}
 
 
-def camera_ids(paths: list, sizes: list) -> list[int]:
+def camera_ids(paths: list, sizes: list) -> tuple[list[int], list[float]]:
     """One id per camera: images whose EXIF names the same make, model and focal length and that have the same
-    size share an id (their focal length is one unknown, COLMAP's single_camera_per_folder for one lens); an
-    image without EXIF model or focal length gets an id of its own. The EXIF focal length itself is not used
-    as a prior (phones report it in mm of an unknown sensor, and a wrong prior is worse than none)."""
+    size share an id (their f, k1, k2 are one unknown: COLMAP's camera shared by images); an image without EXIF
+    model or focal length gets an id of its own. Also a starting focal length per image (pixels of `sizes`)
+    from EXIF's 35 mm equivalent (tag 41989; the 43.27 mm diagonal of a 36 x 24 mm frame maps to the image
+    diagonal), nan without it. It is only where self-calibration and BA start: EXIF can be 40 % off (a phone's
+    digital zoom or crop, an edited file), and self-calibration searches 0.33-3x around it.
+    Returns (ids, focal_px)."""
     from PIL import Image
 
-    ids, seen = [], {}
+    ids, focals, seen = [], [], {}
     for k, (path, size) in enumerate(zip(paths, sizes)):
         try:
             with Image.open(path) as im:
                 exif = im.getexif()
                 make, model = exif.get(271), exif.get(272)
                 focal = exif.get_ifd(0x8769).get(37386)
+                f35 = exif.get_ifd(0x8769).get(41989)
         except OSError:
-            make = model = focal = None
+            make = model = focal = f35 = None
         key = (make, model, str(focal), tuple(size)) if model and focal else ("image", k)
         ids.append(seen.setdefault(key, len(seen)))
-    return ids
+        focals.append(float(f35) * float(np.hypot(*size)) / 43.27 if f35 else np.nan)
+    return ids, focals
 
 
 def reconstruct_folder(folder, max_side: int = 1024, n_features: int = N_FEATURES, upsample: float = UPSAMPLE,
@@ -165,8 +170,9 @@ def reconstruct_folder(folder, max_side: int = 1024, n_features: int = N_FEATURE
     """The whole pipeline on a folder of photos (*.jpg, *.png), cameras unknown.
 
     Images are downscaled to max_side; features are extracted in `workers` processes; images of one camera
-    (EXIF make, model, focal length and size: `camera_ids`) share their self-calibrated starting f. Returns the
-    `incremental_sfm` result plus "names", "keypoints" (in the downscaled images), "image_sizes",
+    (EXIF make, model, focal length and size: `camera_ids`) share f, k1, k2; EXIF's 35 mm focal length, where
+    given, is where self-calibration starts. Returns the `incremental_sfm` result (with "left_out": image ->
+    why it is not registered) plus "names", "keypoints" (in the downscaled images), "image_sizes",
     "scales" (downscaled / original) and "timings" (seconds per stage).
     """
     folder = Path(folder)
@@ -189,9 +195,10 @@ def reconstruct_folder(folder, max_side: int = 1024, n_features: int = N_FEATURE
     timings["matching"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     sizes = [f[2] for f in feats]
+    ids, focals = camera_ids(paths, sizes)
     recon = incremental_sfm({"keypoints": [k[:, :2] for k in keypoints], "matches": matches, "image_sizes": sizes,
-                             "K": None, "verified": True, "camera_ids": camera_ids(paths, sizes)},
-                            seed=seed, verbose=verbose)
+                             "K": None, "verified": True, "camera_ids": ids, "focal_prior": focals},
+                            seed=seed, verbose=verbose, split_tracks=True)
     timings["mapping"] = time.perf_counter() - t0
     timings["total"] = sum(timings.values())
     recon.update(names=[p.name for p in paths], keypoints=[k[:, :2] for k in keypoints], image_sizes=sizes,

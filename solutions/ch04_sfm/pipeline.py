@@ -18,9 +18,14 @@ The loop (Schönberger & Frahm, "Structure-from-Motion Revisited", CVPR 2016):
      >= 1.5 degrees with every observation within 4 px.
   4. local BA (the new image, its best-connected neighbours and the points it sees), then filter:
      observations over 4 px go, points left with fewer than 2 observations go.
-  5. every few images a global BA, filtering and track completion; when no image can be
-     registered, a "rescue" round (global BA, track completion, triangulation of every pending
-     track) and another try; two final rounds with f, k1, k2 refined.
+  5. every few images a global BA, filtering, track completion and retriangulation, after which
+     the images that failed are tried again (up to 3 failures each, COLMAP's max_reg_trials); when
+     no image can be registered, a "rescue" round (global BA, track completion, triangulation of
+     every pending track) and another try, for as long as rescues help; two final rounds with f,
+     k1, k2 refined, and one more growth if they brought an image to 30 visible points. A model
+     that ends with at most half the images is started again from the next initial pair.
+  Images of one camera (camera_ids) share f, k1, k2: the camera's first image estimates them in
+  PnP, the others reuse them, and BA's per-image copies are tied to their median.
 Bundle adjustment is Chapter 5's `bundle_adjust` (BAL camera: rotation, translation, f, k1, k2).
 
 Conventions: world-to-camera (R, t), OpenCV camera frame, pixels (x, y) with the centre of the
@@ -37,10 +42,10 @@ from scipy.spatial.transform import Rotation
 
 from ..ch02_epipolar import ransac_essential, ransac_fundamental
 from ..ch05_bundle_adjustment import bundle_adjust
-from ..geometry import camera_centre
 from .initial_pair import rank_initial_pairs, self_calibrate, two_view_init
+from .model import _Model, default_intrinsics, distort, undistort  # noqa: F401  (distort, undistort: re-exported)
 from .pnp import pnp_ransac, refine_pose
-from .tracks import build_tracks
+from .tracks import build_tracks, consistent_tracks
 from .triangulation import triangulate_multiview
 
 
@@ -59,6 +64,9 @@ MIN_PNP_RATIO = 0.25        # COLMAP: abs_pose_min_inlier_ratio = 0.25
 ABS_POSE_PX = 12.0          # COLMAP: abs_pose_max_error = 12 (registration RANSAC threshold)
 
 
+MAX_REG_TRIALS = 3          # COLMAP: max_reg_trials = 3 (an image that failed is tried again after a global BA)
+
+
 MIN_PAIR_MATCHES = 15       # COLMAP: min_num_inliers of a verified pair = 15
 
 
@@ -74,113 +82,15 @@ INIT_MAX_H_RATIO = 0.7      # COLMAP: 0.8 on its own two-view geometry. Our matc
 
                             # F-verified at 4 px, so H explains more of them; a pair whose parallax
                             # H cannot explain (low ratio) is what the initialisation needs
+                            # COLMAP also rejects a baseline along the optical axis (init_max_forward_motion:
+                            # |t_z| > 0.95 of the unit t); not here: landmark photos are taken from the front at
+                            # several distances, and on Sacre Coeur the test turned down the pair (|t_z| = 0.995,
+                            # 10.4 degrees) that registers all 10 photos for one that registers 5
+INIT_MAX_TRIALS = 2         # initial pairs tried while the model holds at most half the images
 FOCAL_FACTORS = np.geomspace(0.5, 3.0, 7)   # focal lengths tried for an uncalibrated image (x 1.2 max side)
 
 
 _FLIP = np.diag([-1.0, -1.0, 1.0])          # Rz(pi): our z-forward camera <-> BAL's -z camera
-
-
-def default_intrinsics(width: int, height: int) -> np.ndarray:
-    """COLMAP's prior for an unknown camera: f = 1.2 max(w, h), principal point at the centre. (3, 3)."""
-    f = 1.2 * max(width, height)
-    return np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
-
-
-def distort(xn: np.ndarray, k: np.ndarray) -> np.ndarray:
-    """Radial distortion of normalised points: x_d = x_n (1 + k1 r^2 + k2 r^4).
-    xn: (N, 2); k: (2,) one camera or (N, 2) one per point. Returns (N, 2)."""
-    k = np.asarray(k, float)
-    r2 = np.sum(xn * xn, axis=-1, keepdims=True)
-    return xn * (1 + k[..., 0:1] * r2 + k[..., 1:2] * r2 * r2)
-
-
-def undistort(xd: np.ndarray, k: np.ndarray, iters: int = 20) -> np.ndarray:
-    """Invert `distort` by fixed-point iteration x_n <- x_d / (1 + k1 r^2 + k2 r^4) (converges for
-    the mild distortion of photos). (N, 2) -> (N, 2)."""
-    if not np.any(k):
-        return xd
-    xn = xd.copy()
-    for _ in range(iters):
-        r2 = np.sum(xn * xn, axis=-1, keepdims=True)
-        xn = xd / (1 + k[0] * r2 + k[1] * r2 * r2)
-    return xn
-
-
-class _Model:
-    """The growing reconstruction: cameras, tracks, 3D points and which observations are used.
-
-    Observations are flattened over all tracks: obs_img, obs_trk (M,) ints and obs_xy (M, 2)
-    pixels; obs_on (M,) marks those used by the model (image registered, point triangulated,
-    error within 4 px). Points are indexed by track: X (T, 3), has_X (T,).
-    """
-
-    def __init__(self, keypoints, tracks, K_list, sizes):
-        n = len(keypoints)
-        self.n, self.tracks = n, tracks
-        self.known_K = K_list is not None
-        self.K = np.array([np.asarray(K, float) for K in K_list]) if self.known_K else \
-            np.array([default_intrinsics(w, h) for w, h in sizes])
-        self.k = np.zeros((n, 2))
-        self.max_side = np.array([max(w, h) for w, h in sizes], float)
-        self.half_diag = np.array([np.hypot(w, h) / 2 for w, h in sizes], float)
-        self.R, self.t = np.tile(np.eye(3), (n, 1, 1)), np.zeros((n, 3))
-        self.registered = np.zeros(n, bool)
-        self.order: list[int] = []                       # registration order
-        lengths = [len(tr) for tr in tracks]
-        self.obs_trk = np.repeat(np.arange(len(tracks)), lengths).astype(np.int64)
-        self.obs_img = np.array([i for tr in tracks for i in tr], np.int64)
-        self.obs_kp = np.array([kp for tr in tracks for kp in tr.values()], np.int64)
-        self.obs_xy = np.zeros((len(self.obs_img), 2))
-        for i in range(n):
-            sel = self.obs_img == i
-            self.obs_xy[sel] = np.asarray(keypoints[i], float)[self.obs_kp[sel], :2]
-        self.obs_on = np.zeros(len(self.obs_img), bool)
-        self.X = np.full((len(tracks), 3), np.nan)
-        self.has_X = np.zeros(len(tracks), bool)
-        self.gauge = (-1, -1)                            # the initial pair fixes the gauge in BA
-
-    # --- geometry of observations
-    def normalised(self, sel: np.ndarray) -> np.ndarray:
-        """Undistorted normalised coordinates of observations sel: (m, 2)."""
-        img, xy = self.obs_img[sel], self.obs_xy[sel]
-        out = np.empty_like(xy)
-        for i in np.unique(img):
-            s = img == i
-            xn = (xy[s] - self.K[i, :2, 2]) @ np.linalg.inv(self.K[i, :2, :2]).T
-            out[s] = undistort(xn, self.k[i])
-        return out
-
-    def reproject(self, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Reprojection error (px) and depth of observations sel with their current points: (m,), (m,)."""
-        img, X = self.obs_img[sel], self.X[self.obs_trk[sel]]
-        Xc = np.einsum("mij,mj->mi", self.R[img], X) + self.t[img]
-        z = Xc[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xd = distort(Xc[:, :2] / z[:, None], self.k[img])
-            uv = np.einsum("mij,mj->mi", self.K[img, :2, :2], xd) + self.K[img, :2, 2]
-            err = np.linalg.norm(uv - self.obs_xy[sel], axis=1)
-        return np.where((z > 0) & np.isfinite(err), err, np.inf), z
-
-    def max_angles(self, sel: np.ndarray) -> np.ndarray:
-        """For observations sel, the largest triangulation angle (deg) of each track they belong
-        to, over pairs of those observations. Returns (T,) with 0 for tracks without two of them."""
-        trk, img = self.obs_trk[sel], self.obs_img[sel]
-        rays = camera_centre(self.R[img], self.t[img]) - self.X[trk]
-        rays /= np.linalg.norm(rays, axis=1, keepdims=True)
-        order = np.argsort(trk, kind="stable")
-        trk, rays = trk[order], rays[order]
-        start = np.searchsorted(trk, trk)
-        slot = np.arange(len(trk)) - start
-        L = int(slot.max()) + 1 if len(slot) else 1
-        uniq, row = np.unique(trk, return_inverse=True)
-        pad = np.full((len(uniq), L, 3), np.nan)         # tracks x observations x 3, nan padded
-        pad[row, slot] = rays
-        cos = np.einsum("tac,tbc->tab", pad, pad)        # pairwise cosines, nan where padded
-        out = np.zeros(len(self.tracks))
-        with np.errstate(invalid="ignore"):
-            out[uniq] = np.degrees(np.arccos(np.clip(np.nan_to_num(np.nanmin(cos.reshape(len(uniq), -1), 1),
-                                                                   nan=1.0), -1, 1)))
-        return out
 
 
 def _triangulate_tracks(m: _Model, trks: np.ndarray) -> int:
@@ -321,6 +231,11 @@ def _bundle_adjust(m: _Model, cams: list[int] | None = None, points: np.ndarray 
         if m.known_K or not bogus.any():
             break
         fixed[bogus, 6:] = True
+    # Images of one camera: the shared f, k1, k2 (the median of the copies), then the poses and points adapt to it
+    if not m.known_K and m.share_intrinsics(img_ids, cameras[:, 6:9], ~fixed[:, 6]):
+        fixed[:, 6:] = True
+        cameras, X, _ = bundle_adjust(cameras, X, cam_idx, pt_idx, obs, loss=loss, scale=2.0,
+                                      max_iter=min(max_iter, 10), ftol=ftol, fixed=fixed)
     for c, i in enumerate(img_ids):
         m.R[i] = _FLIP @ Rotation.from_rotvec(cameras[c, :3]).as_matrix()
         m.t[i] = _FLIP @ cameras[c, 3:6]
@@ -376,14 +291,13 @@ def _try_pair(m: _Model, matches: dict, pair: tuple[int, int], result) -> bool:
 
 
 def _initialise(m: _Model, keypoints, matches: dict, n_first: int = 3, n_partners: int = 3, seed: int = 0,
-                verbose: bool = False) -> bool:
+                verbose: bool = False, exclude: frozenset = frozenset()) -> bool:
     """Pick and reconstruct the initial pair, in COLMAP's order: first images by their number of
     verified matches overall (a pair inside a small, weakly attached cluster would strand the
     rest), each with its best-matched partners. The partners of a first image are scored with
     `two_view_init` (E and H inliers, median angle) and ranked by `rank_initial_pairs`; the
-    first pair passing all three of its tests and giving >= 30 good points is taken. If no pair
-    passes, a second round with twice the first images and partners; then every scored pair is tried in
-    rank order."""
+    first pair passing all three of its tests and giving >= 30 good points is taken. If no pair passes, a second round with twice the first images and partners; then every scored pair
+    is tried in rank order. Pairs in `exclude` (tried before) are skipped."""
     degree = np.zeros(m.n)
     for (i, j), mt in matches.items():
         degree[[i, j]] += len(mt)
@@ -407,12 +321,13 @@ def _initialise(m: _Model, keypoints, matches: dict, n_first: int = 3, n_partner
     # that fails a test: on a larger set the best-connected images can all be shots from one spot
     for k_first, k_partners in ((n_first, n_partners), (2 * n_first, 2 * n_partners)):
         for a in np.argsort(-degree, kind="stable")[:k_first]:
-            partners = sorted((p for p in matches if a in p), key=lambda p: -len(matches[p]))[:k_partners]
+            partners = sorted((p for p in matches if a in p and p not in exclude),
+                              key=lambda p: -len(matches[p]))[:k_partners]
             stats = [score(p)[1] for p in partners]
             for r in rank_initial_pairs(stats, INIT_MIN_INLIERS, INIT_MAX_H_RATIO, INIT_MIN_ANGLE_DEG):
                 if passes(stats[r]) and _try_pair(m, matches, partners[r], scored[partners[r]][0]):
                     return True
-    pairs = list(scored)
+    pairs = [p for p in scored if p not in exclude]
     for r in rank_initial_pairs([scored[p][1] for p in pairs], INIT_MIN_INLIERS, INIT_MAX_H_RATIO, INIT_MIN_ANGLE_DEG):
         if _try_pair(m, matches, pairs[r], scored[pairs[r]][0]):
             return True
@@ -428,9 +343,10 @@ def _register(m: _Model, i: int, seed: int = 0) -> bool:
     that f. Activates the inlier observations."""
     sel = np.flatnonzero((m.obs_img == i) & m.has_X[m.obs_trk])
     if len(sel) < MIN_PNP_INLIERS:
+        m.why[i] = f"sees {len(sel)} triangulated points (< {MIN_PNP_INLIERS})"
         return False
     X, x = m.X[m.obs_trk[sel]], m.obs_xy[sel]
-    if m.known_K:
+    if m.known_K or m.shares_camera(i):                 # f known, or refined on the camera's other images
         R, t, inl = pnp_ransac(X, x, m.K[i], thresh_px=ABS_POSE_PX, seed=seed)
     else:
         best = (None, None, np.zeros(len(sel), bool), None)
@@ -442,14 +358,19 @@ def _register(m: _Model, i: int, seed: int = 0) -> bool:
                 best = (R, t, inl, K)
         R, t, inl, K = best
         if R is None or inl.sum() < MIN_PNP_INLIERS:
+            m.why[i] = f"PnP: {inl.sum()} inliers of {len(sel)} at any focal length (< {MIN_PNP_INLIERS})"
             return False
         R, t, K = refine_pose(X[inl], x[inl], K, R, t, iters=20, refine_focal=True)
         R, t, inl = pnp_ransac(X, x, K, thresh_px=ABS_POSE_PX, seed=seed, max_iters=1000)
         if R is None:
+            m.why[i] = "PnP failed with the refined focal length"
             return False
         R, t, K = refine_pose(X[inl], x[inl], K, R, t, iters=10, refine_focal=True)
         m.K[i] = K
     if R is None or inl.sum() < MIN_PNP_INLIERS or inl.mean() < MIN_PNP_RATIO:
+        n_in = 0 if R is None else int(inl.sum())
+        m.why[i] = (f"PnP: {n_in} inliers of {len(sel)} 2D-3D matches (needs >= {MIN_PNP_INLIERS} and "
+                    f">= {MIN_PNP_RATIO:.0%})")
         return False
     m.R[i], m.t[i] = R, t
     m.registered[i] = True
@@ -470,22 +391,82 @@ def _refine_all(m: _Model, max_iter: int, refine: str) -> None:
     """Track completion, triangulation of every pending track seen by 2+ registered images, a
     global BA and filtering."""
     _complete_tracks(m)
-    seen = np.bincount(m.obs_trk[m.registered[m.obs_img]], minlength=len(m.tracks))
-    _triangulate_tracks(m, np.flatnonzero(~m.has_X & (seen >= 2)))
+    _retriangulate(m)
     _bundle_adjust(m, max_iter=max_iter, refine=refine)
     _filter(m)
 
 
+def _retriangulate(m: _Model) -> None:
+    """Triangulate every pending track seen by 2+ registered images (after a BA moved the cameras, tracks
+    that failed the 4 px or 1.5 degree tests may pass them now: COLMAP's retriangulation)."""
+    seen = np.bincount(m.obs_trk[m.registered[m.obs_img]], minlength=len(m.tracks))
+    _triangulate_tracks(m, np.flatnonzero(~m.has_X & (seen >= 2)))
+
+
+def _grow(m: _Model, seed: int, local_window: int, global_every: int, log) -> None:
+    """Steps 2-5 of the module docstring: register the next best view until none is left that can be.
+
+    An image that fails is tried again when it sees more points, or after the next global BA (a better
+    model; at most MAX_REG_TRIALS failures, COLMAP's max_reg_trials), or after a rescue round (global BA,
+    track completion, retriangulation) when nothing else can be tried; rescues go on while they help
+    (at most 2 in a row that register nothing)."""
+    failed_at: dict[int, int] = {}                      # image -> visible points when it last failed
+    trials = np.zeros(m.n, int)                         # failed registrations per image
+    since_global, stalls = 0, 0
+    while True:
+        visible = np.bincount(m.obs_img[m.has_X[m.obs_trk]], minlength=m.n)
+        cands = [i for i in np.argsort(-visible, kind="stable") if not m.registered[i]
+                 and visible[i] >= MIN_PNP_INLIERS and visible[i] > failed_at.get(int(i), -1)]
+        if not cands and failed_at and stalls < 2 and not m.registered.all():
+            # Stuck: refine everything, complete tracks and triangulate what the registered images
+            # now allow; the images that failed may see more points.
+            _refine_all(m, max_iter=20, refine="fk1")
+            stalls += 1
+            failed_at.clear()                           # refined intrinsics and points: try them all again
+            log(f"rescue round: {m.has_X.sum()} points")
+            continue
+        if not cands:
+            break
+        i = int(cands[0])
+        if not _register(m, i, seed):
+            failed_at[i] = int(visible[i])
+            trials[i] += 1
+            log(f"image {i}: registration failed ({m.why.get(i, '')})")
+            continue
+        stalls = 0
+        m.why.pop(i, None)
+        new_trks = np.unique(m.obs_trk[(m.obs_img == i) & ~m.has_X[m.obs_trk]])
+        n_new = _triangulate_tracks(m, new_trks)
+        # a camera already refined on other images keeps its intrinsics in the local BA (COLMAP's rule)
+        _bundle_adjust(m, cams=[i, *_neighbours(m, i, local_window - 1)],
+                       points=np.unique(m.obs_trk[m.obs_on & (m.obs_img == i)]), max_iter=10, ftol=1e-4,
+                       refine="f", intrinsics_of=[] if m.shares_camera(i) else [i])
+        _filter(m)
+        since_global += 1
+        if since_global >= global_every:
+            _bundle_adjust(m, max_iter=20, ftol=1e-5, refine="fk1" if m.registered.sum() >= 4 else "f")
+            _filter(m)
+            _complete_tracks(m)
+            _retriangulate(m)
+            since_global = 0
+            failed_at = {j: v for j, v in failed_at.items() if trials[j] >= MAX_REG_TRIALS}
+        log(f"image {i}: registered, {n_new} new points, {m.has_X.sum()} in total")
+
+
 def incremental_sfm(problem: dict, seed: int = 0, local_window: int = 6, global_every: int = 3,
-                    verbose: bool = False) -> dict:
+                    verbose: bool = False, split_tracks: bool = False) -> dict:
     """Exercise 4.14: Incremental SfM (see the module docstring). problem (the 4.14 stub in notebooks/04_sfm.ipynb):
     keypoints: list of (N_i, 2) pixels; matches: {(i, j): (M, 2) int keypoint pairs}, i < j, raw or
     verified (they are verified again unless problem["verified"] is True); image_sizes: list of
     (width, height); K: list of (3, 3), or None for unknown intrinsics (f = 1.2 max(w, h), f, k1,
     k2 refined per camera); optional camera_ids: (n,) ints, images taken with one camera (same lens and
-    zoom) share one self-calibrated starting f.
+    zoom) share f, k1, k2 (self-calibrated together, then refined by BA as one: `_Model.share_intrinsics`);
+    optional focal_prior: (n,) starting f in pixels (nan: none), e.g. from EXIF, searched around, not trusted.
+    split_tracks: a component of matches with two keypoints of one image is split (`consistent_tracks`) rather
+    than dropped (`build_tracks`, 4.11): repeated facades need it (Sceaux keeps 98.5 % of its matched keypoints
+    instead of 71.5 %), at ~20 % more mapping CPU for the extra points; `reconstruct_folder` turns it on.
     Returns {"cameras": {i: {"R", "t", "K", "k"}} (registered only), "points": (P, 3),
-    "tracks": list of P {image: keypoint}}.
+    "tracks": list of P {image: keypoint}, "left_out": {i: why image i is not registered}}.
     """
     start = time.perf_counter()
     keypoints = [np.asarray(k, float)[:, :2] for k in problem["keypoints"]]
@@ -495,52 +476,41 @@ def incremental_sfm(problem: dict, seed: int = 0, local_window: int = 6, global_
     matches = {(i, j) if i < j else (j, i): (v if i < j else v[:, ::-1]) for (i, j), v in matches.items()}
     if not problem.get("verified", False):
         matches = _verify(keypoints, matches, K_list, seed)
-    m = _Model(keypoints, build_tracks(matches), K_list, sizes)
+    tracks = consistent_tracks(matches) if split_tracks else build_tracks(matches)
+    m = _Model(keypoints, tracks, K_list, sizes, problem.get("camera_ids"), problem.get("focal_prior"))
     if K_list is None and problem.get("self_calibrate", True):
         self_calibrate(m.K, keypoints, matches, min_matches=2 * MIN_PAIR_MATCHES, groups=problem.get("camera_ids"))
+    K0 = m.K.copy()
     log = (lambda *a: print(f"[{time.perf_counter() - start:6.2f} s]", *a)) if verbose else (lambda *a: None)
-    if not _initialise(m, keypoints, matches, seed=seed, verbose=verbose):
-        log("no initial pair")
-        return {"cameras": {}, "points": np.zeros((0, 3)), "tracks": []}
-    log(f"initial pair {m.order}: {m.has_X.sum()} points")
-    failed_at: dict[int, int] = {}                      # image -> visible points when it last failed
-    since_global, rescues = 0, 0
-    while True:
-        visible = np.bincount(m.obs_img[m.has_X[m.obs_trk]], minlength=m.n)
-        cands = [i for i in np.argsort(-visible, kind="stable") if not m.registered[i]
-                 and visible[i] >= MIN_PNP_INLIERS and visible[i] > failed_at.get(int(i), -1)]
-        if not cands and failed_at and rescues < 2 and not m.registered.all():
-            # Stuck: refine everything, complete tracks and triangulate what the registered images
-            # now allow (COLMAP's retriangulation); the images that failed may see more points.
-            _refine_all(m, max_iter=20, refine="fk1")
-            rescues += 1
-            failed_at.clear()                           # refined intrinsics and points: try them all again
-            log(f"rescue round {rescues}: {m.has_X.sum()} points")
-            continue
-        if not cands:
+    best, tried = None, set()
+    # A model that stops with at most half the images may have started from a poor pair (a narrow or
+    # repeated-structure one): start again from the best pair not tried yet and keep the larger model
+    # (COLMAP's init_max_reg_trials = 2 and its further models).
+    for attempt in range(INIT_MAX_TRIALS):
+        if attempt:
+            m = _Model(keypoints, tracks, K_list, sizes, problem.get("camera_ids"))
+            m.K = K0.copy()
+        if not _initialise(m, keypoints, matches, seed=seed, verbose=verbose, exclude=frozenset(tried)):
+            log("no initial pair" + (" left" if tried else ""))
             break
-        i = int(cands[0])
-        if not _register(m, i, seed):
-            failed_at[i] = int(visible[i])
-            log(f"image {i}: registration failed ({visible[i]} visible points)")
-            continue
-        new_trks = np.unique(m.obs_trk[(m.obs_img == i) & ~m.has_X[m.obs_trk]])
-        n_new = _triangulate_tracks(m, new_trks)
-        _bundle_adjust(m, cams=[i, *_neighbours(m, i, local_window - 1)],
-                       points=np.unique(m.obs_trk[m.obs_on & (m.obs_img == i)]), max_iter=10, ftol=1e-4,
-                       refine="f", intrinsics_of=[i])
-        _filter(m)
-        since_global += 1
-        if since_global >= global_every:
-            _bundle_adjust(m, max_iter=20, ftol=1e-5, refine="fk1" if m.registered.sum() >= 4 else "f")
-            _filter(m)
-            _complete_tracks(m)
-            since_global = 0
-        log(f"image {i}: registered, {n_new} new points, {m.has_X.sum()} in total")
-    for _ in range(2):
-        _refine_all(m, max_iter=50, refine="fk")
-    log(f"done: {m.registered.sum()} images, {m.has_X.sum()} points")
-    return _export(m)
+        tried.add(tuple(m.order[:2]))
+        log(f"initial pair {m.order}: {m.has_X.sum()} points")
+        for _grow_round in range(2):   # the final refinement can bring an image to 30 visible points: grow once more
+            _grow(m, seed, local_window, global_every, log)
+            for _ in range(2):
+                _refine_all(m, max_iter=50, refine="fk")
+            visible = np.bincount(m.obs_img[m.has_X[m.obs_trk]], minlength=m.n)
+            if not np.any(~m.registered & (visible >= MIN_PNP_INLIERS)):
+                break
+        log(f"done: {m.registered.sum()} images, {m.has_X.sum()} points")
+        if best is None or m.registered.sum() > best.registered.sum():
+            best = m
+        if 2 * best.registered.sum() > best.n:
+            break
+    if best is None:
+        return {"cameras": {}, "points": np.zeros((0, 3)), "tracks": [],
+                "left_out": {i: "no initial pair: no pair passed the two-view tests" for i in range(len(keypoints))}}
+    return _export(best)
 
 
 def _export(m: _Model) -> dict:
@@ -552,7 +522,11 @@ def _export(m: _Model) -> dict:
     for s in on:
         by_trk.setdefault(int(m.obs_trk[s]), {})[int(m.obs_img[s])] = int(m.obs_kp[s])
     tracks = [by_trk.get(int(p), {}) for p in pts]
-    return {"cameras": cameras, "points": m.X[pts].copy(), "tracks": tracks}
+    visible = np.bincount(m.obs_img[m.has_X[m.obs_trk]], minlength=m.n)
+    left_out = {int(i): m.why.get(int(i), f"sees {visible[i]} triangulated points" + (
+        f" (< {MIN_PNP_INLIERS}): too few verified matches with the registered images" if visible[i] < MIN_PNP_INLIERS
+        else " after the last refinement, not tried again")) for i in np.flatnonzero(~m.registered)}
+    return {"cameras": cameras, "points": m.X[pts].copy(), "tracks": tracks, "left_out": left_out}
 
 
 def reprojection_stats(recon: dict, keypoints: list) -> dict:
