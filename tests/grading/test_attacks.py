@@ -356,6 +356,7 @@ def test_a_correct_answer_late_on_a_busy_machine_keeps_its_points_and_waiting_st
         t0 = time.monotonic()
         assert quick(1) == 2 and time.monotonic() - t0 >= stopped - 0.5
         if level == "process":       # one level suffices for the wall-clock end: it does not read /proc
+            learner._restart = learner.stop      # timed to the verdict, not to the fresh process after it
             waits = learner.function("waits", ex)
             waits.begin_case(ex.timeout)
             t0 = time.monotonic()
@@ -410,6 +411,7 @@ def test_a_learner_that_stops_reading_cannot_block_the_judge():
     from graders.core.sandbox import TimeLimitExceeded
     ex = SimpleNamespace(id="t.3", timeout=0.5, arg_names=None)
     with isolation.LearnerProcess(FLOOD) as learner:
+        learner._restart = learner.stop          # timed to the verdict, not to the fresh process after it
         fn = learner.function("flood", ex)
         fn.begin_case(ex.timeout)
         t0 = time.monotonic()
