@@ -30,7 +30,6 @@ misbehave).
 from __future__ import annotations
 
 import importlib.util
-import io
 import json
 import os
 import pickle
