@@ -101,32 +101,27 @@ class PidsLimit:
         return stray
 
     def close(self) -> None:
+        """Kill every member (a fork bomb keeps making new ones), then remove the cgroups: the CPU account's last,
+        once the pids cgroup's kill has emptied it too."""
+        if self.path:
+            for _ in range(100):
+                try:
+                    with open(os.path.join(self.path, "cgroup.procs")) as f:
+                        pids = [int(p) for p in f.read().split()]
+                except OSError:
+                    break
+                if not pids:
+                    break
+                for pid in pids:
+                    try:
+                        os.kill(pid, 9)
+                    except OSError:
+                        pass
+                time.sleep(0.02)
+            _remove_when_empty(self.path)
         if self.cpu_path and self.cpu_path != self.path:
             _remove_when_empty(self.cpu_path)
-            self.cpu_path = None
-        if not self.path:
-            return
-        for _ in range(100):          # kill until empty: a fork bomb keeps making new members
-            try:
-                with open(os.path.join(self.path, "cgroup.procs")) as f:
-                    pids = [int(p) for p in f.read().split()]
-            except OSError:
-                break
-            if not pids:
-                break
-            for pid in pids:
-                try:
-                    os.kill(pid, 9)
-                except OSError:
-                    pass
-            time.sleep(0.02)
-        for _ in range(50):           # members that were just killed take a moment to leave
-            try:
-                os.rmdir(self.path)
-                break
-            except OSError:
-                time.sleep(0.02)
-        self.path = None
+        self.path = self.cpu_path = None
 
 
 def _remove_stale(root: str) -> None:
@@ -158,13 +153,18 @@ def _stat(pid: int) -> tuple[tuple[int, int] | None, float]:
 
 
 def _remove_when_empty(path: str) -> None:
-    for _ in range(50):               # its members were just killed (with the pids cgroup's): they take a moment
+    """rmdir a cgroup whose members were just killed: they take a moment to leave, longer on a loaded machine
+    (a cgroup left behind is removed by `_remove_stale` once its grader has exited)."""
+    deadline = time.monotonic() + 5.0
+    while True:
         try:
             os.rmdir(path)
             return
         except FileNotFoundError:
             return
         except OSError:
+            if time.monotonic() > deadline:
+                return
             time.sleep(0.02)
 
 

@@ -369,13 +369,17 @@ HIDDEN_CPU = """
 import os, signal, time
 def work(x):
     signal.signal(signal.SIGCHLD, signal.SIG_IGN)     # children vanish unreaped: /proc keeps no trace of their CPU
+    r, w = os.pipe()
     for _ in range(4):
         if os.fork() == 0:
             end = time.process_time() + 0.3
             while time.process_time() < end:
                 pass
+            os.write(w, b"x")
             os._exit(0)
-    time.sleep(2.0)                                   # the main thread computes nothing: its own sandbox is quiet
+    done = b""
+    while len(done) < 4:                              # the main thread computes nothing, it waits for the burners
+        done += os.read(r, 4)                         # (a fixed sleep was too short on a loaded machine)
     return x
 """
 
@@ -393,6 +397,8 @@ def test_cpu_of_children_that_vanish_unreaped_is_counted(level):
         before = learner.cpu_seconds()
         assert fn(3) == 3
         assert learner.cpu_seconds() - before >= 1.0, learner.cpu_seconds() - before      # 4 x 0.3 s burnt
+        account = learner.pids.cpu_path
+    assert not os.path.exists(account), account          # the CPU account's cgroup goes with the learner
 
 
 FLOOD = """
