@@ -49,18 +49,13 @@ from graders.core.sandbox import TimeLimitExceeded, current_cotangent
 from graders.grading.callbacks import MAX_CONCURRENT, CallbackServing
 from graders.grading.learner import receive_bytes, send
 from graders.grading import users
-from graders.grading.processes import PidsLimit
+from graders.grading.processes import WALL_FACTOR, PidsLimit
 from graders.grading.policy import refusal
 from graders.grading.quota import DISK_GB, POLL_S, DiskQuota, empty, unmount_stale
 from graders.grading.transport import RemoteError, gradients_back, loads, swap_callables, tensors_back
 
 MARGIN_S = 5.0          # the judge waits this much longer than the learner's own time limit
 CPU_SECONDS = 1800      # CPU time of one learner process (it is restarted after every time-out)
-# A case's time limit counts the CPU time the kernel reports for the learner's processes, as the learner's own
-# sandbox counts it, not wall-clock time: on a busy machine (a batch on every core, the first `import torch`
-# beside a venv being installed) a correct answer must not lose its points. Waiting (sleep, a lock, a pipe
-# nobody writes) uses no CPU, so wall-clock time still ends a call at this many times its limit.
-WALL_FACTOR = 3.0
 
 
 # ------------------------------------------------------------------ the learner process

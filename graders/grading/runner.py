@@ -41,11 +41,15 @@ from typing import Callable
 from graders.core.chapters import READY
 from graders.core.engine import chapter
 from graders.grading.extract import extract, read_cells
+from graders.grading.processes import WALL_FACTOR, most_seen, tree
 from graders.grading.quota import unmount_stale
 from graders.grading.scratch import GRADE_PREFIX, mark_grade_folder
 from graders.core.report import ExerciseResult, result_from_dict
 
-HARD_LIMIT = 120.0    # seconds per exercise before its worker is killed; generous on a slow 2-core machine
+# Seconds of CPU per exercise before its worker is killed (the worker, the learner process and what they start, as
+# /proc shows them): generous on a slow 2-core machine. CPU, not wall-clock time, so that a correct answer keeps its
+# points on a busy grading machine; a worker that waits instead of computing is killed at WALL_FACTOR times it.
+HARD_LIMIT = 120.0
 TIME_BUDGET = 540.0   # seconds for a whole grade: inside Gradescope's default 10-minute limit
 MAX_TIMEOUTS = 3      # exercises that may hit their time limit before the rest are not run
 MEMORY_GB = 8.0       # address-space limit of a worker
@@ -186,12 +190,14 @@ def _events(fd: int, pending: bytearray) -> list[dict]:
 
 def _watch(proc: subprocess.Popen, fd: int, grade: _Grade, hard_limit: float) -> tuple[str | None, str]:
     """Follow a worker's events until it ends. Returns (exercise it was on, why it was stopped or '')."""
-    current, started, pending = None, time.monotonic(), bytearray()
+    seen: dict[tuple[int, int], float] = {}
+    cpu = lambda: most_seen(tree(proc.pid), seen)       # noqa: E731 — the worker's tree, read past the limit only
+    current, started, cpu0, pending = None, time.monotonic(), 0.0, bytearray()
     while True:
         done = proc.poll() is not None
         for event in _events(fd, pending):
             if "start" in event:
-                current, started = event["start"], time.monotonic()
+                current, started, cpu0 = event["start"], time.monotonic(), cpu()
             else:
                 grade.add(result_from_dict(event["result"]))
                 current = None
@@ -204,8 +210,10 @@ def _watch(proc: subprocess.Popen, fd: int, grade: _Grade, hard_limit: float) ->
         if grade.stop_reason():
             return current, grade.stop_reason()
         # Loading the learner's code counts against the first exercise's limit.
-        if time.monotonic() - started > hard_limit:
-            return current, f"took longer than {hard_limit:g} s and was stopped"
+        waited = time.monotonic() - started
+        if waited > hard_limit and (cpu() - cpu0 > hard_limit or waited > WALL_FACTOR * hard_limit):
+            return current, (f"took longer than {hard_limit:g} s of CPU time (or {WALL_FACTOR * hard_limit:g} s of "
+                             "wall-clock time) and was stopped")
         time.sleep(0.05)
 
 

@@ -365,6 +365,33 @@ def test_a_correct_answer_late_on_a_busy_machine_keeps_its_points_and_waiting_st
             assert time.monotonic() - t0 < isolation.WALL_FACTOR * ex.timeout + isolation.MARGIN_S + 2.0
 
 
+STARVED = """
+import os, signal
+from solutions.ch01_camera_models import project_points as _reference
+def project_points(X, K, R, t, dist=None):
+    if not os.environ.get("STOPPED_ONCE"):            # the first case: stopped for 6 s, as a starved worker is
+        os.environ["STOPPED_ONCE"] = "1"
+        if os.fork() == 0:
+            import time
+            time.sleep(6.0)
+            os.kill(os.getppid(), signal.SIGCONT)
+            os._exit(0)
+        os.kill(os.getpid(), signal.SIGSTOP)
+    return _reference(X, K, R, t, dist)
+"""
+
+
+def test_a_worker_starved_past_the_hard_limit_keeps_its_points(tmp_path):
+    """The runner's per-exercise limit counts the CPU of the worker's process tree: a worker that gets no CPU for
+    longer than the limit (here: stopped, as on a machine busy with a batch) is not killed before WALL_FACTOR times
+    it. A worker that waits instead of computing still is: tests/grading/test_quota.py, test_hostile.py."""
+    from graders.grading.runner import check_file
+    source = tmp_path / "01_starved.py"
+    source.write_text(STARVED)
+    results, _ = check_file(source, seed=7, only=["1.5"], hard_limit=5.0)
+    assert results[0].score == results[0].max_score, str(results[0])
+
+
 HIDDEN_CPU = """
 import os, signal, time
 def work(x):

@@ -37,8 +37,9 @@ def test_solved_chapter_gets_full_marks_in_graded_mode(ch, tmp_path):
     path = ROOT / ch.notebook
     nbformat.write(_solved(path), tmp_path / path.name)
     # The solved notebook imports `solutions`, which graded work may not: the reference is let in by name. The hard
-    # limit (wall clock, per exercise) is the grader's for a machine of its own, scaled as the notebooks' budget is
-    # for the test workers sharing this one: 4.14 on the photos takes ~53 s alone, and failed 120 s beside a load of 30.
+    # limit per exercise (CPU time, with a wall-clock backstop at WALL_FACTOR times it) is the grader's, scaled as the
+    # notebooks' budget is for the test workers sharing this machine: 4.14 on the photos takes ~53 s alone, and
+    # failed at 120 s beside a load of 30 when the limit was wall-clock time; the scale keeps the backstop above that.
     hard_limit = HARD_LIMIT * notebook_budget_s() / NOTEBOOK_BUDGET_S
     tests = _grade(tmp_path / path.name, tmp_path / "r.json", "--hard-limit", f"{hard_limit:g}",
                    env={"CV3D_GRADE_REFERENCE": "1"})
