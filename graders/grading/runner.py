@@ -191,7 +191,7 @@ def _events(fd: int, pending: bytearray) -> list[dict]:
 def _watch(proc: subprocess.Popen, fd: int, grade: _Grade, hard_limit: float) -> tuple[str | None, str]:
     """Follow a worker's events until it ends. Returns (exercise it was on, why it was stopped or '')."""
     seen: dict[tuple[int, int], float] = {}
-    cpu = lambda: most_seen(tree(proc.pid), seen)       # noqa: E731 — the worker's tree, read past the limit only
+    cpu = lambda: most_seen(tree(proc.pid), seen)   # noqa: E731 — the worker's tree: at each start, and past the limit
     current, started, cpu0, pending = None, time.monotonic(), 0.0, bytearray()
     while True:
         done = proc.poll() is not None
