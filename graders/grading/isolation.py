@@ -150,11 +150,18 @@ def _font_cache() -> list[str]:
 
 def _give_font_cache(folder: str, uid: int, gid: int) -> None:
     """Copies of the judge's font lists (`_font_cache`) in the learner's matplotlib folder (its MPLCONFIGDIR, in
-    its private folder beside its home, which stays empty), owned by the learner."""
+    its private folder beside its home, which stays empty), owned by the learner. Best effort: without it (a quota
+    smaller than the list, a file that went away) the learner's matplotlib builds its own."""
     for path in _font_cache():
         copy = os.path.join(folder, os.path.basename(path))
-        shutil.copyfile(path, copy, follow_symlinks=False)
-        os.chown(copy, uid, gid, follow_symlinks=False)
+        try:
+            shutil.copyfile(path, copy, follow_symlinks=False)
+            os.chown(copy, uid, gid, follow_symlinks=False)
+        except OSError:
+            try:
+                os.unlink(copy)
+            except OSError:
+                pass
 
 
 @functools.lru_cache(maxsize=1)
