@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from scipy import ndimage
 
 from graders.kit import scene
 from .common import transfer
@@ -27,6 +26,7 @@ def show_dog_stack(s: int = 3, sigma0: float = 1.6, octaves: int = 2, size: int 
     """Two octaves of SIFT's scale space on a crop of a texture: the s + 3 Gaussian images of each octave
     (sigma0 k^i, k = 2^(1/s)), the s + 2 DoG images between neighbours, and the 3 x 3 x 3 neighbourhood a
     DoG extremum is compared with (26 neighbours: 8 at its own level, 9 above, 9 below)."""
+    from scipy import ndimage
     plt, Circle, Rectangle, LineCollection = _mpl()
     img = scene.texture("astronaut", (2 * size, 2 * size))[size // 2:size // 2 + size, size // 2:size // 2 + size]
     k = 2 ** (1 / s)
@@ -82,6 +82,7 @@ def _draw_neighbourhood(ax, label: bool):
 def show_sift_grid(seed: int = 0):
     """SIFT's descriptor on one patch: the 16 x 16 sample window (gradient arrows), its 4 x 4 cells, the
     Gaussian weight (sigma = half the window), and each cell's 8-bin orientation histogram: 4 x 4 x 8 = 128."""
+    from scipy import ndimage
     plt, Circle, Rectangle, LineCollection = _mpl()
     img = scene.texture("brick", (64, 64))
     rng = np.random.default_rng(seed)

@@ -3,7 +3,6 @@ and the stand-in for 5.14 built on them."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from graders.oracles.bundle_adjust import bal_cost, scipy_bundle_adjust
 
@@ -25,6 +24,7 @@ def bal_to_reconstruction(cameras, points, cam_idx, pt_idx, obs, keep: np.ndarra
     """A pycolmap Reconstruction of a BAL problem: one RADIAL camera (f, cx = cy = 0, k1, k2), rig
     and frame per BAL camera; poses and pixels flipped into COLMAP's (= OpenCV's) axes by F.
     keep: which observations to include (default all). Returns (reconstruction, point ids (np,))."""
+    from scipy.spatial.transform import Rotation
     import pycolmap
 
     cameras, points, obs = np.asarray(cameras, float), np.asarray(points, float), np.asarray(obs, float)
@@ -58,6 +58,7 @@ def bal_to_reconstruction(cameras, points, cam_idx, pt_idx, obs, keep: np.ndarra
 def reconstruction_to_bal(rec, ids, n_cams: int, points: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Cameras (nc, 9) and points (np, 3) back from a Reconstruction made by bal_to_reconstruction
     (points it left out keep their values from `points`)."""
+    from scipy.spatial.transform import Rotation
     cams = np.zeros((n_cams, 9))
     for i in range(n_cams):
         pose = rec.image(i + 1).cam_from_world()
@@ -91,6 +92,7 @@ def colmap_bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "lin
     lower COLMAP's cost but not the BAL cost (observations behind a camera: the two costs disagree).
     Returns (cameras, points, costs = [initial, final], or one entry per iteration with per_iteration)
     (+ the Ceres summary of the last solve if return_summary)."""
+    from scipy.spatial.transform import Rotation
     import pycolmap
 
     cameras, points = np.asarray(cameras, float), np.asarray(points, float)

@@ -7,7 +7,6 @@ import tempfile
 from functools import lru_cache
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from graders.kit import datasets
 from graders.core.engine import Case, Exercise, Hint, OutputError, as_array, like, register
@@ -145,6 +144,7 @@ READ_HINTS = [
 
 
 def cases_bal_project(rng: np.random.Generator) -> list[Case]:
+    from scipy.spatial.transform import Rotation
     out = []
     for name, kw in [("8 cameras, 150 points", dict(n_cams=8, n_points=150)),
                      ("30 cameras, 3,000 points (vectorise!)", dict(n_cams=30, n_points=3000, visibility=0.5))]:
@@ -181,6 +181,7 @@ def _convert_small_rotations(out, case):
 
 
 def _project_variant(case, sign=-1.0, r_power=2, transpose=False, k2_power=4):
+    from scipy.spatial.transform import Rotation
     cams, pts, ci, pi = case.args
     c = cams[ci]
     rot = Rotation.from_rotvec(c[:, :3])

@@ -9,9 +9,6 @@ import copy
 from collections.abc import Iterable
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg
-from scipy.spatial.transform import Rotation
 
 from graders.kit import scene
 from graders.core.engine import Case, Exercise, Hint, OutputError, debug_cases, debug_practice, raised, register, shared_run
@@ -30,6 +27,7 @@ from .problems import camera_centres, held_out_rms, make_problem, problem_args, 
 
 def debug_diverges(rng: np.random.Generator) -> tuple[dict, dict]:
     """5.15 — BA diverges: a far-off start, lambda0 = 1e-12, and failed triangulations at (0, 0, 0)."""
+    from scipy.spatial.transform import Rotation
     prob = make_problem(rng, n_cams=8, n_points=120, noise=0.5, rot_deg=4.0, pos_frac=0.08, pt_frac=0.10,
                         f_frac=0.05, new_gauge=False)
     # The SfM front end made camera 0 the world frame (R = I, t = 0) ...
@@ -68,6 +66,7 @@ def debug_points_at_infinity(rng: np.random.Generator) -> tuple[dict, dict]:
     are seen by those two cameras only (parallax ~0.1°: their depth is barely observable), plus 20
     points seen by a single camera (depth not observable at all), on top of 150 good points.
     """
+    from scipy.spatial.transform import Rotation
     prob = make_problem(rng, n_cams=8, n_points=150, noise=0.5, single_view=20, new_gauge=False)
     truth_c, truth_X = prob["truth"]["cameras"], prob["truth"]["points"]
     w, h = prob["truth"]["size"]
@@ -301,6 +300,7 @@ POINTS_HINTS = [
 
 def _finite_start(case: dict) -> tuple[np.ndarray, np.ndarray]:
     """Observations whose start is usable (finite residual, point in front of the camera)."""
+    from scipy.spatial.transform import Rotation
     cams, pts, ci, pi, obs = problem_args(case)
     c = cams[ci]
     P = Rotation.from_rotvec(c[:, :3]).apply(pts[pi]) + c[:, 3:6]
@@ -358,6 +358,9 @@ def naive_gauss_newton(cameras, points, cam_idx, pt_idx, obs, lam: float = 1e-12
     problem with a fixed damping lam * I (no Schur complement, no adaptive damping unless
     `reject`, which only refuses steps that raise the cost), no robust loss, no gauge fixing.
     Returns dict(cameras, points, costs, seconds per iteration)."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg
+    from scipy.spatial.transform import Rotation
     import time
 
     cams, pts = np.array(cameras, float), np.array(points, float)

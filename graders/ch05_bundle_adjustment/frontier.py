@@ -2,8 +2,6 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from graders.kit import scene
 from graders.core.engine import Case, Exercise, Hint, register
@@ -24,6 +22,7 @@ def _pose_residual(pose, X, uv, intr):
 def _gn_polish(poses, X, uvs, intr, iters: int) -> np.ndarray:
     """Gauss-Newton steps on B independent copies of one camera's pose, each with its own
     observations: poses (B, 6), X (n, 3), uvs (B, n, 2). Exact (autograd) Jacobians, one batch."""
+    from scipy.spatial.transform import Rotation
     poses, uvs = np.array(poses, float), np.asarray(uvs, float)
     B, n = len(poses), len(X)
     ci, pi = np.repeat(np.arange(B), n), np.tile(np.arange(n), B)
@@ -41,6 +40,7 @@ def scipy_refine_pose(X, uv, intrinsics, pose0) -> np.ndarray:
     """The refined pose (w, t): scipy's Levenberg-Marquardt (MINPACK), then two Gauss-Newton steps
     with the exact Jacobian, to machine precision (MINPACK's finite-difference Jacobian leaves it
     ~1e-9 away: too far for finite differences of the solution)."""
+    from scipy.optimize import least_squares
     X, uv, intr = np.asarray(X, float), np.asarray(uv, float), np.asarray(intrinsics, float)
     pose = least_squares(_pose_residual, np.asarray(pose0, float), args=(X, uv, intr), method="lm",
                          xtol=1e-15, ftol=1e-15, gtol=1e-15).x
@@ -74,6 +74,7 @@ def fd_differentiable_pose(X, uv, intrinsics, pose0, n_steps: int = 10):
 
 
 def cases_differentiable_pose(rng: np.random.Generator) -> list[Case]:
+    from scipy.spatial.transform import Rotation
     out = []
     for i in range(2):
         prob = make_problem(rng, n_cams=2, n_points=25, noise=1.0, visibility=1.0, new_gauge=False)

@@ -5,8 +5,6 @@ Oracles: torch autograd and central finite differences (independent of each othe
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.spatial.transform import Rotation
 
 from graders.core.engine import Case, Exercise, Hint, OutputError, like, register
 from graders.kit.geometry import skew
@@ -35,6 +33,7 @@ def torch_jacobians(cameras, points, cam_idx, pt_idx) -> tuple[np.ndarray, np.nd
 
 
 def _torch_jacobians(torch, cameras, points, cam_idx, pt_idx):
+    from scipy.spatial.transform import Rotation
     cameras, points = np.asarray(cameras, float), np.asarray(points, float)
     c = cameras[cam_idx]
     R = torch.as_tensor(Rotation.from_rotvec(cameras[:, :3]).as_matrix()[cam_idx])
@@ -55,6 +54,7 @@ def _torch_jacobians(torch, cameras, points, cam_idx, pt_idx):
 
 def fd_jacobians(cameras, points, cam_idx, pt_idx, h: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
     """The same Jacobians by central differences (an oracle independent of torch; ~1e-8 relative)."""
+    from scipy.spatial.transform import Rotation
     cameras, points = np.asarray(cameras, float), np.asarray(points, float)
     m = len(cam_idx)
     J_cam, J_pt = np.empty((m, 2, 9)), np.empty((m, 2, 3))
@@ -225,6 +225,7 @@ def _jac_hint(bug, text):
 
 def _jac_constant_distortion(case):
     """Translation columns if the radial factor d were treated as a constant: f d dp/dP."""
+    from scipy.spatial.transform import Rotation
     cams, pts, ci, pi = case.args
     c = cams[ci]
     P = Rotation.from_rotvec(c[:, :3]).apply(pts[pi]) + c[:, 3:6]
@@ -259,6 +260,7 @@ JACOBIAN_HINTS = [
 def gt_sparse_jacobian(J_cam, J_pt, cam_idx, pt_idx, n_cams, n_points) -> sp.csr_matrix:
     """`sparse_jacobian` by its definition: rows (2k, 2k+1) of observation k, camera block at
     columns 9 c, point block at 9 nc + 3 j."""
+    import scipy.sparse as sp
     m = len(cam_idx)
     blocks = np.concatenate([np.asarray(J_cam, float), np.asarray(J_pt, float)], axis=2)  # (M, 2, 12)
     cols = np.c_[9 * np.asarray(cam_idx)[:, None] + np.arange(9),
@@ -297,6 +299,7 @@ def cases_sparse_jacobian(rng: np.random.Generator) -> list[Case]:
 
 
 def _convert_sparse(out, case):
+    import scipy.sparse as sp
     if not sp.issparse(out):
         raise OutputError(f"expected a scipy.sparse matrix, got {type(out).__name__}: a dense Jacobian of a real "
                           f"problem does not fit in memory")

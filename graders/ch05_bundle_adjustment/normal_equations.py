@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 
 from graders.core.engine import Case, Exercise, Hint, register
 
@@ -13,6 +12,7 @@ from .jacobians import gt_sparse_jacobian, jacobian_inputs
 
 def gt_normal_equations(J_cam, J_pt, r, cam_idx, pt_idx, n_cams, n_points, weights=None):
     """`normal_equations` from the sparse Jacobian: J^T W J and J^T W r, blocks cut out of them."""
+    import scipy.sparse as sp
     m = len(cam_idx)
     w = np.ones(m) if weights is None else np.asarray(weights, float)
     J = gt_sparse_jacobian(J_cam, J_pt, cam_idx, pt_idx, n_cams, n_points)

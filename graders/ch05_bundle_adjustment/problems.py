@@ -8,7 +8,6 @@ held-out points triangulated in the estimated cameras."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from graders.kit import scene
 from graders.kit.geometry import umeyama
@@ -20,11 +19,13 @@ F = np.diag([1.0, -1.0, -1.0])  # OpenCV camera axes <-> BAL camera axes (both w
 
 def _bal_camera(R_cv: np.ndarray, t_cv: np.ndarray, f: float, k1: float, k2: float) -> np.ndarray:
     """A course (OpenCV) camera as a BAL 9-vector: R = F R_cv, t = F t_cv."""
+    from scipy.spatial.transform import Rotation
     return np.r_[Rotation.from_matrix(F @ R_cv).as_rotvec(), F @ t_cv, f, k1, k2]
 
 
 def camera_centres(cameras: np.ndarray) -> np.ndarray:
     """C = -R^T t of every BAL camera: (nc, 3)."""
+    from scipy.spatial.transform import Rotation
     cameras = np.asarray(cameras, float)
     return -Rotation.from_rotvec(cameras[:, :3]).inv().apply(cameras[:, 3:6])
 
@@ -35,6 +36,7 @@ def transform_problem(cameras, points, s: float, Q: np.ndarray, d: np.ndarray) -
     P = R X + t = R Q^T (X' - d) / s + t, and scaling P does not move its projection, so
     R' = R Q^T, t' = s t - R Q^T d.
     """
+    from scipy.spatial.transform import Rotation
     cams = np.array(cameras, float)
     Rn = Rotation.from_rotvec(cams[:, :3]) * Rotation.from_matrix(Q).inv()
     cams[:, 3:6] = s * cams[:, 3:6] - Rn.apply(d)
@@ -59,6 +61,7 @@ def make_problem(rng: np.random.Generator, n_cams: int = 8, n_points: int = 150,
     Returns dict(cameras, points, cam_idx, pt_idx, obs: the problem and the start; truth:
     dict(cameras, points, size, radius); is_outlier (M,) bool; n_views (np,)).
     """
+    from scipy.spatial.transform import Rotation
     w, h = size
     radius = rng.uniform(5.0, 8.0)
     rig = scene.random_rig(rng, n_cams, radius=radius, arc_deg=rng.uniform(90, 180), elevation_deg=(5, 30),
@@ -172,6 +175,7 @@ def held_out_rms(cameras: np.ndarray, truth: dict, n: int = 300, seed: int = 7) 
     to how the points of the problem were handled. The triangulation starts from the true points
     moved by the similarity of the camera centres; failures (non-finite, behind a camera) count
     as 1e4 px."""
+    from scipy.spatial.transform import Rotation
     cameras = np.asarray(cameras, float)
     nc = len(cameras)
     X_t = scene.random_point_cloud(np.random.default_rng(seed), n, extent=2.5)

@@ -5,8 +5,6 @@ Oracles: a direct sparse solve of the full normal equations; scipy's conjugate g
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg
 
 from graders.core.engine import Case, Exercise, Hint, register
 
@@ -17,6 +15,7 @@ from .normal_equations import gt_normal_equations, jacobian_inputs
 
 def _full_system(U, V, W, g_c, g_p, cam_idx, pt_idx) -> tuple[sp.csr_matrix, np.ndarray]:
     """The full normal-equation matrix [[U, W], [W^T, V]] (sparse) and right-hand side -g."""
+    import scipy.sparse as sp
     nc, n_pts = len(U), len(V)
     nC = 9 * nc
     rows, cols, vals = [], [], []
@@ -44,6 +43,7 @@ def full_normal_equations(U, V, W, g_c, g_p, cam_idx, pt_idx) -> tuple[sp.csr_ma
 
 def gt_schur_solve(U, V, W, g_c, g_p, cam_idx, pt_idx):
     """Stand-in for `schur_solve`: a direct sparse solve of the full normal equations (no Schur)."""
+    import scipy.sparse.linalg
     H, b = _full_system(U, V, W, g_c, g_p, cam_idx, pt_idx)
     x = scipy.sparse.linalg.spsolve(H.tocsc(), b) if H.shape[0] > 1500 else np.linalg.solve(H.toarray(), b)
     return x[:9 * len(U)].reshape(-1, 9), x[9 * len(U):].reshape(-1, 3)
@@ -94,6 +94,7 @@ def _residual_of(out, system):
 
 def _bsr(blocks: np.ndarray, rows: np.ndarray, cols: np.ndarray, n_row_blocks: int, n_cols: int) -> sp.bsr_matrix:
     """Block-sparse matrix of dense blocks (K, a, b) at block positions (rows, cols) (K,)."""
+    import scipy.sparse as sp
     order = np.lexsort((cols, rows))
     indptr = np.r_[0, np.cumsum(np.bincount(rows, minlength=n_row_blocks))]
     return sp.bsr_matrix((blocks[order], np.asarray(cols)[order], indptr),
@@ -102,6 +103,7 @@ def _bsr(blocks: np.ndarray, rows: np.ndarray, cols: np.ndarray, n_row_blocks: i
 
 def _schur_variant(case, use_V=False, sign=1.0, back_sign=1.0, with_U=True):
     """What a Schur solve with one known mistake returns (cached on the case: hints ask repeatedly)."""
+    import scipy.sparse as sp
     key = ("schur_variant", use_V, sign, back_sign, with_U)
     if key in case.info:
         return case.info[key]
@@ -143,6 +145,8 @@ SCHUR_HINTS = [
 def scipy_pcg(S, b, block_size: int = 9, tol: float = 1e-10, max_iter: int | None = None):
     """Stand-in for `pcg_block_jacobi`: scipy's conjugate gradients with the block-Jacobi
     preconditioner as a LinearOperator."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg
     S = sp.csr_matrix(S)
     n = S.shape[0]
     nb = n // block_size
@@ -191,6 +195,7 @@ def cases_pcg(rng: np.random.Generator) -> list[Case]:
 def _stopped_early(case, out) -> bool:
     """The output is block-Jacobi PCG's iterate after fewer than max_iter iterations (scipy's cg with
     the same preconditioner, every iterate recorded by its callback): the loop ignored max_iter."""
+    import scipy.sparse.linalg
     key = "pcg_iterates"
     if key not in case.info:
         S, b, bs, _, max_iter = case.args

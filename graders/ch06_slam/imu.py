@@ -14,7 +14,6 @@ a_m = R_wbᵀ (a_w − g) + b_a + noise (9.81 m/s² upwards at rest); the pre-in
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from graders.core.engine import Case, Exercise, Hint, OutputError, like, register
 from graders.kit.geometry import skew, so3_exp
@@ -42,6 +41,7 @@ def imu_window(rng: np.random.Generator, n: int = 100, dt: float = 0.005, rate: 
     (|b_g|, |b_a|) in random directions.
     Returns omega_m, acc_m (n, 3) measurements (with biases, and noise if `noise`), dt, the true biases
     and the true states (R, p, v) at the two keyframes."""
+    from scipy.spatial.transform import Rotation
     t = np.arange(n) * dt
     f1, f2 = rng.uniform(0.3, 2.0, (2, 3))
     ph1, ph2 = rng.uniform(0, 2 * np.pi, (2, 3))
@@ -121,6 +121,7 @@ def gtsam_corrected(omega_m, acc_m, dt, b_g, b_a, b_g_new, b_a_new):
 def gtsam_preintegrate(omega_m, acc_m, dt, b_g, b_a):
     """Stand-in for 6.17: gtsam's manifold pre-integration; the bias Jacobians (not exposed by the wrapper)
     by central differences of gtsam's own `predict` (its first-order correction), 1e-4 steps."""
+    from scipy.spatial.transform import Rotation
     dR, dv, dp = gtsam_deltas(omega_m, acc_m, dt, b_g, b_a)
     J = np.zeros((9, 6))
     b = np.r_[b_g, b_a]
@@ -207,6 +208,7 @@ def _convert(out, case):
 
 def _delta_error(out, expected):
     """Worst of: rotation angle between the ΔR (rad), ‖Δv error‖ (m/s), ‖Δp error‖ (m)."""
+    from scipy.spatial.transform import Rotation
     dR, dv, dp = out[:3]
     eR, ev, ep = expected[:3]
     ang = Rotation.from_matrix(eR.T @ dR if np.allclose(dR @ dR.T, np.eye(3), atol=1e-6) else np.eye(3)).magnitude()

@@ -19,7 +19,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from graders.core.convert import as_pose_stack
 from graders.core.engine import Case, Exercise, Hint, OutputError, register, shared_run
@@ -93,6 +92,7 @@ def match_in_window(seq: dict, T_pred: np.ndarray, k: int, radius: float = WINDO
     """Project the map with the predicted pose T_cw, and for each projection inside the image take, among frame
     k's keypoints within `radius` px, the one with the nearest descriptor (accepted if that distance is < 1.5).
     Returns (map point indices (m,), keypoint pixels (m, 2))."""
+    from scipy.spatial import cKDTree
     X, fr = seq["X"], seq["frames"][k]
     Xc = X @ T_pred[:3, :3].T + T_pred[:3, 3]
     front = Xc[:, 2] > 0.1

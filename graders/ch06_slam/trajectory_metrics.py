@@ -11,7 +11,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from graders.kit import datasets
 from graders.core.engine import Case, Exercise, OutputError, like, register
@@ -25,6 +24,7 @@ MAX_DIFF = 0.01  # s: evo's default association window (`evo_ape ... --t_max_dif
 
 def read_tum(file) -> tuple[np.ndarray, np.ndarray]:
     """A TUM trajectory file (`t tx ty tz qx qy qz qw`, '#' comments) -> stamps (N,), T_wc (N, 4, 4)."""
+    from scipy.spatial.transform import Rotation
     a = np.loadtxt(file, comments="#")
     T = np.tile(np.eye(4), (len(a), 1, 1))
     T[:, :3, :3] = Rotation.from_quat(a[:, 4:8]).as_matrix()  # TUM and scipy: scalar last
@@ -46,6 +46,7 @@ def synthetic_pair(rng: np.random.Generator,
     """A smooth 6-DOF ground truth at `rate_gt` Hz and an estimate at ~`rate_est` Hz in another frame and
     scale (a random similarity), with noise, a slow rotation drift, jittered stamps and a few estimate
     poses with no ground truth within MAX_DIFF (they must be dropped by the association)."""
+    from scipy.spatial.transform import Rotation
     t0 = rng.uniform(1e9, 1.6e9)
     T_len = n_gt / rate_gt
     freq = rng.uniform(0.05, 0.4, (2, 3))

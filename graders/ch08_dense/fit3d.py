@@ -20,7 +20,6 @@ from __future__ import annotations
 import copy
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from graders.core.convert import OutputError
 from graders.core.engine import Case, Exercise, Hint, register, shared_run
@@ -66,6 +65,7 @@ def _camera(az_deg: float, el_deg: float, dist: float = 4.0):
 
 
 def _plane(rng: np.random.Generator, n_side: int, half: float, z: float, size: tuple, base) -> dict:
+    from scipy.spatial.transform import Rotation
     g = np.linspace(-half, half, n_side)
     x, y = np.meshgrid(g, g)
     n = x.size

@@ -24,7 +24,6 @@ from __future__ import annotations
 import copy
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from graders.core.convert import OutputError
 from graders.core.engine import Case, Exercise, Hint, register, shared_run
@@ -56,6 +55,7 @@ def _camera(az_deg: float, el_deg: float, dist: float = 4.0):
 
 
 def _wall(rng: np.random.Generator) -> dict:
+    from scipy.spatial.transform import Rotation
     g = np.linspace(-0.9, 0.9, N_SIDE)
     x, y = np.meshgrid(g, g)
     n = N_SIDE * N_SIDE
@@ -124,6 +124,7 @@ def _pane(rng: np.random.Generator, wall_color: np.ndarray) -> dict:
     (opacity 0.2-0.45), as glass, a fence or foliage are in a real capture. Every training view sees it: it is
     surface, and pruning by opacity deletes it with the floaters. Its tint differs from the wall's mean colour
     `wall_color` (3,) by 0.35 on every channel, so the pane shows in every view it covers."""
+    from scipy.spatial.transform import Rotation
     g = np.linspace(-0.45, 0.45, 4)
     x, y = np.meshgrid(g, g)
     n = x.size
@@ -145,6 +146,7 @@ def _psnr(imgs, refs) -> float:
 
 
 def _draw(rng: np.random.Generator):
+    from scipy.spatial.transform import Rotation
     K = np.array([[FOCAL, 0, W / 2], [0, FOCAL, H / 2], [0, 0, 1]])
     az = np.sort(rng.uniform(-45, 45, 6))
     cams = [(K, *_camera(a, rng.uniform(-12, 12))) for a in az]

@@ -8,7 +8,6 @@ itself (not the closed-form Jacobian the specification gives), Σ' = J_fd Σ J_f
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from graders.core.convert import OutputError
 from graders.core.engine import Case, Exercise, Hint, register, shared_run
@@ -21,6 +20,7 @@ NEAR, DILATION = 0.2, 0.3          # 3DGS's near plane (m) and low-pass dilation
 def gaussian_scene(rng: np.random.Generator, N: int = 200, W: int = 64, H: int = 48) -> dict:
     """N Gaussians around a camera looking down +z: most in view, some behind it, some off-screen.
     q: (N, 4) unnormalised (w, x, y, z); s: (N, 3) scales in m; pose world-to-camera R, t; K (3, 3)."""
+    from scipy.spatial.transform import Rotation
     f = float(rng.uniform(50, 80))
     K = np.array([[f, 0, W / 2], [0, f * float(rng.uniform(0.95, 1.05)), H / 2], [0, 0, 1]])
     ang = rng.normal(0, 0.1, 3)
@@ -47,6 +47,7 @@ def _project(Xc, K):
 
 def gt_project(mu, q, s, R, t, K, W, H) -> dict:
     """The oracle: 2D means, covariances, conics, 3σ radii, depths and the visibility mask."""
+    from scipy.spatial.transform import Rotation
     mu, q, s = to_numpy(mu), to_numpy(q), to_numpy(s)
     Rq = Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_matrix()                       # scipy normalises
     M = Rq * s[:, None, :]

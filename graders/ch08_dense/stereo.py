@@ -18,7 +18,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from scipy import ndimage
 
 from graders.core.convert import OutputError
 from graders.core.engine import Case, Exercise, Hint, like, register, shared_run
@@ -33,12 +32,14 @@ PATHS_8 = PATHS_4 + ((1, 1), (1, -1), (-1, 1), (-1, -1))
 def _spline_texture(rng: np.random.Generator, shape: tuple[int, int], sigma: float = 1.0) -> np.ndarray:
     """Band-limited noise (std ~0.15 around 0.5) and its cubic-spline coefficients, so sampling it at
     any real (y, x) is exact and shared by both views."""
+    from scipy import ndimage
     noise = ndimage.gaussian_filter(rng.normal(size=shape), sigma)
     noise = 0.5 + 0.15 * noise / noise.std()
     return ndimage.spline_filter(noise, order=3)
 
 
 def _sample(coeffs: np.ndarray, y: np.ndarray, x: np.ndarray) -> np.ndarray:
+    from scipy import ndimage
     return ndimage.map_coordinates(coeffs, [y, x], order=3, prefilter=False, mode="nearest")
 
 
@@ -107,6 +108,7 @@ def motorcycle_crop(rng: np.random.Generator, H: int = 72, W: int = 136) -> dict
 def cost_volume(I_l: np.ndarray, I_r: np.ndarray, d_max: int, r: int) -> np.ndarray:
     """SAD cost volume C: (H, W, d_max + 1), C[y, x, d] = sum over the (2r+1)^2 window of
     |I_l(y', x') - I_r(y', x' - d)|; inf where x - d < 0 (no partner in the right view)."""
+    from scipy import ndimage
     H, W = I_l.shape
     C = np.full((H, W, d_max + 1), np.inf)
     k = 2 * r + 1

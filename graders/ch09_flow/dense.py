@@ -10,7 +10,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from scipy.ndimage import gaussian_filter, median_filter
 
 from graders.core.convert import OutputError, as_array
 from graders.core.engine import Case, Exercise, Hint, like, register
@@ -87,6 +86,7 @@ def cv_dense_flow(I1, I2) -> np.ndarray:
     """Stand-in for 9.13: DIS (medium preset) fused per pixel with the dominant motion (the median of
     cv2.calcOpticalFlowPyrLK tracks on a 16-px grid): DIS where its local warp error is below half the
     dominant motion's, then a 5 x 5 median filter."""
+    from scipy.ndimage import gaussian_filter, median_filter
     from graders.oracles.flow import cv_pyramidal_lk
     f = cv_dis(I1, I2)
     H, W = np.shape(I1)

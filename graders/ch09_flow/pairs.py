@@ -10,7 +10,6 @@ from functools import lru_cache
 
 import cv2
 import numpy as np
-from scipy.ndimage import map_coordinates
 
 from graders.kit import datasets, scene
 
@@ -116,6 +115,7 @@ def plane_pair(rng: np.random.Generator, width: int = 160, height: int = 120, sh
     I2 = I1 resampled (cubic spline) at H⁻¹ x, so I2(H x) = I1(x) and flow(x) = H x − x exactly; pixels of I2
     whose source lies outside I1 are filled by reflection, and `valid` marks frame-1 pixels that land
     inside frame 2 (the others have no right answer)."""
+    from scipy.ndimage import map_coordinates
     if I1 is None:
         I1 = texture_patch(rng, width, height, blur)
     height, width = I1.shape

@@ -13,7 +13,6 @@ I2 = T). Compared by EPE with the zero flow and OpenCV's Farneback on the same p
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import gaussian_filter, map_coordinates
 
 from graders.kit.threads import torch_threads
 
@@ -24,6 +23,7 @@ SIZE, RADIUS, PATCH = 40, 2, 5
 
 def synthetic_warps(rng: np.random.Generator, n: int, size: int = SIZE, max_flow: float = 6.0):
     """n pairs: I1, I2 (n, size, size) in [0, 1] and the exact flow (n, size, size, 2) of frame 1."""
+    from scipy.ndimage import gaussian_filter, map_coordinates
     I1, I2, W = [], [], []
     y, x = np.mgrid[0:size, 0:size].astype(float)
     m = 12

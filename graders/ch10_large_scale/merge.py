@@ -19,7 +19,6 @@ Reconstruction dicts (COLMAP-style, world-to-camera, OpenCV frame, pixel centres
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from graders.core.compare import rotation_angle_deg
 from graders.core.convert import OutputError, as_pose, as_sim3
@@ -55,6 +54,7 @@ def merge_problem(rng: np.random.Generator, n_shared: int = 40, n_own: int = 60,
     truth with `drift` m of point and camera-centre error and 0.2° of rotation error (what a local BA
     leaves), then moved into its own random Sim(3) gauge. Returns rec_a, rec_b, the truth (cameras,
     points), sim_ba (the true (s, R, t) with X_a = s R X_b + t)."""
+    from scipy.spatial.transform import Rotation
     K = np.array([[F, 0, (W - 1) / 2], [0, F, (H - 1) / 2], [0, 0, 1.0]])
     xs = np.linspace(-5, 5, 2 * n_cams)
     cams = {}
@@ -98,6 +98,7 @@ def merge_problem(rng: np.random.Generator, n_shared: int = 40, n_own: int = 60,
 # ------------------------------------------------------------------ the grader's merge (the stand-in)
 
 def _to_bal(rec: dict):
+    from scipy.spatial.transform import Rotation
     ids, pids = sorted(rec["cameras"]), sorted(rec["points"])
     ci, pi = {i: k for k, i in enumerate(ids)}, {p: k for k, p in enumerate(pids)}
     Fl = np.diag([1.0, -1.0, -1.0])
@@ -111,6 +112,7 @@ def _to_bal(rec: dict):
 
 
 def _from_bal(cams, pts, ids, pids, K) -> dict:
+    from scipy.spatial.transform import Rotation
     Fl = np.diag([1.0, -1.0, -1.0])
     out = {i: {"K": K, "R": Fl @ Rotation.from_rotvec(c[:3]).as_matrix(), "t": Fl @ c[3:6]} for i, c in zip(ids, cams)}
     return {"cameras": out, "points": {p: X for p, X in zip(pids, pts)}}

@@ -22,8 +22,6 @@ radius, and every pair's scale against the truth.
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.sparse.csgraph import minimum_spanning_tree
 
 from graders.kit import scene
 from graders.core.convert import OutputError, as_rotation
@@ -103,6 +101,7 @@ def _stack(pairs: list[dict]) -> tuple[np.ndarray, ...]:
 def _mst_init(pairs: list[dict], n_views: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Camera-to-world rotations Rcw (N, 3, 3), centres (N, 3) and pair scales (E,) by chaining Umeyama fits
     along the maximum-confidence spanning tree (scipy's minimum spanning tree of -confidence)."""
+    from scipy.sparse.csgraph import minimum_spanning_tree
     first, views, X, C = _stack(pairs)
     weight = np.zeros((n_views, n_views))
     for e, (n, m) in enumerate(views):
@@ -166,6 +165,7 @@ def _residuals(params: np.ndarray, first, views, X, C, R0, n_views: int) -> np.n
 def gt_global_alignment(pairs: list[dict], n_views: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Stand-in: spanning-tree initialisation, then scipy least squares (squared loss weighted by C^2, the
     maximum likelihood for errors of std ~ 1 / C; world pointmaps eliminated). Returns world-to-camera Rs (N, 3, 3), ts (N, 3) and pair scales (E,)."""
+    from scipy.optimize import least_squares
     first, views, X, C = _stack(pairs)
     R0, centres, sigma = _mst_init(pairs, n_views)
     x0 = np.r_[np.zeros(3 * n_views), centres.ravel(), np.log(sigma)]

@@ -15,8 +15,6 @@ Independent stand-in: scipy's Mahalanobis distance (scipy.spatial.distance.cdist
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.distance import cdist
-from scipy.stats import chi2, norm
 
 from graders.core.engine import Case, Exercise, Hint, like, register
 
@@ -52,6 +50,7 @@ def gt_confidence_flags(train, stream, alpha: float = 0.01) -> np.ndarray:
 
 
 def _flags(fit_on, x, alpha, diagonal=False, threshold=None, squared=True):
+    from scipy.stats import chi2
     mu = fit_on.mean(0)
     S = np.cov(fit_on, rowvar=False)
     S = np.diag(np.diag(S)) if diagonal else S
@@ -63,6 +62,8 @@ def _flags(fit_on, x, alpha, diagonal=False, threshold=None, squared=True):
 
 def scipy_confidence_flags(train, stream, alpha: float = 0.01) -> np.ndarray:
     """The stand-in: scipy's Mahalanobis distance with the inverse covariance, chi2's quantile."""
+    from scipy.spatial.distance import cdist
+    from scipy.stats import chi2
     lt, ls = np.log(train), np.log(stream)
     VI = np.linalg.inv(np.cov(lt.T))
     d = cdist(ls, lt.mean(0, keepdims=True), "mahalanobis", VI=VI)[:, 0]
@@ -100,6 +101,7 @@ def _bug_diagonal(case):
 
 
 def _bug_normal_quantile(case):
+    from scipy.stats import norm
     lt, ls, alpha = _logs(case)
     return _flags(lt, ls, alpha, threshold=norm.isf(alpha) ** 2)
 

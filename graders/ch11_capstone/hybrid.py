@@ -17,7 +17,6 @@ float rounding), its error against the truth reported beside it.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from graders.core.convert import as_pose_stack
 from graders.core.engine import Case, Exercise, like, register
@@ -36,6 +35,7 @@ def _rigids(R, t) -> np.ndarray:
 def _perturb(rng: np.random.Generator, T, rot_deg, trans_m) -> np.ndarray:
     """Each of T (n, 4, 4) with a random rotation of rot_deg[i] (rms over the axes) and a translation error of
     trans_m[i] (rms) applied: an estimate of the motion."""
+    from scipy.spatial.transform import Rotation
     n = len(T)
     w = np.radians(rot_deg)[:, None] * rng.standard_normal((n, 3)) / np.sqrt(3)
     dR = Rotation.from_rotvec(w).as_matrix()
@@ -54,6 +54,7 @@ def _window(rng: np.random.Generator, lo, hi, length=(9, 14), n_flicker=(1, 2)):
 def hybrid_run(rng: np.random.Generator, windows=("features", "inliers")) -> dict:
     """Inputs and truth for 11.8: features (T,), inlier_ratio (T,), T_classical, T_direct, T_true (T, 4, 4)
     relative motions (index 0: identity), and the fault windows. windows: which faults, in order."""
+    from scipy.spatial.transform import Rotation
     n = N_FRAMES
     yaw = np.radians(rng.uniform(0.4, 1.5)) * np.sin(np.linspace(0, rng.uniform(2, 5) * np.pi, n))
     t = np.c_[rng.normal(0, 0.01, n), np.zeros(n), -rng.uniform(0.06, 0.1, n)]

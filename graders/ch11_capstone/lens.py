@@ -13,7 +13,6 @@ about 0.9 r: the soft rim keeps some).
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
 from graders.kit import corridor
 from graders.core.engine import Case, Exercise, Hint, like, register

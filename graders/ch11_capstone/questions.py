@@ -16,7 +16,6 @@ from __future__ import annotations
 from math import comb
 
 import numpy as np
-from scipy.stats import norm
 
 from graders.core.compare import relative
 from graders.core.engine import Hint, choice_question, numeric_question, register, value_hint
@@ -31,6 +30,7 @@ SAMPLE, CONFIDENCE = 8, 0.99            # the 8-point F inside RANSAC (chapter 2
 
 def inlier_ratio(bias_px: float, correct: float = CORRECT, sigma: float = SIGMA, tau: float = TAU) -> float:
     """Fraction of tentative matches that pass |d| <= tau when correct ones have d ~ N(bias, sigma^2)."""
+    from scipy.stats import norm
     return float(correct * (norm.cdf((tau - bias_px) / sigma) - norm.cdf((-tau - bias_px) / sigma)))
 
 

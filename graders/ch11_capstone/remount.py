@@ -21,8 +21,6 @@ least-squares fit is pulled off by ~1.6 px). Judged on 300 fresh matches of the 
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from graders.core.convert import as_rotation
 from graders.core.engine import Case, Exercise, Hint, OutputError, register, shared_run
@@ -59,6 +57,7 @@ def _matches(rng: np.random.Generator, R_m, n, noise=0.1):
 
 def remount_problem(rng: np.random.Generator, n: int = 300, wrong: float = 0.1) -> dict:
     """Matches (x_left, x_right (n, 2)), K, the true mount R_m, held-out clean matches, the wrong ones' mask."""
+    from scipy.spatial.transform import Rotation
     sign = rng.choice([-1, 1], 2)
     angles = np.radians([sign[0] * rng.uniform(0.5, 1.5), 0.0, sign[1] * rng.uniform(0.25, 0.6)])
     R_m = Rotation.from_euler("xyz", angles).as_matrix()
@@ -86,6 +85,8 @@ def repaired_columns(R, x_right, K_) -> np.ndarray:
 def gt_fix_right_mount(x_left, x_right, K_) -> np.ndarray:
     """The grader's stand-in: pitch and roll (yaw held at 0) minimising the row residuals with a Cauchy loss
     (scale 0.3 px), started from pitch = median row offset / f."""
+    from scipy.optimize import least_squares
+    from scipy.spatial.transform import Rotation
     x_left, x_right = np.asarray(x_left, float), np.asarray(x_right, float)
 
     def R_of(p):
@@ -151,6 +152,7 @@ def _yaw(case, out) -> bool:
 
 
 def _no_roll(case, out) -> bool:
+    from scipy.spatial.transform import Rotation
     roll = Rotation.from_matrix(np.asarray(out)).as_euler("xyz")[2]
     return abs(roll) < 0.02 * abs(Rotation.from_matrix(case.info["R_m"]).as_euler("xyz")[2])
 
@@ -163,6 +165,7 @@ def _pulled(case, out) -> bool:
 
 
 def _signed(p, x_left, x_right, K_):
+    from scipy.spatial.transform import Rotation
     R = Rotation.from_euler("xyz", [p[0], 0, p[1]]).as_matrix()
     h = np.c_[x_right, np.ones(len(x_right))] @ (K_ @ R.T @ np.linalg.inv(K_)).T
     return h[:, 1] / h[:, 2] - x_left[:, 1]
@@ -170,6 +173,8 @@ def _signed(p, x_left, x_right, K_):
 
 def _least_squares_fit(x_left, x_right, K_):
     """Pitch and roll by plain least squares on every match (the mistake _pulled recognises)."""
+    from scipy.optimize import least_squares
+    from scipy.spatial.transform import Rotation
     p = least_squares(_signed, np.zeros(2), args=(x_left, x_right, K_)).x
     return Rotation.from_euler("xyz", [p[0], 0, p[1]]).as_matrix()
 

@@ -23,7 +23,6 @@ the repair x_r - v dt with the true offset (the pipeline's depth metric back nea
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from graders.core.engine import Case, Exercise, Hint, OutputError, register
 
@@ -41,6 +40,7 @@ def _project(X, R, t):
 def _frame(rng: np.random.Generator, motion, dt_frames, n, noise=0.1):
     """n matches seen by the left camera at t = 0 and by the right one at t = dt, the left points' velocity
     (px/frame, from t = -1 to 1), and their true depths."""
+    from scipy.spatial.transform import Rotation
     v, w = motion
     X = np.c_[rng.uniform(-4, 4, 6 * n), rng.uniform(-1.5, 1.5, 6 * n), rng.uniform(1.5, 12, 6 * n)]
     at = lambda s: (Rotation.from_rotvec(s * w).as_matrix(), -s * v)      # noqa: E731  camera pose at time s

@@ -26,15 +26,13 @@ from __future__ import annotations
 import hashlib
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 __all__ = ["bal_project", "bal_cost", "gauge_mask", "bal_sparsity", "scipy_bundle_adjust"]
 
 
 def bal_project(cameras: np.ndarray, points: np.ndarray, cam_idx: np.ndarray, pt_idx: np.ndarray) -> np.ndarray:
     """BAL projection with scipy's rotations: (M, 2) pixels (depth sign ignored, as BAL does)."""
+    from scipy.spatial.transform import Rotation
     cameras, points = np.asarray(cameras, float), np.asarray(points, float)
     c = cameras[cam_idx]
     P = Rotation.from_rotvec(c[:, :3]).apply(points[pt_idx]) + c[:, 3:6]
@@ -57,6 +55,7 @@ def gauge_mask(cameras: np.ndarray) -> np.ndarray:
     """(nc, 9) True where `fix_gauge` holds a camera parameter: camera 0's w and t, and the
     translation component k of camera 1 with the largest |t1 - R1 R0^T t0|_k (the direction in
     which a scale change that keeps camera 0 moves camera 1)."""
+    from scipy.spatial.transform import Rotation
     cameras = np.asarray(cameras, float)
     fixed = np.zeros(cameras.shape, bool)
     fixed[0, :6] = True
@@ -72,6 +71,7 @@ def bal_sparsity(cam_idx: np.ndarray, pt_idx: np.ndarray, n_cams: int, n_points:
     """Jacobian sparsity of the BAL residuals over x = [cameras.ravel(), points.ravel()]: rows (2k, 2k+1)
     of observation k (one row k with per_observation: residual norms) touch camera columns 9 c..9 c+8
     and point columns 9 nc + 3 j..+2. Shape (2M or M, 9 nc + 3 np)."""
+    import scipy.sparse as sp
     cam_idx, pt_idx = np.asarray(cam_idx), np.asarray(pt_idx)
     m = len(cam_idx)
     rows = np.arange(m) if per_observation else np.arange(2 * m)
@@ -116,6 +116,7 @@ def scipy_bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "line
     max_nfev is given); lsmr_maxiter caps the LSMR iterations of each trust-region step.
     Returns (cameras (nc, 9), points (np, 3), costs = [initial, after each iteration, ..., final]).
     """
+    from scipy.optimize import least_squares
     cameras, points = np.array(cameras, float), np.array(points, float)
     cam_idx, pt_idx, obs = np.asarray(cam_idx), np.asarray(pt_idx), np.asarray(obs, float)
     key = _key(cameras, points, cam_idx, pt_idx, obs,

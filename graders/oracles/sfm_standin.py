@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.sparse import lil_matrix
 
 from graders.kit.geometry import (angle_between_deg, brown_distort, brown_undistort, camera_centre, pixels_to_normalised,
                         project)
@@ -111,6 +109,7 @@ def pnp_unknown_focal(X, x, K, thresh_px, factors=np.geomspace(0.6, 1.7, 9)):
     f = factor × K's f, the one with the lowest truncated cost Σ min(e², thresh²) kept (a wrong f bends the
     bearings: the inlier count alone hardly moves at a 12 px threshold), then pose and f refined together
     on its inliers (scipy least squares on rotation vector, t, log f). Returns (R, t, inliers, K)."""
+    from scipy.optimize import least_squares
     best = None
     for s in factors:
         Ks = K.copy()
@@ -151,6 +150,7 @@ def _rodrigues(r: np.ndarray) -> np.ndarray:
 
 
 def _ba_sparsity(oc, op, nc, npnt, ni, n_par):
+    from scipy.sparse import lil_matrix
     A = lil_matrix((2 * len(oc), n_par), dtype=int)
     rows = np.arange(len(oc))
     for d in range(6):
@@ -170,6 +170,7 @@ def bundle_adjust(poses, Xs, tracks, kps, K, max_nfev: int = 30, dist=None, intr
     more slowly on this problem (30 evaluations: 2° off instead of 0.04°). LSMR steps are capped at 100
     iterations (the photos: 4 s instead of 8 s, same result).
     Returns (poses, points, K list, dist list)."""
+    from scipy.optimize import least_squares
     cam_ids, pt_ids = sorted(poses), sorted(Xs)
     ci = {c: a for a, c in enumerate(cam_ids)}
     pi = {p: a for a, p in enumerate(pt_ids)}

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from scipy.optimize import least_squares
 
 from graders.kit.geometry import skew, so3_exp, to_h
 from .sfm_standin import cv_pnp_ransac, triangulate_normalised
@@ -18,6 +17,7 @@ def refine_essential(E0: np.ndarray, x1: np.ndarray, x2: np.ndarray, K1: np.ndar
     near E0: (3, 3), with scipy's Levenberg-Marquardt on (rotation increment, translation direction).
     Returns E: (3, 3), unit Frobenius norm. (An 8-point or 5-point E alone is 2-5x less accurate in
     rotation: projecting onto the essential manifold ignores what it does to the residuals.)"""
+    from scipy.optimize import least_squares
     U, _, Vt = np.linalg.svd(E0)
     U = -U if np.linalg.det(U) < 0 else U
     Vt = -Vt if np.linalg.det(Vt) < 0 else Vt
