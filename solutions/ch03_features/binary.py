@@ -52,8 +52,13 @@ def box_sums(img: np.ndarray, size: int = 5) -> np.ndarray:
     I = np.asarray(img)
     P = np.pad(I, h, mode="edge").astype(np.uint16 if I.dtype == np.uint8 else np.float64)
     H, W = I.shape
-    rows = sum(P[i:i + H] for i in range(size))  # (H, W + 2h): vertical sums
-    return sum(rows[:, j:j + W] for j in range(size))  # (H, W)
+    rows = P[:H].copy()  # (H, W + 2h): vertical sums, accumulated in place (no fresh array per term)
+    for i in range(1, size):
+        rows += P[i:i + H]
+    out = rows[:, :W].copy()  # (H, W): then horizontal sums
+    for j in range(1, size):
+        out += rows[:, j:j + W]
+    return out
 
 
 def orb_descriptors(img: np.ndarray, kps: np.ndarray, pattern: np.ndarray) -> np.ndarray:
@@ -108,8 +113,18 @@ def resize_bilinear(I: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
         return i0, (u - i0).astype(np.result_type(I.dtype, np.float32))  # a float32 image stays float32
     y0, fy = weights(I.shape[0], shape[0])
     x0, fx = weights(I.shape[1], shape[1])
-    rows = I[y0] * (1 - fy)[:, None] + I[y0 + 1] * fy[:, None]  # (h, W)
-    return rows[:, x0] * (1 - fx) + rows[:, x0 + 1] * fx  # (h, w)
+    # in place (*=, +=): every fresh image-sized array costs page faults; these reuse two buffers
+    rows = I[y0]  # (h, W): a row gather copies, so the products below can overwrite it
+    rows *= (1 - fy)[:, None]
+    lower = I[y0 + 1]
+    lower *= fy[:, None]
+    rows += lower  # (h, W): rows interpolated
+    out = rows[:, x0]  # (h, w)
+    out *= 1 - fx
+    right = rows[:, x0 + 1]
+    right *= fx
+    out += right  # (h, w): then columns
+    return out
 
 
 def orb_detect(img: np.ndarray, n_features: int = 1000, n_levels: int = 8, scale: float = 1.2,
@@ -135,7 +150,7 @@ def orb_detect(img: np.ndarray, n_features: int = 1000, n_levels: int = 8, scale
         if min(shape) < 2 * border + 8:
             break
         L = I if lv == 0 else resize_bilinear(L, shape)  # each level from the previous one, as OpenCV does
-        L8 = np.rint(L).astype(np.uint8)  # bilinear weights are convex: within [0, 255]
+        L8 = np.rint(L, out=np.empty(shape, np.uint8), casting="unsafe")  # convex weights: within [0, 255]
         h, w = shape
         k = fast_detect(L8[crop:h - crop, crop:w - crop], threshold, True) + crop  # the inside only
         k = k[(k[:, 0] >= border) & (k[:, 0] < w - border) & (k[:, 1] >= border) & (k[:, 1] < h - border)]

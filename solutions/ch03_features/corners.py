@@ -123,7 +123,10 @@ def fast_detect(img: np.ndarray, threshold: int = 20, nms: bool = True) -> np.nd
     a, b = 3 * W + 3, (H - 3) * W - 3  # p in [a, b): every row 3 px or more from the top and bottom
     c = flat[a:b]
     ring = [flat[a + o:b + o] for o in step]  # views, no copies: ring[i][q] is circle pixel i of p = a + q
-    q = _fast_candidates(c, ring, threshold)
+    # the pre-test in slices of PRETEST_BLOCK pixels: its ~30 temporaries then stay in the CPU cache
+    q = np.concatenate([np.zeros(0, np.intp)] + [
+        _fast_candidates(c[i:i + PRETEST_BLOCK], [r[i:i + PRETEST_BLOCK] for r in ring], threshold) + i
+        for i in range(0, len(c), PRETEST_BLOCK)])
     x = (q + a) % W
     q = q[(x >= 3) & (x < W - 3)]  # 3 px or more from the left and right edges
     # Blocks keep the (16, block) temporaries in the CPU cache (graf1's 34,000 candidates: 7.7 ms CPU
@@ -136,12 +139,15 @@ def fast_detect(img: np.ndarray, threshold: int = 20, nms: bool = True) -> np.nd
     if nms:  # compare each corner's score with its 8 neighbours' (0 where there is no corner)
         s = np.zeros(H * W, np.int16)
         s[p] = score
-        around = np.array([dy * W + dx for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dx or dy])
-        p = p[np.all(score[:, None] > s[p[:, None] + around], axis=1)]
+        keep = np.ones(len(p), bool)
+        for o in [dy * W + dx for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dx or dy]:
+            keep &= score > s[p + o]  # one neighbour at a time: no (N, 8) temporaries
+        p = p[keep]
     return np.c_[p % W, p // W].astype(np.float64)  # p ascends: raster order
 
 
 FAST_BLOCK = 8192  # candidates scored at once by fast_detect
+PRETEST_BLOCK = 1 << 17  # pixels pre-tested at once (graf1: 2.8 ms CPU in one slice, 1.9 ms in slices of 2^17)
 
 
 def _fast_candidates(c: np.ndarray, ring: list[np.ndarray], threshold: int) -> np.ndarray:
@@ -169,15 +175,19 @@ def harris_at(img: np.ndarray, pts: np.ndarray, radius: int = 3, k: float = 0.04
     computed in a window one pixel wider. pts: (N, 2) (x, y), at least radius + 1 px inside. (N,).
 
     Each point's (w, w) window is one entry of sliding_window_view (a view of every window of the
-    image, no copy); a uint8 image's differences and their sums are exact integers (int32), scaled
-    to gray()'s [0, 1] units at the end."""
+    image, no copy). A uint8 image's differences, their products and sums are integers below 2^24
+    (at most (2 radius + 1)^2 255^2 = 3.2e6 at radius 3), exact in float32, summed by einsum
+    ("ni,ni->n": products and sum in one pass, no (N, w^2) temporaries) and scaled to gray()'s
+    [0, 1] units at the end."""
     img = np.asarray(img)
     w = 2 * radius + 3
     xy = np.rint(np.asarray(pts, float)[:, :2]).astype(int) - radius - 1  # windows' top-left corners
     P = sliding_window_view(img, (w, w))[xy[:, 1], xy[:, 0]]  # (N, w, w): only the windows
-    P = P.astype(np.int32) if img.dtype == np.uint8 else gray(P)
-    gx = P[:, 1:-1, 2:] - P[:, 1:-1, :-2]  # (N, 2 radius + 1, 2 radius + 1): 2 dI/dx
-    gy = P[:, 2:, 1:-1] - P[:, :-2, 1:-1]
-    unit = (0.5 / 255) ** 2 if img.dtype == np.uint8 else 0.25  # (1/2 of the difference)^2, in gray() units
-    Sxx, Sxy, Syy = [unit * (u * v).sum((1, 2)) for u, v in ((gx, gx), (gx, gy), (gy, gy))]
+    exact32 = img.dtype == np.uint8 and (2 * radius + 1) ** 2 * 255 ** 2 < 2 ** 24
+    P = P.astype(np.float32) if exact32 else gray(P)
+    n = (2 * radius + 1) ** 2
+    gx = (P[:, 1:-1, 2:] - P[:, 1:-1, :-2]).reshape(len(P), n)  # (N, (2 radius + 1)^2): 2 dI/dx
+    gy = (P[:, 2:, 1:-1] - P[:, :-2, 1:-1]).reshape(len(P), n)
+    unit = (0.5 / 255) ** 2 if exact32 else 0.25  # (1/2 of the difference)^2, in gray() units
+    Sxx, Sxy, Syy = [unit * np.einsum("ni,ni->n", u, v).astype(np.float64) for u, v in ((gx, gx), (gx, gy), (gy, gy))]
     return Sxx * Syy - Sxy ** 2 - k * (Sxx + Syy) ** 2
