@@ -73,17 +73,22 @@ CIRCLE16 = np.array([(0, -3), (1, -3), (2, -2), (3, -1), (3, 0), (3, 1), (2, 2),
                      (0, 3), (-1, 3), (-2, 2), (-3, 1), (-3, 0), (-3, -1), (-2, -2), (-1, -3)])
 
 
+def _brighter_arc(d: np.ndarray, arc: int = 9) -> np.ndarray:
+    """The largest t for which `arc` contiguous entries of d (16, ...) (circle along axis 0) are all
+    > t: the max over the 16 arcs of the min over each arc."""
+    d = np.concatenate([d, d[:arc - 1]])  # the circle wraps around
+    lo, k = d, 1
+    while 2 * k <= arc:  # doubling: lo[j] = min(d[j], ..., d[j + 2k - 1]) from two windows of k
+        lo, k = np.minimum(lo[:-k], lo[k:]), 2 * k
+    # an arc of `arc` pixels = two overlapping windows of k (k <= arc < 2k): its min over them
+    return np.minimum(lo[:16], lo[arc - k:arc - k + 16]).max(axis=0)
+
+
 def _arc_score(d: np.ndarray, arc: int = 9) -> np.ndarray:
     """FAST score from the 16 circle-minus-centre differences d (16, ...) (circle along axis 0): the
-    largest t for which `arc` contiguous circle pixels are all > t or all < -t."""
-    d = np.concatenate([d, d[:arc - 1]])  # the circle wraps around
-    lo, hi, k = d, d, 1
-    while 2 * k <= arc:  # doubling: lo[j] = min(d[j], ..., d[j + 2k - 1]) from two windows of k
-        lo, hi, k = np.minimum(lo[:-k], lo[k:]), np.maximum(hi[:-k], hi[k:]), 2 * k
-    # an arc of `arc` pixels = two overlapping windows of k (k <= arc < 2k): its min / max over them
-    lo = np.minimum(lo[:16], lo[arc - k:arc - k + 16])
-    hi = np.maximum(hi[:16], hi[arc - k:arc - k + 16])
-    return np.maximum(lo.max(axis=0), -hi.min(axis=0))  # brighter arc, darker arc
+    largest t for which `arc` contiguous circle pixels are all > t (brighter arc: d) or all < -t
+    (darker arc: the brighter arc of -d)."""
+    return np.maximum(_brighter_arc(d, arc), _brighter_arc(-d, arc))
 
 
 def fast_score(img: np.ndarray, arc: int = 9) -> np.ndarray:
@@ -124,16 +129,20 @@ def fast_detect(img: np.ndarray, threshold: int = 20, nms: bool = True) -> np.nd
     c = flat[a:b]
     ring = [flat[a + o:b + o] for o in step]  # views, no copies: ring[i][q] is circle pixel i of p = a + q
     # the pre-test in slices of PRETEST_BLOCK pixels: its ~30 temporaries then stay in the CPU cache
-    q = np.concatenate([np.zeros(0, np.intp)] + [
-        _fast_candidates(c[i:i + PRETEST_BLOCK], [r[i:i + PRETEST_BLOCK] for r in ring], threshold) + i
-        for i in range(0, len(c), PRETEST_BLOCK)])
+    parts = [_fast_candidates(c[i:i + PRETEST_BLOCK], [r[i:i + PRETEST_BLOCK] for r in ring], threshold, i)
+             for i in range(0, max(len(c), 1), PRETEST_BLOCK)]
+    q, bright, dark = (np.concatenate(column) for column in zip(*parts))
     x = (q + a) % W
-    q = q[(x >= 3) & (x < W - 3)]  # 3 px or more from the left and right edges
-    # Blocks keep the (16, block) temporaries in the CPU cache (graf1's 34,000 candidates: 7.7 ms CPU
-    # in one block, 2.1 ms in blocks of 8,192): the same scores either way.
-    score = np.concatenate([np.zeros(0, np.int16)] + [
-        _arc_score(np.stack([r[qb] for r in ring]).astype(np.int16) - c[qb])
-        for qb in np.split(q, range(FAST_BLOCK, len(q), FAST_BLOCK))])
+    inside = (x >= 3) & (x < W - 3)  # 3 px or more from the left and right edges
+    q, bright, dark = q[inside], bright[inside], dark[inside]
+    # Blocks keep the (16, block) temporaries small: the same scores either way. (Block sizes measured
+    # over the 16 pyramid levels of graf1 and graf3 at load 7: FAST_BLOCK 2,048-16,384 x PRETEST_BLOCK
+    # 2^15-2^22: 59-82 ms CPU, best at 16,384 and 2^18; the smaller, the more numpy calls.)
+    score = np.zeros(len(q), np.int16)
+    for i in range(0, len(q), FAST_BLOCK):
+        qb, block = q[i:i + FAST_BLOCK], slice(i, i + FAST_BLOCK)
+        d = np.stack([r[qb] for r in ring]).astype(np.int16) - c[qb]  # (16, block)
+        score[block] = _candidate_scores(d, bright[block], dark[block])
     corner = score > threshold
     p, score = a + q[corner], score[corner]
     if nms:  # compare each corner's score with its 8 neighbours' (0 where there is no corner)
@@ -146,13 +155,29 @@ def fast_detect(img: np.ndarray, threshold: int = 20, nms: bool = True) -> np.nd
     return np.c_[p % W, p // W].astype(np.float64)  # p ascends: raster order
 
 
-FAST_BLOCK = 8192  # candidates scored at once by fast_detect
-PRETEST_BLOCK = 1 << 17  # pixels pre-tested at once (graf1: 2.8 ms CPU in one slice, 1.9 ms in slices of 2^17)
+FAST_BLOCK = 16384  # candidates scored at once by fast_detect
+PRETEST_BLOCK = 1 << 18  # pixels pre-tested at once
 
 
-def _fast_candidates(c: np.ndarray, ring: list[np.ndarray], threshold: int) -> np.ndarray:
-    """fast_detect's pre-test: indices q where min_i max(ring_i, ring_i+8) > c + t or
-    max_i min(ring_i, ring_i+8) < c - t (the 16 circle pixels ring_i of centres c, all (n,) uint8).
+def _candidate_scores(d: np.ndarray, bright: np.ndarray, dark: np.ndarray) -> np.ndarray:
+    """FAST scores of pre-tested candidates, d (16, n) their circle-minus-centre differences, bright /
+    dark (n,) which pre-test each passed: the same as _arc_score(d) wherever that is above the
+    threshold, for half the work. A candidate that failed the darker pre-test has no darker arc
+    above the threshold, so its score is above the threshold iff its brighter arc's is, and is then
+    that one: only the brighter arc is scored (and only the darker, on -d, if it failed the
+    brighter pre-test). The rare candidates that passed both get both."""
+    d *= np.where(bright, 1, -1).astype(d.dtype)  # dark-only columns negated: their darker arc
+    score = _brighter_arc(d)
+    both = bright & dark
+    if both.any():
+        score[both] = np.maximum(score[both], _brighter_arc(-d[:, both]))
+    return score
+
+
+def _fast_candidates(c: np.ndarray, ring: list[np.ndarray], threshold: int, start: int = 0):
+    """fast_detect's pre-test: indices q where min_i max(ring_i, ring_i+8) > c + t (bright) or
+    max_i min(ring_i, ring_i+8) < c - t (dark) (the 16 circle pixels ring_i of centres c, all (n,)
+    uint8). Returns (q + start, bright[q], dark[q]).
 
     It stays in uint8: c + t is capped at 255 and c - t floored at 0 (no uint8 pixel is > 255 or
     < 0, so the capped comparisons give the same answers as exact ones). The threshold is an array
@@ -166,7 +191,9 @@ def _fast_candidates(c: np.ndarray, ring: list[np.ndarray], threshold: int) -> n
     t_ = np.full_like(c, threshold)
     above = np.minimum(c, 255 - t_) + t_  # min(I_p + t, 255)
     below = np.maximum(c, t_) - t_  # max(I_p - t, 0)
-    return np.flatnonzero((darkest_bright > above) | (brightest_dark < below))
+    bright, dark = darkest_bright > above, brightest_dark < below
+    q = np.flatnonzero(bright | dark)
+    return q + start, bright[q], dark[q]
 
 
 def harris_at(img: np.ndarray, pts: np.ndarray, radius: int = 3, k: float = 0.04) -> np.ndarray:
