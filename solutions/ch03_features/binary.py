@@ -21,15 +21,18 @@ def orientation_centroid(img: np.ndarray, kps: np.ndarray, radius: int = 15) -> 
 
     The angle does not change when the image is scaled, so the moments are taken on the raw values.
     Each keypoint's (w, w) square, w = 2 radius + 1, is one entry of sliding_window_view (a view of
-    every square of the image, no copy) on the image padded by `radius` with its edge values (a point
-    off the image reads the nearest edge pixel); m10 and m01 are its dot products with dx and dy,
-    zero outside the disc. (N,) radians."""
+    every square of the image, no copy). Where a square reaches past the image, the image is padded
+    with its edge values by that much (a point off the image reads the nearest edge pixel; no copy
+    at all when every square is inside); m10 and m01 are its dot products with dx and dy, zero
+    outside the disc. (N,) radians."""
     img = np.asarray(img)
     xy = np.rint(np.asarray(kps, float)[:, :2]).astype(int)
-    off = max(0, -xy.min(initial=0), *(xy.max(0, initial=0) - img.shape[::-1] + 1))  # keypoints off the image
-    I = np.pad(img, radius + off, mode="edge")  # (edge padding of any width = clipping the coordinates)
+    if len(xy) == 0:
+        return np.zeros(0)
     w = 2 * radius + 1
-    xy += off  # a keypoint's square starts there in I
+    pad = max(0, radius - xy.min(initial=radius), *(xy.max(0, initial=0) + radius + 1 - np.array(img.shape[::-1])))
+    I = np.pad(img, pad, mode="edge") if pad else img  # (edge padding of any width = clipping the coordinates)
+    xy += pad - radius  # a keypoint's square starts there in I
     squares = sliding_window_view(I, (w, w))[xy[:, 1], xy[:, 0]].reshape(len(xy), w * w)  # (N, w^2)
     r = np.arange(-radius, radius + 1)
     dx, dy = np.meshgrid(r, r)  # (w, w)
