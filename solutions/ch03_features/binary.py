@@ -78,12 +78,21 @@ def orb_descriptors(img: np.ndarray, kps: np.ndarray, pattern: np.ndarray) -> np
     theta = orientation_centroid(I, kps)
     c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]  # (N, 1)
     px, py = np.asarray(pattern, float).reshape(-1, 2).T  # (2 n,): a_0, b_0, a_1, b_1, ...
-    # rotate the pattern points by theta, round, read the smoothed image (all 2 n points at once)
-    x = np.rint(kps[:, 0:1] + c * px - s * py).astype(np.int32)  # (N, 2 n)
-    y = np.rint(kps[:, 1:2] + s * px + c * py).astype(np.int32)
-    np.clip(x, 0, I.shape[1] - 1, out=x)  # in place: a fresh (N, 2 n) array costs more than the clip
+    # rotate the pattern points by theta, round, read the smoothed image (all 2 n points at once):
+    # x = rint(k_x + c p_x - s p_y), y = rint(k_y + s p_x + c p_y), each (N, 2 n) array updated in
+    # place (+=, -=, out=): every fresh (N, 2 n) array would cost page faults
+    x, y = c * px, s * px
+    x += kps[:, 0:1]
+    y += kps[:, 1:2]
+    x -= s * py
+    y += c * py
+    x = np.rint(x, out=x).astype(np.int32)
+    y = np.rint(y, out=y).astype(np.int32)
+    np.clip(x, 0, I.shape[1] - 1, out=x)
     np.clip(y, 0, I.shape[0] - 1, out=y)
-    v = S[y * I.shape[1] + x].reshape(len(kps), len(pattern), 2)  # (N, n, 2): (I_s(p + R a_i), I_s(p + R b_i))
+    y *= I.shape[1]
+    y += x  # flat indices y W + x
+    v = S[y].reshape(len(kps), len(pattern), 2)  # (N, n, 2): (I_s(p + R a_i), I_s(p + R b_i))
     bits = v[..., 0] < v[..., 1]  # (N, n)
     return np.packbits(bits, axis=1)
 
