@@ -55,11 +55,13 @@ def box_sums(img: np.ndarray, size: int = 5) -> np.ndarray:
     I = np.asarray(img)
     P = np.pad(I, h, mode="edge").astype(np.uint16 if I.dtype == np.uint8 else np.float64)
     H, W = I.shape
-    rows = P[:H].copy()  # (H, W + 2h): vertical sums, accumulated in place (no fresh array per term)
-    for i in range(1, size):
+    if size == 1:
+        return P
+    rows = P[:H] + P[1:H + 1]  # (H, W + 2h): vertical sums, accumulated in place (no fresh array per term)
+    for i in range(2, size):
         rows += P[i:i + H]
-    out = rows[:, :W].copy()  # (H, W): then horizontal sums
-    for j in range(1, size):
+    out = rows[:, :W] + rows[:, 1:W + 1]  # (H, W): then horizontal sums
+    for j in range(2, size):
         out += rows[:, j:j + W]
     return out
 
