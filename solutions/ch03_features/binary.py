@@ -88,8 +88,8 @@ def orb_descriptors(img: np.ndarray, kps: np.ndarray, pattern: np.ndarray) -> np
     y += kps[:, 1:2]
     x -= s * py
     y += c * py
-    x = np.rint(x, out=x).astype(np.int32)
-    y = np.rint(y, out=y).astype(np.int32)
+    x = np.rint(x, out=x).astype(np.intp)  # intp, numpy's index type: other integer indices are
+    y = np.rint(y, out=y).astype(np.intp)  # converted to it first (a whole extra (N, 2 n) pass)
     np.clip(x, 0, I.shape[1] - 1, out=x)
     np.clip(y, 0, I.shape[0] - 1, out=y)
     y *= I.shape[1]
