@@ -121,21 +121,24 @@ def hamming_distances(D1: np.ndarray, D2: np.ndarray, block: int = 512) -> np.nd
 def resize_bilinear(I: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """Bilinear resize to `shape` (h, w) keeping pixel centres (output x reads input (x + 0.5) W / w - 0.5):
     linear interpolation between rows, then between columns (bilinear is separable)."""
+    dtype = np.result_type(I.dtype, np.float32)  # a float32 image stays float32; integers become float
+
     def weights(n_in, n_out):  # for each output sample: the lower input sample and its weight
         u = np.clip((np.arange(n_out) + 0.5) * n_in / n_out - 0.5, 0, n_in - 1)
         i0 = np.minimum(np.floor(u).astype(int), n_in - 2)
-        return i0, (u - i0).astype(np.result_type(I.dtype, np.float32))  # a float32 image stays float32
+        return i0, (u - i0).astype(dtype)
     y0, fy = weights(I.shape[0], shape[0])
     x0, fx = weights(I.shape[1], shape[1])
-    # in place (*=, +=): every fresh image-sized array costs page faults; these reuse two buffers
-    rows = I[y0]  # (h, W): a row gather copies, so the products below can overwrite it
+    # np.take gathers whole rows (or columns) faster than fancy indexing; then in place (*=, +=):
+    # every fresh image-sized array costs page faults, these reuse two buffers
+    rows = np.take(I, y0, axis=0).astype(dtype, copy=False)  # (h, W): a copy, so it can be overwritten
     rows *= (1 - fy)[:, None]
-    lower = I[y0 + 1]
+    lower = np.take(I, y0 + 1, axis=0).astype(dtype, copy=False)
     lower *= fy[:, None]
     rows += lower  # (h, W): rows interpolated
-    out = rows[:, x0]  # (h, w)
+    out = np.take(rows, x0, axis=1)  # (h, w)
     out *= 1 - fx
-    right = rows[:, x0 + 1]
+    right = np.take(rows, x0 + 1, axis=1)
     right *= fx
     out += right  # (h, w): then columns
     return out
