@@ -94,7 +94,7 @@ def orb_descriptors(img: np.ndarray, kps: np.ndarray, pattern: np.ndarray) -> np
     np.clip(y, 0, I.shape[0] - 1, out=y)
     y *= I.shape[1]
     y += x  # flat indices y W + x
-    v = S[y].reshape(len(kps), len(pattern), 2)  # (N, n, 2): (I_s(p + R a_i), I_s(p + R b_i))
+    v = np.take(S, y).reshape(len(kps), len(pattern), 2)  # (N, n, 2): (I_s(p + R a_i), I_s(p + R b_i))
     bits = v[..., 0] < v[..., 1]  # (N, n)
     return np.packbits(bits, axis=1)
 
