@@ -17,6 +17,19 @@ Same keypoints and descriptor bits on all 12 images, so every accuracy column is
 what is left (FAST's whole-image pre-test, the bilinear pyramid's column gathers, one Harris window per
 FAST corner, 512 rotated reads per keypoint) is near numpy's floor for bit-identical output; the ORB
 paper's 12-degree lookup of pre-turned patterns would cut the last but changes bits.
+Second round (same day, same keypoints and bits on all 12 images, FAST's corners on 672 calls): Harris
+gradients as shifted slices of each flattened window (not 7-wide strided slices), FAST scoring only the
+arc its pre-test allows, in-place resize / box sums / BRIEF coordinates, intp sample indices, no image
+copy in the orientation. Old and new code interleaved (30 rounds, order alternating, graf1 + graf3,
+median process CPU): 163.7 -> 148.4 ms (4.32x -> 3.92x OpenCV ORB's 37.9 ms, load 7.4-8.1), 168.7 ->
+155.2 ms (4.52x -> 4.16x, load 7.9-8.1), 167.2 -> 148.8 ms (4.53x -> 4.04x, load 6.1-7.3); with np.take
+for the pyramid's and BRIEF's gathers 172.9 -> 151.9 ms (4.64x -> 4.08x, load 7.3-8.0), 172.7 -> 152.9
+ms (4.44x -> 3.93x, load 1.6-1.9); this benchmark: graf 144 vs 37 ms (3.9x, load 7.4-8.0), 148 vs 37 ms
+(4.0x, load 5.8-6.5). About 12 % less CPU; the 4x goal is met only just (3.9-4.1x by the run). Rejected:
+ORB's 30-bin steering for orb_like (8 % faster, graf MMA@3px 0.706 -> 0.660), a 2- to 6-pair FAST
+pre-test (more candidates to score: 68-140 ms vs 60 over the 16 levels), adding "quad" tests (implied
+by the pair test: no fewer candidates), one einsum (N, 4) x (4, 4n) for the turned pattern with a padded
+image (slower), ndimage.zoom for the pyramid (2x slower, not bit-identical).
 ORB-like's MMA depends on its learned pattern: from one learning seed to the next, graf's MMA@3px
 moves by +-0.04 (learn_brief_pattern's docstring).
 """

@@ -21,15 +21,18 @@ def orientation_centroid(img: np.ndarray, kps: np.ndarray, radius: int = 15) -> 
 
     The angle does not change when the image is scaled, so the moments are taken on the raw values.
     Each keypoint's (w, w) square, w = 2 radius + 1, is one entry of sliding_window_view (a view of
-    every square of the image, no copy) on the image padded by `radius` with its edge values (a point
-    off the image reads the nearest edge pixel); m10 and m01 are its dot products with dx and dy,
-    zero outside the disc. (N,) radians."""
+    every square of the image, no copy). Where a square reaches past the image, the image is padded
+    with its edge values by that much (a point off the image reads the nearest edge pixel; no copy
+    at all when every square is inside); m10 and m01 are its dot products with dx and dy, zero
+    outside the disc. (N,) radians."""
     img = np.asarray(img)
     xy = np.rint(np.asarray(kps, float)[:, :2]).astype(int)
-    off = max(0, -xy.min(initial=0), *(xy.max(0, initial=0) - img.shape[::-1] + 1))  # keypoints off the image
-    I = np.pad(img, radius + off, mode="edge")  # (edge padding of any width = clipping the coordinates)
+    if len(xy) == 0:
+        return np.zeros(0)
     w = 2 * radius + 1
-    xy += off  # a keypoint's square starts there in I
+    pad = max(0, radius - xy.min(initial=radius), *(xy.max(0, initial=0) + radius + 1 - np.array(img.shape[::-1])))
+    I = np.pad(img, pad, mode="edge") if pad else img  # (edge padding of any width = clipping the coordinates)
+    xy += pad - radius  # a keypoint's square starts there in I
     squares = sliding_window_view(I, (w, w))[xy[:, 1], xy[:, 0]].reshape(len(xy), w * w)  # (N, w^2)
     r = np.arange(-radius, radius + 1)
     dx, dy = np.meshgrid(r, r)  # (w, w)
@@ -52,8 +55,15 @@ def box_sums(img: np.ndarray, size: int = 5) -> np.ndarray:
     I = np.asarray(img)
     P = np.pad(I, h, mode="edge").astype(np.uint16 if I.dtype == np.uint8 else np.float64)
     H, W = I.shape
-    rows = sum(P[i:i + H] for i in range(size))  # (H, W + 2h): vertical sums
-    return sum(rows[:, j:j + W] for j in range(size))  # (H, W)
+    if size == 1:
+        return P
+    rows = P[:H] + P[1:H + 1]  # (H, W + 2h): vertical sums, accumulated in place (no fresh array per term)
+    for i in range(2, size):
+        rows += P[i:i + H]
+    out = rows[:, :W] + rows[:, 1:W + 1]  # (H, W): then horizontal sums
+    for j in range(2, size):
+        out += rows[:, j:j + W]
+    return out
 
 
 def orb_descriptors(img: np.ndarray, kps: np.ndarray, pattern: np.ndarray) -> np.ndarray:
@@ -70,12 +80,21 @@ def orb_descriptors(img: np.ndarray, kps: np.ndarray, pattern: np.ndarray) -> np
     theta = orientation_centroid(I, kps)
     c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]  # (N, 1)
     px, py = np.asarray(pattern, float).reshape(-1, 2).T  # (2 n,): a_0, b_0, a_1, b_1, ...
-    # rotate the pattern points by theta, round, read the smoothed image (all 2 n points at once)
-    x = np.rint(kps[:, 0:1] + c * px - s * py).astype(np.int32)  # (N, 2 n)
-    y = np.rint(kps[:, 1:2] + s * px + c * py).astype(np.int32)
-    np.clip(x, 0, I.shape[1] - 1, out=x)  # in place: a fresh (N, 2 n) array costs more than the clip
+    # rotate the pattern points by theta, round, read the smoothed image (all 2 n points at once):
+    # x = rint(k_x + c p_x - s p_y), y = rint(k_y + s p_x + c p_y), each (N, 2 n) array updated in
+    # place (+=, -=, out=): every fresh (N, 2 n) array would cost page faults
+    x, y = c * px, s * px
+    x += kps[:, 0:1]
+    y += kps[:, 1:2]
+    x -= s * py
+    y += c * py
+    x = np.rint(x, out=x).astype(np.intp)  # intp, numpy's index type: other integer indices are
+    y = np.rint(y, out=y).astype(np.intp)  # converted to it first (a whole extra (N, 2 n) pass)
+    np.clip(x, 0, I.shape[1] - 1, out=x)
     np.clip(y, 0, I.shape[0] - 1, out=y)
-    v = S[y * I.shape[1] + x].reshape(len(kps), len(pattern), 2)  # (N, n, 2): (I_s(p + R a_i), I_s(p + R b_i))
+    y *= I.shape[1]
+    y += x  # flat indices y W + x
+    v = np.take(S, y).reshape(len(kps), len(pattern), 2)  # (N, n, 2): (I_s(p + R a_i), I_s(p + R b_i))
     bits = v[..., 0] < v[..., 1]  # (N, n)
     return np.packbits(bits, axis=1)
 
@@ -102,14 +121,27 @@ def hamming_distances(D1: np.ndarray, D2: np.ndarray, block: int = 512) -> np.nd
 def resize_bilinear(I: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """Bilinear resize to `shape` (h, w) keeping pixel centres (output x reads input (x + 0.5) W / w - 0.5):
     linear interpolation between rows, then between columns (bilinear is separable)."""
+    dtype = np.result_type(I.dtype, np.float32)  # a float32 image stays float32; integers become float
+
     def weights(n_in, n_out):  # for each output sample: the lower input sample and its weight
         u = np.clip((np.arange(n_out) + 0.5) * n_in / n_out - 0.5, 0, n_in - 1)
         i0 = np.minimum(np.floor(u).astype(int), n_in - 2)
-        return i0, (u - i0).astype(np.result_type(I.dtype, np.float32))  # a float32 image stays float32
+        return i0, (u - i0).astype(dtype)
     y0, fy = weights(I.shape[0], shape[0])
     x0, fx = weights(I.shape[1], shape[1])
-    rows = I[y0] * (1 - fy)[:, None] + I[y0 + 1] * fy[:, None]  # (h, W)
-    return rows[:, x0] * (1 - fx) + rows[:, x0 + 1] * fx  # (h, w)
+    # np.take gathers whole rows (or columns) faster than fancy indexing; then in place (*=, +=):
+    # every fresh image-sized array costs page faults, these reuse two buffers
+    rows = np.take(I, y0, axis=0).astype(dtype, copy=False)  # (h, W): a copy, so it can be overwritten
+    rows *= (1 - fy)[:, None]
+    lower = np.take(I, y0 + 1, axis=0).astype(dtype, copy=False)
+    lower *= fy[:, None]
+    rows += lower  # (h, W): rows interpolated
+    out = np.take(rows, x0, axis=1)  # (h, w)
+    out *= 1 - fx
+    right = np.take(rows, x0 + 1, axis=1)
+    right *= fx
+    out += right  # (h, w): then columns
+    return out
 
 
 def orb_detect(img: np.ndarray, n_features: int = 1000, n_levels: int = 8, scale: float = 1.2,
@@ -135,7 +167,7 @@ def orb_detect(img: np.ndarray, n_features: int = 1000, n_levels: int = 8, scale
         if min(shape) < 2 * border + 8:
             break
         L = I if lv == 0 else resize_bilinear(L, shape)  # each level from the previous one, as OpenCV does
-        L8 = np.rint(L).astype(np.uint8)  # bilinear weights are convex: within [0, 255]
+        L8 = np.rint(L, out=np.empty(shape, np.uint8), casting="unsafe")  # convex weights: within [0, 255]
         h, w = shape
         k = fast_detect(L8[crop:h - crop, crop:w - crop], threshold, True) + crop  # the inside only
         k = k[(k[:, 0] >= border) & (k[:, 0] < w - border) & (k[:, 1] >= border) & (k[:, 1] < h - border)]

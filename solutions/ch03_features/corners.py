@@ -73,17 +73,22 @@ CIRCLE16 = np.array([(0, -3), (1, -3), (2, -2), (3, -1), (3, 0), (3, 1), (2, 2),
                      (0, 3), (-1, 3), (-2, 2), (-3, 1), (-3, 0), (-3, -1), (-2, -2), (-1, -3)])
 
 
+def _brighter_arc(d: np.ndarray, arc: int = 9) -> np.ndarray:
+    """The largest t for which `arc` contiguous entries of d (16, ...) (circle along axis 0) are all
+    > t: the max over the 16 arcs of the min over each arc."""
+    d = np.concatenate([d, d[:arc - 1]])  # the circle wraps around
+    lo, k = d, 1
+    while 2 * k <= arc:  # doubling: lo[j] = min(d[j], ..., d[j + 2k - 1]) from two windows of k
+        lo, k = np.minimum(lo[:-k], lo[k:]), 2 * k
+    # an arc of `arc` pixels = two overlapping windows of k (k <= arc < 2k): its min over them
+    return np.minimum(lo[:16], lo[arc - k:arc - k + 16]).max(axis=0)
+
+
 def _arc_score(d: np.ndarray, arc: int = 9) -> np.ndarray:
     """FAST score from the 16 circle-minus-centre differences d (16, ...) (circle along axis 0): the
-    largest t for which `arc` contiguous circle pixels are all > t or all < -t."""
-    d = np.concatenate([d, d[:arc - 1]])  # the circle wraps around
-    lo, hi, k = d, d, 1
-    while 2 * k <= arc:  # doubling: lo[j] = min(d[j], ..., d[j + 2k - 1]) from two windows of k
-        lo, hi, k = np.minimum(lo[:-k], lo[k:]), np.maximum(hi[:-k], hi[k:]), 2 * k
-    # an arc of `arc` pixels = two overlapping windows of k (k <= arc < 2k): its min / max over them
-    lo = np.minimum(lo[:16], lo[arc - k:arc - k + 16])
-    hi = np.maximum(hi[:16], hi[arc - k:arc - k + 16])
-    return np.maximum(lo.max(axis=0), -hi.min(axis=0))  # brighter arc, darker arc
+    largest t for which `arc` contiguous circle pixels are all > t (brighter arc: d) or all < -t
+    (darker arc: the brighter arc of -d)."""
+    return np.maximum(_brighter_arc(d, arc), _brighter_arc(-d, arc))
 
 
 def fast_score(img: np.ndarray, arc: int = 9) -> np.ndarray:
@@ -123,30 +128,57 @@ def fast_detect(img: np.ndarray, threshold: int = 20, nms: bool = True) -> np.nd
     a, b = 3 * W + 3, (H - 3) * W - 3  # p in [a, b): every row 3 px or more from the top and bottom
     c = flat[a:b]
     ring = [flat[a + o:b + o] for o in step]  # views, no copies: ring[i][q] is circle pixel i of p = a + q
-    q = _fast_candidates(c, ring, threshold)
-    x = (q + a) % W
-    q = q[(x >= 3) & (x < W - 3)]  # 3 px or more from the left and right edges
-    # Blocks keep the (16, block) temporaries in the CPU cache (graf1's 34,000 candidates: 7.7 ms CPU
-    # in one block, 2.1 ms in blocks of 8,192): the same scores either way.
-    score = np.concatenate([np.zeros(0, np.int16)] + [
-        _arc_score(np.stack([r[qb] for r in ring]).astype(np.int16) - c[qb])
-        for qb in np.split(q, range(FAST_BLOCK, len(q), FAST_BLOCK))])
+    # the pre-test in slices of PRETEST_BLOCK pixels: its ~30 temporaries then stay in the CPU cache
+    parts = [_fast_candidates(c[i:i + PRETEST_BLOCK], [r[i:i + PRETEST_BLOCK] for r in ring], threshold, i)
+             for i in range(0, max(len(c), 1), PRETEST_BLOCK)]
+    q, bright, dark = (np.concatenate(column) for column in zip(*parts))
+    # Blocks keep the (16, block) temporaries small: the same scores either way. (Block sizes measured
+    # over the 16 pyramid levels of graf1 and graf3 at load 7: FAST_BLOCK 2,048-16,384 x PRETEST_BLOCK
+    # 2^15-2^22: 59-82 ms CPU, best at 16,384 and 2^18; the smaller, the more numpy calls.)
+    score = np.zeros(len(q), np.int16)
+    for i in range(0, len(q), FAST_BLOCK):
+        qb, block = q[i:i + FAST_BLOCK], slice(i, i + FAST_BLOCK)
+        d = np.stack([r[qb] for r in ring]).astype(np.int16)  # (16, block)
+        d -= c[qb]
+        score[block] = _candidate_scores(d, bright[block], dark[block])
     corner = score > threshold
     p, score = a + q[corner], score[corner]
+    x = p % W
+    inside = (x >= 3) & (x < W - 3)  # 3 px or more from the left and right edges (dropped only now:
+    p, score = p[inside], score[inside]  # the corners are fewer than the candidates)
     if nms:  # compare each corner's score with its 8 neighbours' (0 where there is no corner)
         s = np.zeros(H * W, np.int16)
         s[p] = score
-        around = np.array([dy * W + dx for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dx or dy])
-        p = p[np.all(score[:, None] > s[p[:, None] + around], axis=1)]
-    return np.c_[p % W, p // W].astype(np.float64)  # p ascends: raster order
+        keep = np.ones(len(p), bool)
+        for o in [dy * W + dx for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dx or dy]:
+            keep &= score > s[p + o]  # one neighbour at a time: no (N, 8) temporaries
+        p = p[keep]
+    return np.stack([p % W, p // W], axis=1).astype(np.float64)  # p ascends: raster order
 
 
-FAST_BLOCK = 8192  # candidates scored at once by fast_detect
+FAST_BLOCK = 16384  # candidates scored at once by fast_detect
+PRETEST_BLOCK = 1 << 18  # pixels pre-tested at once
 
 
-def _fast_candidates(c: np.ndarray, ring: list[np.ndarray], threshold: int) -> np.ndarray:
-    """fast_detect's pre-test: indices q where min_i max(ring_i, ring_i+8) > c + t or
-    max_i min(ring_i, ring_i+8) < c - t (the 16 circle pixels ring_i of centres c, all (n,) uint8).
+def _candidate_scores(d: np.ndarray, bright: np.ndarray, dark: np.ndarray) -> np.ndarray:
+    """FAST scores of pre-tested candidates, d (16, n) their circle-minus-centre differences, bright /
+    dark (n,) which pre-test each passed: the same as _arc_score(d) wherever that is above the
+    threshold, for half the work. A candidate that failed the darker pre-test has no darker arc
+    above the threshold, so its score is above the threshold iff its brighter arc's is, and is then
+    that one: only the brighter arc is scored (and only the darker, on -d, if it failed the
+    brighter pre-test). The rare candidates that passed both get both."""
+    d *= np.where(bright, d.dtype.type(1), d.dtype.type(-1))  # dark-only columns negated: their darker arc
+    score = _brighter_arc(d)
+    both = bright & dark
+    if both.any():
+        score[both] = np.maximum(score[both], _brighter_arc(-d[:, both]))
+    return score
+
+
+def _fast_candidates(c: np.ndarray, ring: list[np.ndarray], threshold: int, start: int = 0):
+    """fast_detect's pre-test: indices q where min_i max(ring_i, ring_i+8) > c + t (bright) or
+    max_i min(ring_i, ring_i+8) < c - t (dark) (the 16 circle pixels ring_i of centres c, all (n,)
+    uint8). Returns (q + start, bright[q], dark[q]).
 
     It stays in uint8: c + t is capped at 255 and c - t floored at 0 (no uint8 pixel is > 255 or
     < 0, so the capped comparisons give the same answers as exact ones). The threshold is an array
@@ -160,7 +192,9 @@ def _fast_candidates(c: np.ndarray, ring: list[np.ndarray], threshold: int) -> n
     t_ = np.full_like(c, threshold)
     above = np.minimum(c, 255 - t_) + t_  # min(I_p + t, 255)
     below = np.maximum(c, t_) - t_  # max(I_p - t, 0)
-    return np.flatnonzero((darkest_bright > above) | (brightest_dark < below))
+    bright, dark = darkest_bright > above, brightest_dark < below
+    q = np.flatnonzero(bright | dark)
+    return q + start, bright[q], dark[q]
 
 
 def harris_at(img: np.ndarray, pts: np.ndarray, radius: int = 3, k: float = 0.04) -> np.ndarray:
@@ -169,15 +203,26 @@ def harris_at(img: np.ndarray, pts: np.ndarray, radius: int = 3, k: float = 0.04
     computed in a window one pixel wider. pts: (N, 2) (x, y), at least radius + 1 px inside. (N,).
 
     Each point's (w, w) window is one entry of sliding_window_view (a view of every window of the
-    image, no copy); a uint8 image's differences and their sums are exact integers (int32), scaled
-    to gray()'s [0, 1] units at the end."""
+    image, no copy), flattened: in a row of w^2 values pixel j's right neighbour is j + 1 and the
+    one below j + w, so both gradients are differences of two shifted slices of the whole row (long
+    contiguous runs; on the (N, w, w) windows they would run 7 values at a time). Pixels of the
+    first and last column get wrapped-around "neighbours": a mask zeroes them. A uint8 image's
+    differences, their products and sums are integers below 2^24 (at most (2 radius + 1)^2 255^2
+    = 3.2e6 at radius 3), exact in float32, summed by einsum ("ni,ni->n": products and sum in one
+    pass) and scaled to gray()'s [0, 1] units at the end."""
     img = np.asarray(img)
     w = 2 * radius + 3
     xy = np.rint(np.asarray(pts, float)[:, :2]).astype(int) - radius - 1  # windows' top-left corners
-    P = sliding_window_view(img, (w, w))[xy[:, 1], xy[:, 0]]  # (N, w, w): only the windows
-    P = P.astype(np.int32) if img.dtype == np.uint8 else gray(P)
-    gx = P[:, 1:-1, 2:] - P[:, 1:-1, :-2]  # (N, 2 radius + 1, 2 radius + 1): 2 dI/dx
-    gy = P[:, 2:, 1:-1] - P[:, :-2, 1:-1]
-    unit = (0.5 / 255) ** 2 if img.dtype == np.uint8 else 0.25  # (1/2 of the difference)^2, in gray() units
-    Sxx, Sxy, Syy = [unit * (u * v).sum((1, 2)) for u, v in ((gx, gx), (gx, gy), (gy, gy))]
+    P = sliding_window_view(img, (w, w))[xy[:, 1], xy[:, 0]].reshape(len(xy), w * w)  # (N, w^2): only the windows
+    exact32 = img.dtype == np.uint8 and (2 * radius + 1) ** 2 * 255 ** 2 < 2 ** 24
+    P = P.astype(np.float32) if exact32 else gray(P)
+    # the centres j = w, ..., w^2 - w - 1 (rows 1 to w - 2), then only columns 1 to w - 2 kept
+    gx = P[:, w + 1:w * w - w + 1] - P[:, w - 1:w * w - w - 1]  # (N, w (w - 2)): 2 dI/dx
+    gy = P[:, 2 * w:] - P[:, :w * w - 2 * w]  # 2 dI/dy
+    column = np.arange(w, w * w - w) % w
+    inside = ((column >= 1) & (column <= w - 2)).astype(P.dtype)
+    gx *= inside
+    gy *= inside
+    unit = (0.5 / 255) ** 2 if exact32 else 0.25  # (1/2 of the difference)^2, in gray() units
+    Sxx, Sxy, Syy = [unit * np.einsum("ni,ni->n", u, v).astype(np.float64) for u, v in ((gx, gx), (gx, gy), (gy, gy))]
     return Sxx * Syy - Sxy ** 2 - k * (Sxx + Syy) ** 2
