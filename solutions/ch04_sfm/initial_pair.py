@@ -146,9 +146,16 @@ def focal_from_fundamental(F: np.ndarray, K1: np.ndarray, K2: np.ndarray,
 
 def _essential_cost(F: np.ndarray, Ka: np.ndarray, Kb: np.ndarray) -> np.ndarray:
     """Mendonça–Cipolla cost (s1 − s2) / (s1 + s2) of E = Kbᵀ F Ka for stacks Ka, Kb: (n, 3, 3) -> (n,);
-    F: (3, 3), or (n, 3, 3) for one F per row."""
-    S = np.linalg.svd(np.swapaxes(Kb, 1, 2) @ F @ Ka, compute_uv=False)
-    return (S[:, 0] - S[:, 1]) / (S[:, 0] + S[:, 1])
+    F: (3, 3), or (n, 3, 3) for one F per row, of rank 2.
+
+    Without an SVD (the focal polish evaluates this cost thousands of times per photo set): F has rank 2, so
+    s3 = 0 and the invariants of M = Eᵀ E give the other two: tr M = s1² + s2² and
+    ((tr M)² − |M|²) / 2 = s1² s2² (the sum of M's 2 x 2 principal minors), hence (s1 ∓ s2)² = tr M ∓ 2 s1 s2."""
+    E = np.swapaxes(Kb, 1, 2) @ F @ Ka
+    M = np.swapaxes(E, 1, 2) @ E
+    tr = np.trace(M, axis1=1, axis2=2)
+    s1s2 = np.sqrt(np.maximum(0.5 * (tr * tr - np.sum(M * M, axis=(1, 2))), 0.0))
+    return np.sqrt(np.maximum(tr - 2 * s1s2, 0.0) / (tr + 2 * s1s2))
 
 
 def self_calibrate(K: np.ndarray, keypoints: list, matches: dict, min_matches: int = 30, rounds: int = 4,
