@@ -338,9 +338,9 @@ def _register(m: _Model, i: int, seed: int = 0) -> bool:
     """Register image i by P3P RANSAC on its 2D-3D correspondences, COLMAP's way: inlier threshold
     12 px (abs_pose_max_error; the 4 px filter after BA is the tight one), accepted with >= 30
     inliers making up >= 25 % of the correspondences. With an unknown focal length, the factors
-    FOCAL_FACTORS x f are tried (a wrong f bends the bearings, so it finds fewer inliers), the
-    pose and f of the best are refined together on its inliers, and RANSAC runs once more with
-    that f. Activates the inlier observations."""
+    FOCAL_FACTORS x f are tried in one RANSAC (`pnp_ransac_focal`: every sample solved at every f; a
+    wrong f bends the bearings, so it finds fewer inliers), the pose and f of the best are refined
+    together on its inliers, and RANSAC runs once more with that f. Activates the inlier observations."""
     sel = np.flatnonzero((m.obs_img == i) & m.has_X[m.obs_trk])
     if len(sel) < MIN_PNP_INLIERS:
         m.why[i] = f"sees {len(sel)} triangulated points (< {MIN_PNP_INLIERS})"
