@@ -227,6 +227,15 @@ def run() -> list[dict]:
 #   sceaux_burst 13/13, 0.08° / 0.23°, 1.027, 0.62x; sceaux_640 11/11, 0.33° / 0.40°, 1.026, 0.79x; sceaux_sparse
 #   6/6, 0.29° / 0.35°, 1.029, 1.31x. pycolmap's own run-to-run spread is ~0.05-0.1° here (sceaux_exif_off before,
 #   two runs: 0.07° / 0.11° and 0.04° / 0.13°); the time ratios are from one run each at a drifting load.
+# One-RANSAC focal search (fast414: pnp_ransac_focal, SVD-free self-calibration; 5 Dec 2026, load 4.5-29): A/B on one
+# set of features per variant, pycolmap once, the mapping run with the code before and after. Every variant's
+# registered count, rotations vs pycolmap (aligned median / max) and f / truth identical before and after; mapping CPU
+# s before -> after: sceaux 23.5 -> 23.2, sacre_coeur 7.7 -> 4.9, sceaux_1280 20.4 -> 20.4, sceaux_noexif 42.8 -> 20.8
+# (no EXIF: every image searches its focal length), sceaux_exif_off 23.7 -> 22.1, sceaux_first5 9.4 -> 8.2,
+# sceaux_burst 31.5 -> 30.2, sceaux_640 9.3 -> 8.2, sceaux_sparse 4.5 -> 4.4 (one camera by EXIF: only its first image
+# searches f, and BA dominates). `run()` before / after (load ~6): Sacre Coeur 10/10, 0.29° / 0.48° -> 0.29° / 0.49°
+# (pycolmap's own run differed: 1,473 -> 1,561 points), mapping 16.8 -> 7.9 s; Sceaux Castle 11/11, 0.06° / 0.22°,
+# focal 2.7 % / 2.7 % both times, mapping 33.9 -> 44.4 s wall (23.5 -> 23.2 CPU s in the A/B: the load).
 VARIANTS = ("sceaux", "sacre_coeur", "sceaux_1280", "sceaux_noexif", "sceaux_exif_off", "sceaux_first5",
             "sceaux_burst", "sceaux_640", "sceaux_sparse")
 

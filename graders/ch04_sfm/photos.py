@@ -125,22 +125,27 @@ def colmap_sacre_coeur() -> dict:
 
 def real_reprojection_px(rec: dict, problem: dict) -> float:
     """Mean reprojection error (px) over every observation of the returned tracks, with each camera's
-    returned K and radial (k1, k2). An observation in an image that is not registered counts as 100 px."""
-    kps, errs = problem["keypoints"], []
-    for X, tr in zip(rec["points"], rec["tracks"]):
-        for i, kp in tr.items():
-            i, kp = int(i), int(kp)
-            if i not in rec["cameras"] or not 0 <= kp < len(kps[i]):
-                errs.append(100.0)
-                continue
-            R, t = rec["cameras"][i]
-            Xc = R @ X + t
-            if Xc[2] <= 0:
-                errs.append(100.0)
-                continue
-            uv = rec["K"][i][:2, :2] @ brown_distort(Xc[None, :2] / Xc[2], rec["k"][i])[0] + rec["K"][i][:2, 2]
-            errs.append(float(np.linalg.norm(uv - kps[i][kp])))
-    return float(np.mean(errs)) if errs else 100.0
+    returned K and radial (k1, k2). An observation in an image that is not registered (or of a keypoint that
+    image does not have, or behind its camera) counts as 100 px. Vectorised per image: one loop over
+    ~10,000 observations took ~0.5 s of a grade."""
+    kps = problem["keypoints"]
+    obs = [(j, int(i), int(kp)) for j, (_, tr) in enumerate(zip(rec["points"], rec["tracks"])) for i, kp in tr.items()]
+    if not obs:
+        return 100.0
+    trk, img, kp = np.array(obs).reshape(-1, 3).T
+    points = np.asarray(rec["points"], float).reshape(-1, 3)
+    err = np.full(len(obs), 100.0)
+    for i in np.unique(img):
+        if int(i) not in rec["cameras"]:
+            continue
+        sel = np.flatnonzero((img == i) & (kp >= 0) & (kp < len(kps[i])))
+        R, t = rec["cameras"][int(i)]
+        Xc = points[trk[sel]] @ np.asarray(R, float).T + np.asarray(t, float)
+        sel, Xc = sel[Xc[:, 2] > 0], Xc[Xc[:, 2] > 0]
+        K = rec["K"][int(i)]
+        uv = brown_distort(Xc[:, :2] / Xc[:, 2:], rec["k"][int(i)]) @ K[:2, :2].T + K[:2, 2]
+        err[sel] = np.linalg.norm(uv - np.asarray(kps[i])[kp[sel]], axis=1)
+    return float(np.mean(err))
 
 
 def recon_reprojection_px(out: dict, problem: dict) -> float:

@@ -3,7 +3,7 @@ following the notebook's sections:
 
     triangulation       4.4 triangulate_dlt, 4.5 triangulate_midpoint, 4.6 triangulation_angles
                         (+ triangulate_multiview, reprojection_errors)
-    pnp                 4.7 pnp_dlt, 4.8 p3p, 4.9 epnp, 4.10 pnp_ransac (+ refine_pose)
+    pnp                 4.7 pnp_dlt, 4.8 p3p, 4.9 epnp, 4.10 pnp_ransac (+ refine_pose, pnp_ransac_focal)
     tracks              4.11 build_tracks
     initial_pair        4.12 two_view_init, 4.13 rank_initial_pairs (+ decompose_homography,
                         focal_from_fundamental)

@@ -138,17 +138,26 @@ def focal_from_fundamental(F: np.ndarray, K1: np.ndarray, K2: np.ndarray,
     Ka[:, 0, 0] = Ka[:, 1, 1] = f1
     Kb[:, 0, 0] = Kb[:, 1, 1] = f2
     E = np.swapaxes(Kb, 1, 2)[None, :] @ np.asarray(F, float) @ Ka[:, None]     # (n1, n2, 3, 3)
-    S = np.linalg.svd(E, compute_uv=False)
-    cost = (S[..., 0] - S[..., 1]) / (S[..., 0] + S[..., 1])
+    cost = _cost_of_rank2(E.reshape(-1, 3, 3)).reshape(E.shape[:2])        # F has rank 2, so E has too
     a, b = np.unravel_index(np.argmin(cost), cost.shape)
     return float(f1[a]), float(f2[b]), float(cost[a, b])
 
 
 def _essential_cost(F: np.ndarray, Ka: np.ndarray, Kb: np.ndarray) -> np.ndarray:
     """Mendonça–Cipolla cost (s1 − s2) / (s1 + s2) of E = Kbᵀ F Ka for stacks Ka, Kb: (n, 3, 3) -> (n,);
-    F: (3, 3), or (n, 3, 3) for one F per row."""
-    S = np.linalg.svd(np.swapaxes(Kb, 1, 2) @ F @ Ka, compute_uv=False)
-    return (S[:, 0] - S[:, 1]) / (S[:, 0] + S[:, 1])
+    F: (3, 3), or (n, 3, 3) for one F per row, of rank 2."""
+    return _cost_of_rank2(np.swapaxes(Kb, 1, 2) @ F @ Ka)
+
+
+def _cost_of_rank2(E: np.ndarray) -> np.ndarray:
+    """(s1 − s2) / (s1 + s2) of rank-2 matrices E: (n, 3, 3) -> (n,), without an SVD (the focal polish evaluates
+    it thousands of times per photo set): s3 = 0, so the invariants of M = Eᵀ E give the other two:
+    tr M = s1² + s2² and ((tr M)² − |M|²) / 2 = s1² s2² (the sum of M's 2 x 2 principal minors), hence
+    (s1 ∓ s2)² = tr M ∓ 2 s1 s2."""
+    M = np.swapaxes(E, 1, 2) @ E
+    tr = np.trace(M, axis1=1, axis2=2)
+    s1s2 = np.sqrt(np.maximum(0.5 * (tr * tr - np.sum(M * M, axis=(1, 2))), 0.0))
+    return np.sqrt(np.maximum(tr - 2 * s1s2, 0.0) / (tr + 2 * s1s2))
 
 
 def self_calibrate(K: np.ndarray, keypoints: list, matches: dict, min_matches: int = 30, rounds: int = 4,
@@ -231,12 +240,17 @@ def _polish_focals(pairs: list, K: np.ndarray, prior: np.ndarray, factor: np.nda
     def factors_of(x):
         return np.where(cam_slot >= 0, np.exp(x[np.maximum(cam_slot, 0)]), factor)
 
+    # K = C D with C = [[1, 0, cx], [0, 1, cy], [0, 0, 1]] and D = diag(f, f, 1), so E = Kbᵀ F Ka = Db G Da with
+    # G = Cbᵀ F Ca fixed per pair: an evaluation only scales G's rows by Db and its columns by Da.
+    C = K.copy()
+    C[:, 0, 0] = C[:, 1, 1] = 1.0
+    G = np.swapaxes(C[b_idx], 1, 2) @ Fs @ C[a_idx]                            # (pairs, 3, 3)
+
     def cost(x):
         f = prior * factors_of(x)
-        Ka, Kb = K[a_idx].copy(), K[b_idx].copy()
-        Ka[:, 0, 0] = Ka[:, 1, 1] = f[a_idx]
-        Kb[:, 0, 0] = Kb[:, 1, 1] = f[b_idx]
-        return float(w @ _essential_cost(Fs, Ka, Kb))
+        Da = np.stack([f[a_idx], f[a_idx], np.ones(len(a_idx))], axis=1)       # (pairs, 3)
+        Db = np.stack([f[b_idx], f[b_idx], np.ones(len(b_idx))], axis=1)
+        return float(w @ _cost_of_rank2(Db[:, :, None] * G * Da[:, None, :]))
 
     first = np.array([np.log(factor[groups == g][0]) for g in free])
     lo, hi = np.log(bounds)

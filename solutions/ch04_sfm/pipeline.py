@@ -44,9 +44,9 @@ from ..ch02_epipolar import ransac_essential, ransac_fundamental
 from ..ch05_bundle_adjustment import bundle_adjust
 from .initial_pair import rank_initial_pairs, self_calibrate, two_view_init
 from .model import _Model, default_intrinsics, distort, undistort  # noqa: F401  (distort, undistort: re-exported)
-from .pnp import pnp_ransac, refine_pose
+from .pnp import pnp_ransac, pnp_ransac_focal, refine_pose
 from .tracks import build_tracks, consistent_tracks
-from .triangulation import triangulate_multiview
+from .triangulation import reprojection_errors, triangulate_multiview
 
 
 MAX_REPROJ_PX = 4.0         # filtering and inlier threshold (COLMAP: filter_max_reproj_error = 4)
@@ -338,9 +338,9 @@ def _register(m: _Model, i: int, seed: int = 0) -> bool:
     """Register image i by P3P RANSAC on its 2D-3D correspondences, COLMAP's way: inlier threshold
     12 px (abs_pose_max_error; the 4 px filter after BA is the tight one), accepted with >= 30
     inliers making up >= 25 % of the correspondences. With an unknown focal length, the factors
-    FOCAL_FACTORS x f are tried (a wrong f bends the bearings, so it finds fewer inliers), the
-    pose and f of the best are refined together on its inliers, and RANSAC runs once more with
-    that f. Activates the inlier observations."""
+    FOCAL_FACTORS x f are tried in one RANSAC (`pnp_ransac_focal`: every sample solved at every f; a
+    wrong f bends the bearings, so it finds fewer inliers), the pose and f of the best are refined
+    together on its inliers, and RANSAC runs once more with that f. Activates the inlier observations."""
     sel = np.flatnonzero((m.obs_img == i) & m.has_X[m.obs_trk])
     if len(sel) < MIN_PNP_INLIERS:
         m.why[i] = f"sees {len(sel)} triangulated points (< {MIN_PNP_INLIERS})"
@@ -349,18 +349,14 @@ def _register(m: _Model, i: int, seed: int = 0) -> bool:
     if m.known_K or m.shares_camera(i):                 # f known, or refined on the camera's other images
         R, t, inl = pnp_ransac(X, x, m.K[i], thresh_px=ABS_POSE_PX, seed=seed)
     else:
-        best = (None, None, np.zeros(len(sel), bool), None)
-        for factor in FOCAL_FACTORS:
-            K = m.K[i].copy()
-            K[:2, :2] *= factor
-            R, t, inl = pnp_ransac(X, x, K, thresh_px=ABS_POSE_PX, seed=seed, max_iters=300)
-            if R is not None and inl.sum() > best[2].sum():
-                best = (R, t, inl, K)
-        R, t, inl, K = best
+        R, t, K, inl = pnp_ransac_focal(X, x, m.K[i], FOCAL_FACTORS, thresh_px=ABS_POSE_PX, seed=seed,
+                                        max_iters=300)
+        for _ in range(2 if R is not None else 0):      # pose and f on the inliers, which grow as they improve
+            R, t, K = refine_pose(X[inl], x[inl], K, R, t, iters=20, refine_focal=True)
+            inl = reprojection_errors(K, R, t, X, x) < ABS_POSE_PX
         if R is None or inl.sum() < MIN_PNP_INLIERS:
             m.why[i] = f"PnP: {inl.sum()} inliers of {len(sel)} at any focal length (< {MIN_PNP_INLIERS})"
             return False
-        R, t, K = refine_pose(X[inl], x[inl], K, R, t, iters=20, refine_focal=True)
         R, t, inl = pnp_ransac(X, x, K, thresh_px=ABS_POSE_PX, seed=seed, max_iters=1000)
         if R is None:
             m.why[i] = "PnP failed with the refined focal length"

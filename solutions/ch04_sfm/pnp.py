@@ -340,3 +340,43 @@ def pnp_ransac(X: np.ndarray, x: np.ndarray, K: np.ndarray, thresh_px: float = 4
         R, t = refine_pose(X[inl], x[inl], K, R, t)
         inl = reprojection_errors(K, R, t, X, x) < thresh_px
     return R, t, inl
+
+
+def pnp_ransac_focal(X: np.ndarray, x: np.ndarray, K: np.ndarray, factors: np.ndarray, thresh_px: float = 12.0,
+                     seed: int = 0, confidence: float = 0.999, max_iters: int = 300):
+    """P3P RANSAC with an unknown focal length, searched over f = factors x K's f (COLMAP samples focal lengths
+    the same way). Every minimal sample is solved with the bearings of every candidate f, so all candidates
+    share one loop (Chapter 2's `ransac`), one set of samples and one stopping rule: the number of samples
+    adapts to the best inlier ratio over all of them, where one RANSAC per candidate paid each its own loop,
+    local optimisation and refinement only to compare inlier counts. A hypothesis is the camera
+    P = K_f [R | t]; a wrong f bends the bearings, so its poses explain fewer matches (MSAC picks the best
+    (pose, f) pair). No local optimisation: the caller refines the pose together with f.
+    X: (N, 3); x: (N, 2) pixels; K: (3, 3) with fx = fy and no skew; factors: (F,).
+    Returns (R, t, K_f, inliers (N,) bool), or (None, None, None, all False) if no pose was found.
+    """
+    X, x, K = np.asarray(X, float), np.asarray(x, float), np.asarray(K, float)
+    Ks = np.repeat(K[None], len(factors), axis=0)
+    Ks[:, :2, :2] *= np.asarray(factors, float)[:, None, None]                  # (F, 3, 3)
+    rays = to_h(x) @ np.swapaxes(np.linalg.inv(Ks), 1, 2)                       # (F, N, 3): K_f^-1 xh
+    rays /= np.linalg.norm(rays, axis=2, keepdims=True)
+    n_f = len(Ks)
+
+    def solve(idx):                                   # (B, 3) samples -> (M, 3, 4) cameras K_f [R | t]
+        B = len(idx)
+        R, t, valid = _p3p_batch(np.tile(X[idx], (n_f, 1, 1)), rays[:, idx].reshape(n_f * B, 3, 3))
+        P = np.repeat(Ks, B, axis=0)[:, None] @ np.concatenate([R, t[..., None]], -1)   # (F B, 4, 3, 4)
+        return P[valid]
+
+    def residuals(P):                                 # (M, 3, 4) -> (M, N) pixels, inf behind
+        p = np.einsum("mij,nj->mni", P[:, :, :3], X) + P[:, None, :, 3]      # K_f X_c: its z is X_c's depth
+        with np.errstate(divide="ignore", invalid="ignore"):
+            e = np.linalg.norm(p[..., :2] / p[..., 2:3] - x, axis=-1)
+        return np.where(p[..., 2] > 0, e, np.inf)
+
+    P, inl = ransac(len(X), 3, solve, residuals, thresh_px, confidence=confidence, max_iters=max_iters, rng=seed)
+    if P is None:
+        return None, None, None, np.zeros(len(X), bool)
+    f = np.linalg.norm(P[0, :3] - K[0, 2] * P[2, :3])                        # row 1 of K_f R is f r1 + c_x r3
+    K_f = Ks[np.argmin(np.abs(np.log(f / Ks[:, 0, 0])))]
+    Rt = np.linalg.solve(K_f, P)
+    return project_to_so3(Rt[:, :3]), Rt[:, 3], K_f.copy(), inl
