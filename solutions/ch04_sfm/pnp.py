@@ -344,11 +344,12 @@ def pnp_ransac(X: np.ndarray, x: np.ndarray, K: np.ndarray, thresh_px: float = 4
 
 def pnp_ransac_focal(X: np.ndarray, x: np.ndarray, K: np.ndarray, factors: np.ndarray, thresh_px: float = 12.0,
                      seed: int = 0, confidence: float = 0.999, max_iters: int = 300):
-    """P3P RANSAC with an unknown focal length, searched over f = factors x K's f (COLMAP samples focal lengths
-    the same way). Every minimal sample is solved with the bearings of every candidate f, so all candidates
-    share one loop (Chapter 2's `ransac`), one set of samples and one stopping rule: the number of samples
-    adapts to the best inlier ratio over all of them, where one RANSAC per candidate paid each its own loop,
-    local optimisation and refinement only to compare inlier counts. A hypothesis is the camera
+    """P3P RANSAC with an unknown focal length, searched over f = factors x K's f. COLMAP samples focal lengths
+    too (`EstimateAbsolutePose` in src/colmap/estimators/pose.cc: 31 factors from 0.1 to 10, quadratically
+    spaced) but runs one RANSAC per factor; here every minimal sample is solved with the bearings of every
+    candidate f, so all candidates share one loop (Chapter 2's `ransac`), one set of samples and one stopping
+    rule: the number of samples adapts to the best inlier ratio over all of them, where one RANSAC per
+    candidate paid each its own loop, local optimisation and refinement only to compare inlier counts. A hypothesis is the camera
     P = K_f [R | t]; a wrong f bends the bearings, so its poses explain fewer matches (MSAC picks the best
     (pose, f) pair). No local optimisation: the caller refines the pose together with f.
     X: (N, 3); x: (N, 2) pixels; K: (3, 3) with fx = fy and no skew; factors: (F,).
