@@ -5,8 +5,9 @@ textured corridor at 320 x 240, tracked by OpenCV's KLT (graders.oracles.flow.kl
 tracker output (drifting tracks, tracks that die and are re-detected). Two runs are projected points whose ids are
 the scene point's (0.3 px noise, 5 % of them given a wrong id: the mismatches RANSAC must reject): there the truth
 is exact, and the bars can be tight enough to tell a map that carries the scale from one that re-invents it.
-The two-view and PnP solvers come in as callables (OpenCV-backed stand-ins of chapters 2 and 4), so the
-exercise is the loop: initialisation, map, tracking, map extension.
+The two-view and PnP solvers come in as callables (graders.oracles.two_view.SOLVERS: OpenCV-backed stand-ins of
+chapters 2 and 4, E refitted on RANSAC's inliers), so the exercise is the loop: initialisation, map, tracking,
+map extension.
 
 Judged on fresh hidden sequences: the camera centres after a Sim(3) alignment onto the truth (ATE, relative to
 the path length), and the scale drift — the scale of a Sim(3) fit on the last third of the run against the
@@ -83,12 +84,6 @@ def rendered_vo_sequence(rng: np.random.Generator, n_frames: int = 40, noise: fl
     return {"frames": klt_tracks(images), "images": images, "T": T}
 
 
-# ----------------------------------------------------------------- the solvers handed to the learner
-
-
-# ----------------------------------------------------------------- the stand-in VO (grader's own)
-
-
 # ----------------------------------------------------------------- judging
 
 
@@ -115,20 +110,23 @@ def scale_drift(T, T_true) -> float:
     return float(abs(np.log(s2 / s1)))
 
 
-# ATE: the reference reaches 0.1-0.67 % of the path (0.3 px noise, 40 frames; 100 runs, 90th percentile 0.39 %);
+# ATE: the reference reaches 0.03-0.32 % of the path (0.3 px noise, 40 frames; 100 runs, median 0.12 %, 90th
+# percentile 0.21 %, with the refitted E of graders.oracles.two_view.essential_ransac_refined);
 # 1.5 % leaves room for other sound loops (another initial pair, triangulation gap, map policy). Chaining
 # unit-norm E translations is off by >= 2.3 %, camera-to-world poses by >= 2.9 %; a VO that never extends its
 # map loses every map point after ~15 frames (PnP fails).
 TOL_ATE = 0.015
-# Scale drift: monocular VO without BA drifts; the reference's |log| ratio reached 0.08 at worst over 100 runs
-# (90th percentile 0.03); 0.3 flags a scale that is re-invented along the way.
+# Scale drift: monocular VO without BA drifts; the reference's |log| ratio reached 0.033 at worst over the same 100
+# runs; 0.3 flags a scale that is re-invented along the way.
 TOL_DRIFT = 0.3
 
 
 # On the rendered run the tracks come from images (KLT drifts along a track, corners die and are re-detected): over
-# 120 runs the reference reaches a median 0.6 % of the path and 3.8 % at worst, OpenCV's stand-in loop 0.7 % and
-# 3.1 % (and 200 fairness runs of the reference pass); 6 % leaves a sound loop room. Scale drift is not judged
-# there: the tracker's own drift enters it.
+# 300 runs the reference reaches a median 0.39 % of the path (90th percentile 0.56 %, worst 0.86 %), the stand-in
+# loop 0.38 % (0.53 %, 0.75 %). Before the E handed to the loop was refitted on its inliers, RANSAC's minimal-sample
+# E (up to 4 deg off in rotation on the initial pair) made the worst runs 4.3 % and 5.5 % in those 300 and 8.7 % on
+# one CI seed: a correct loop lost its points to the solver it was given. 6 % leaves other sound loops (another
+# initial pair, gap, map policy) room. Scale drift is not judged there: the tracker's own drift enters it.
 TOL_ATE_RENDERED = 0.06
 
 

