@@ -159,12 +159,37 @@ def _give_font_cache(folder: str, uid: int, gid: int) -> None:
                 pass
 
 
+def _record_paths(dist) -> list[list[str]]:
+    """The parts of every path a distribution's RECORD lists ('' and '.' parts dropped, as PackagePath does), read as
+    text: importlib.metadata's `files` makes a PackagePath of each of the ~20,000 lines of site-packages (1 CPU s)."""
+    import csv
+    text = dist.read_text("RECORD")
+    if text is None:
+        return [list(f.parts) for f in dist.files or ()]
+    return [parts for row in csv.reader(text.splitlines()) if row
+            if (parts := [p for p in row[0].split("/") if p not in ("", ".")])]
+
+
+def _top_level(dist) -> set[str]:
+    """The import names a distribution provides, as importlib.metadata.packages_distributions() finds them."""
+    declared = (dist.read_text("top_level.txt") or "").split()
+    if declared:
+        return set(declared)
+    return {parts[0] if len(parts) > 1 else parts[0][:-3] for parts in _record_paths(dist)
+            if parts[-1].endswith(".py") and parts[-1] != ".py"}
+
+
 @functools.lru_cache(maxsize=1)
-def _packages_distributions() -> dict[str, list[str]]:
-    """importlib.metadata's map from import name to distributions, read once per judge process: it reads every
-    installed distribution's metadata (~0.37 CPU s), and the installed packages do not change while a grader runs."""
+def _packages_distributions() -> dict[str, list]:
+    """Import name -> the installed distributions that provide it (as metadata.packages_distributions(), but
+    the distributions, not their names), read once per judge process (0.08 CPU s; the standard library's takes
+    0.39): the installed packages do not change while a grader runs."""
     import importlib.metadata as metadata
-    return metadata.packages_distributions()
+    found: dict[str, list] = {}
+    for dist in metadata.distributions():
+        for name in _top_level(dist):
+            found.setdefault(name, []).append(dist)
+    return found
 
 
 @functools.lru_cache(maxsize=None)
@@ -172,8 +197,6 @@ def _distribution_folders(library: str) -> tuple[str, ...]:
     """Every top-level folder the installed distributions of `library` put in site-packages (cv2/,
     opencv_python_headless.libs/, its dist-info): hiding only the package would leave its binaries. Once per judge
     process and library (each learner process's start, and restart, hid them at 0.4 CPU s a library)."""
-    import importlib.metadata as metadata
-    import importlib.util
     folders = set()
     try:
         spec = importlib.util.find_spec(library)
@@ -182,13 +205,8 @@ def _distribution_folders(library: str) -> tuple[str, ...]:
     if spec is not None and spec.submodule_search_locations:
         folders |= {os.path.realpath(p) for p in spec.submodule_search_locations}
     for dist in _packages_distributions().get(library, []):
-        try:
-            files = metadata.distribution(dist).files or []
-        except metadata.PackageNotFoundError:
-            continue
-        for f in files:
-            if len(f.parts) > 1 and f.parts[0] != "..":
-                folders.add(os.path.realpath(os.path.join(str(f.locate())[:-len(str(f))], f.parts[0])))
+        tops = {parts[0] for parts in _record_paths(dist) if len(parts) > 1 and parts[0] != ".."}
+        folders |= {os.path.realpath(str(dist.locate_file(top))) for top in tops}
     return tuple(sorted(folders))
 
 

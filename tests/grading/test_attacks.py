@@ -9,6 +9,7 @@ stand-in answers must score 0 in both; the sandbox's own walls are checked where
 """
 from __future__ import annotations
 
+import importlib.util
 import os
 import socket
 import tempfile
@@ -138,6 +139,23 @@ def test_forbidden_files_are_absent_from_the_learner_view(monkeypatch):
         seen = learner.function("probe", get("1.5"))()
     assert all(not listing for listing in seen), seen
 
+
+
+def test_the_hidden_library_folders_are_what_importlib_metadata_lists():
+    """The judge reads site-packages' RECORD files as text (isolation._record_paths, 0.09 CPU s a judge process against
+    0.53): the import names are packages_distributions()'s, and each refused library's hidden folders are every top
+    folder of its distributions' files (its package, its .libs with the binaries, its dist-info)."""
+    import importlib.metadata as metadata
+    from graders.core.engine import LIBRARIES
+    found = isolation._packages_distributions()
+    assert {name: [d.metadata["Name"] for d in dists] for name, dists in found.items()} == metadata.packages_distributions()
+    for library in LIBRARIES:
+        expected = {os.path.realpath(p) for p in importlib.util.find_spec(library).submodule_search_locations}
+        for name in metadata.packages_distributions()[library]:
+            expected |= {os.path.realpath(os.path.join(str(f.locate())[:-len(str(f))], f.parts[0]))
+                         for f in metadata.distribution(name).files if len(f.parts) > 1 and f.parts[0] != ".."}
+        assert isolation._distribution_folders(library) == tuple(sorted(expected)), library
+    assert any(p.endswith(".libs") for p in isolation._distribution_folders("cv2"))    # the binaries, not only cv2/
 
 # ------------------------------------------------------------------ item 5: stand-in answers, value questions, shared runs
 
