@@ -233,7 +233,7 @@ MUTANTS += [
 # ----------------------------------------------------------------- 8.11 fusion
 
 def _fuse(depths, Ks, Rs, ts, rel_tol, min_consistent, *, filt=True, self_vote=False, absolute=False,
-          forward_R=False, euclid=False):
+          forward_R=False, euclid=False, floor=False):
     out = []
     for i, Z in enumerate(depths):
         Z = np.asarray(Z, float)
@@ -252,7 +252,8 @@ def _fuse(depths, Ks, Rs, ts, rel_tol, min_consistent, *, filt=True, self_vote=F
             zj = np.linalg.norm(Xj, axis=1) if euclid else Xj[:, 2]
             q = Xj @ Ks[j].T
             with np.errstate(all="ignore"):
-                uj, vj = np.rint(q[:, 0] / q[:, 2]), np.rint(q[:, 1] / q[:, 2])
+                rnd = np.floor if floor else np.rint
+                uj, vj = rnd(q[:, 0] / q[:, 2]), rnd(q[:, 1] / q[:, 2])
             H, W = depths[j].shape
             ok = (Xj[:, 2] > 0) & (uj >= 0) & (uj < W) & (vj >= 0) & (vj < H)
             d = np.full(len(X), np.nan)
@@ -283,7 +284,24 @@ def fuse_range_not_depth(depths, Ks, Rs, ts, rel_tol=0.01, min_consistent=2):
     return _fuse(depths, Ks, Rs, ts, rel_tol, min_consistent, euclid=True)
 
 
+def fuse_truncated_lookup(depths, Ks, Rs, ts, rel_tol=0.01, min_consistent=2):
+    """int(u), int(v): the pixel up-left of the projection, not the nearest. Kept within 1 % of the specification's
+    count on 30 % of the draws, so the count alone let it pass."""
+    return _fuse(depths, Ks, Rs, ts, rel_tol, min_consistent, floor=True)
+
+
+def fuse_rel_tol_ignored(depths, Ks, Rs, ts, rel_tol=0.01, min_consistent=2):
+    return _fuse(depths, Ks, Rs, ts, 0.01, min_consistent)
+
+
+def fuse_min_consistent_ignored(depths, Ks, Rs, ts, rel_tol=0.01, min_consistent=2):
+    return _fuse(depths, Ks, Rs, ts, rel_tol, 2)
+
+
 MUTANTS += [
+    ("8.11", "depth looked up at the truncated pixel", fuse_truncated_lookup, "do not truncate"),
+    ("8.11", "rel_tol ignored (0.01)", fuse_rel_tol_ignored, None),
+    ("8.11", "min_consistent ignored (2)", fuse_min_consistent_ignored, None),
     ("8.11", "no consistency filter", fuse_no_filter, "the consistency filter is missing"),
     ("8.11", "a view votes for itself", fuse_self_vote, "j ≠ i"),
     ("8.11", "absolute depth tolerance", fuse_absolute_tolerance, None),
