@@ -166,8 +166,9 @@ def _sweep_cases(rng: np.random.Generator):
         r = int(rng.integers(1, 3))
         args = (s["I_ref"], s["K_ref"], s["images"], s["Ks"], s["Rs"], s["ts"], s["depths"], r)
         region = sweep_region(s["K_ref"], s["Ks"], s["Rs"], s["ts"], s["depths"], s["I_ref"].shape, r)
-        acc_o = depth_accuracy(gt_plane_sweep(*args), s["Z_gt"], region)
-        info = {"Z_gt": s["Z_gt"], "region": region, "args": args}
+        Z_o = gt_plane_sweep(*args)
+        acc_o = depth_accuracy(Z_o, s["Z_gt"], region)
+        info = {"Z_gt": s["Z_gt"], "region": region, "args": args, "Z_o": Z_o}
         # 0.01: implementations of the same sweep differ only where two hypotheses' costs nearly tie
         # (bilinear weights: cv2's 1/32 fixed point vs exact), measured < 0.3 % of the judged pixels.
         yield Case(f"scene {i + 1} ({n_views} neighbours): pixels within 3 % of the exact depth, vs the "
@@ -175,6 +176,23 @@ def _sweep_cases(rng: np.random.Generator):
                    lambda Z, a, inf=info: max(0.0, a - depth_accuracy(Z, inf["Z_gt"], inf["region"])), 0.01,
                    "of the pixels", shape=s["I_ref"].shape, convert=_as_depth, info=info, key=f"sweep-{n_views}",
                    tags=(f"views-{n_views}",))
+        # The sweep is deterministic, so its WTA map is held pixel by pixel too: 1 % of the judged pixels on another
+        # plane. Implementations of the same sweep differ only at near-ties (10 seeds, 20 scenes: the reference
+        # median 0.007 %, worst 0.031 %; OpenCV's remap + blur worst 0.028 %). The accuracy above is one-sided, so a
+        # window larger than r (r = 3 or 4 whatever r says: 45-64 % of the pixels on another plane) or SSD (41-55 %)
+        # kept full marks: a wider window is more accurate on these planar scenes.
+        yield Case(f"scene {i + 1} ({n_views} neighbours): depth map vs the specification's sweep, pixel by pixel "
+                   "(share on another plane)", args, 0.0,
+                   lambda Z, _, inf=info: plane_disagreement(Z, inf["Z_o"], inf["region"]), 0.01, "of the pixels",
+                   shape=s["I_ref"].shape, convert=_as_depth, info=info, key=f"sweep-{n_views}-agree",
+                   tags=(f"views-{n_views}", "agree"))
+
+
+def plane_disagreement(Z: np.ndarray, Z_o: np.ndarray, region: np.ndarray) -> float:
+    """Share of the `region`'s pixels whose depth is not Z_o's plane (more than 0.1 % apart, or not finite)."""
+    with np.errstate(invalid="ignore"):
+        off = ~(np.abs(Z - Z_o) <= 1e-3 * Z_o)
+    return float(off[region].mean()) if region.any() else 0.0
 
 
 def _agrees(Z, Z_bug, region) -> bool:
@@ -208,7 +226,12 @@ SWEEP_HINTS = [
                           "taking the best plane — one pixel's intensity matches many depths."),
     Hint("most depths are wrong: warp each neighbour *into the reference* (sample the neighbour at H p for every "
          "reference pixel p), sum the costs over the neighbours and keep the plane with the LOWEST cost.",
-         lambda c, Z: depth_accuracy(Z, c.info["Z_gt"], c.info["region"]) < 0.5 * c.expected),
+         lambda c, Z: "agree" not in c.tags and depth_accuracy(Z, c.info["Z_gt"], c.info["region"]) < 0.5 * c.expected),
+    Hint("your depths are as accurate as the specification's sweep but are not its: the cost is the SAD over the "
+         "(2r+1)² window with the r given (not a larger window, not squared differences), of bilinear samples, "
+         "summed over every neighbour.",
+         lambda c, Z: "agree" in c.tags and depth_accuracy(Z, c.info["Z_gt"], c.info["region"]) >=
+         depth_accuracy(c.info["Z_o"], c.info["Z_gt"], c.info["region"]) - 0.01),
 ]
 
 register(Exercise(

@@ -20,7 +20,9 @@ SEEDS = [0, 1, 2]
 _SPEC = {"density after the left-right check": "StereoBM's texture/uniqueness tests reject 10-25 % more pixels",
          "bad-pixel rate (> 1 px) vs the specification's": "its pre-filter and 1/16 px quantisation change the "
                                                           "error distribution (0.1-1 % above the specification's)",
-         "sub-pixel error (mean |error| of pixels within 1 px)": "its sub-pixel fit is not the SAD parabola"}
+         "sub-pixel error (mean |error| of pixels within 1 px)": "its sub-pixel fit is not the SAD parabola",
+         "disparity map vs the specification's, pixel by pixel (share > 0.01 px apart or rejected by one only)":
+             "its filters, thresholds and 1/16 px disparities change most pixels of the specification's map"}
 STEREO_BM_CANNOT = {f"{label}: {what}": why for label in ("synthetic pair (exact disparity, occlusions)",
                                                           "real motorcycle crop (Middlebury ground truth)")
                     for what, why in _SPEC.items()}

@@ -39,7 +39,12 @@ def _matcher(I_l, I_r, d_max, r=3, max_lr_diff=1.0, *, sign=1, lr="ok", subpixel
         cp = np.take_along_axis(C, np.clip(d + 1, 0, n - 1)[..., None], 2)[..., 0]
         with np.errstate(all="ignore"):
             den = cm - 2 * c0 + cp
-            off = (cm - cp) / (2 * den) if subpixel == "ok" else (cp - cm) / (2 * den)
+            if subpixel == "equiangular":   # the two lines through the minimum (Shimizu & Okutomi): another fit
+                off = (cm - cp) / (2 * np.maximum(cm - c0, cp - c0))
+            elif subpixel == "no_half":
+                off = (cm - cp) / den
+            else:
+                off = (cm - cp) / (2 * den) if subpixel == "ok" else (cp - cm) / (2 * den)
         inner = (d > 0) & (d < n - 1) & np.isfinite(off)
         D = np.where(inner, d + np.clip(off, -0.5, 0.5), d)
     if lr == "none":
@@ -74,6 +79,20 @@ def bm_no_subpixel(I_l, I_r, d_max, r=3, max_lr_diff=1.0):
 
 def bm_parabola_sign(I_l, I_r, d_max, r=3, max_lr_diff=1.0):
     return _matcher(I_l, I_r, d_max, r, max_lr_diff, subpixel="flipped")
+
+
+def bm_parabola_without_half(I_l, I_r, d_max, r=3, max_lr_diff=1.0):
+    """The vertex offset (C- - C+) / (C- - 2 C0 + C+): twice the parabola's. SAD's pixel locking pulls the true
+    vertex toward the integers, so this lowers the mean sub-pixel error and passed every rate case."""
+    return _matcher(I_l, I_r, d_max, r, max_lr_diff, subpixel="no_half")
+
+
+def bm_equiangular_subpixel(I_l, I_r, d_max, r=3, max_lr_diff=1.0):
+    return _matcher(I_l, I_r, d_max, r, max_lr_diff, subpixel="equiangular")
+
+
+def bm_window_radius_ignored(I_l, I_r, d_max, r=3, max_lr_diff=1.0):
+    return _matcher(I_l, I_r, d_max, 4, max_lr_diff)   # a 9 x 9 window whatever r says
 
 
 def bm_shift_plus(I_l, I_r, d_max, r=3, max_lr_diff=1.0):
@@ -149,6 +168,9 @@ MUTANTS: list[tuple] = [
     ("8.8", "no sub-pixel refinement", bm_no_subpixel, "every disparity is an integer"),
     ("8.8", "parabola vertex sign flipped", bm_parabola_sign, "the sub-pixel offsets make it worse"),
     ("8.8", "right image shifted the wrong way", bm_shift_plus, "x − d"),
+    ("8.8", "parabola vertex without the 1/2", bm_parabola_without_half, "not without the ½"),
+    ("8.8", "equiangular sub-pixel fit", bm_equiangular_subpixel, "not another interpolation"),
+    ("8.8", "window radius ignored (r = 4)", bm_window_radius_ignored, None),
     ("8.9", "P1 and P2 swapped", sgm_swapped_penalties, "P1 and P2 are swapped"),
     ("8.9", "always 4 paths", sgm_always_four_paths, "4-path sum"),
     ("8.9", "no P2 term", sgm_no_p2, "P2 term is missing"),
@@ -160,7 +182,7 @@ MUTANTS: list[tuple] = [
 # ----------------------------------------------------------------- 8.10 plane sweep
 
 def _sweep(I_ref, K_ref, images, Ks, Rs, ts, depths, r, *, sign=1.0, same_K=False, window=True, best=np.argmin,
-           inverse=False):
+           inverse=False, squared=False):
     H, W = I_ref.shape
     ys, xs = np.mgrid[0:H, 0:W].astype(float)
     p = np.stack([xs, ys, np.ones_like(xs)], -1)
@@ -174,7 +196,7 @@ def _sweep(I_ref, K_ref, images, Ks, Rs, ts, depths, r, *, sign=1.0, same_K=Fals
             q = p @ Hk.T
             warped = ndimage.map_coordinates(np.asarray(img, float), [q[..., 1] / q[..., 2], q[..., 0] / q[..., 2]],
                                              order=1, mode="constant", cval=0.0)
-            ad = np.abs(I_ref - warped)
+            ad = (I_ref - warped) ** 2 if squared else np.abs(I_ref - warped)
             C[i] += ndimage.uniform_filter(ad, 2 * r + 1, mode="nearest") if window else ad
     return np.asarray(depths)[best(C, axis=0)]
 
@@ -195,12 +217,24 @@ def sweep_argmax(I_ref, K_ref, images, Ks, Rs, ts, depths, r=2):
     return _sweep(I_ref, K_ref, images, Ks, Rs, ts, depths, r, best=np.argmax)
 
 
+def sweep_wider_window(I_ref, K_ref, images, Ks, Rs, ts, depths, r=2):
+    """A 7 x 7 window whatever r says: more accurate on these planar scenes, so the one-sided accuracy case kept
+    full marks before the map was also held to the specification's pixel by pixel."""
+    return _sweep(I_ref, K_ref, images, Ks, Rs, ts, depths, 3)
+
+
+def sweep_ssd(I_ref, K_ref, images, Ks, Rs, ts, depths, r=2):
+    return _sweep(I_ref, K_ref, images, Ks, Rs, ts, depths, r, squared=True)
+
+
 def sweep_inverse_homography(I_ref, K_ref, images, Ks, Rs, ts, depths, r=2):
     return _sweep(I_ref, K_ref, images, Ks, Rs, ts, depths, r, inverse=True)
 
 
 MUTANTS += [
     ("8.10", "R - t nᵀ/d for the plane nᵀX = d", sweep_minus_sign, "the plane moves the wrong way"),
+    ("8.10", "window 7 x 7 whatever r says", sweep_wider_window, "not a larger window"),
+    ("8.10", "squared differences (SSD)", sweep_ssd, None),
     ("8.10", "reference K for every camera", sweep_reference_K_everywhere, "uses the reference's K"),
     ("8.10", "per-pixel cost, no window", sweep_per_pixel_cost, "costs are per pixel"),
     ("8.10", "argmax of the cost", sweep_argmax, "LOWEST cost"),
@@ -211,7 +245,7 @@ MUTANTS += [
 # ----------------------------------------------------------------- 8.11 fusion
 
 def _fuse(depths, Ks, Rs, ts, rel_tol, min_consistent, *, filt=True, self_vote=False, absolute=False,
-          forward_R=False, euclid=False):
+          forward_R=False, euclid=False, floor=False):
     out = []
     for i, Z in enumerate(depths):
         Z = np.asarray(Z, float)
@@ -230,7 +264,8 @@ def _fuse(depths, Ks, Rs, ts, rel_tol, min_consistent, *, filt=True, self_vote=F
             zj = np.linalg.norm(Xj, axis=1) if euclid else Xj[:, 2]
             q = Xj @ Ks[j].T
             with np.errstate(all="ignore"):
-                uj, vj = np.rint(q[:, 0] / q[:, 2]), np.rint(q[:, 1] / q[:, 2])
+                rnd = np.floor if floor else np.rint
+                uj, vj = rnd(q[:, 0] / q[:, 2]), rnd(q[:, 1] / q[:, 2])
             H, W = depths[j].shape
             ok = (Xj[:, 2] > 0) & (uj >= 0) & (uj < W) & (vj >= 0) & (vj < H)
             d = np.full(len(X), np.nan)
@@ -261,7 +296,24 @@ def fuse_range_not_depth(depths, Ks, Rs, ts, rel_tol=0.01, min_consistent=2):
     return _fuse(depths, Ks, Rs, ts, rel_tol, min_consistent, euclid=True)
 
 
+def fuse_truncated_lookup(depths, Ks, Rs, ts, rel_tol=0.01, min_consistent=2):
+    """int(u), int(v): the pixel up-left of the projection, not the nearest. Kept within 1 % of the specification's
+    count on 30 % of the draws, so the count alone let it pass."""
+    return _fuse(depths, Ks, Rs, ts, rel_tol, min_consistent, floor=True)
+
+
+def fuse_rel_tol_ignored(depths, Ks, Rs, ts, rel_tol=0.01, min_consistent=2):
+    return _fuse(depths, Ks, Rs, ts, 0.01, min_consistent)
+
+
+def fuse_min_consistent_ignored(depths, Ks, Rs, ts, rel_tol=0.01, min_consistent=2):
+    return _fuse(depths, Ks, Rs, ts, rel_tol, 2)
+
+
 MUTANTS += [
+    ("8.11", "depth looked up at the truncated pixel", fuse_truncated_lookup, "do not truncate"),
+    ("8.11", "rel_tol ignored (0.01)", fuse_rel_tol_ignored, None),
+    ("8.11", "min_consistent ignored (2)", fuse_min_consistent_ignored, None),
     ("8.11", "no consistency filter", fuse_no_filter, "the consistency filter is missing"),
     ("8.11", "a view votes for itself", fuse_self_vote, "j ≠ i"),
     ("8.11", "absolute depth tolerance", fuse_absolute_tolerance, None),
