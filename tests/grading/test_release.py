@@ -203,9 +203,9 @@ print(check("7.2", ["excellent", "acceptable", "acceptable"], seed=0).cases[0].h
 # graded mode refuses) and which the release still ships: graders.grading.standins.KEPT, each with why it stays.
 # 51: 60 before 2.6, 2.7, 2.8, 2.9 and 4.6 got their library twins, 55 before 4.14's stand-in was seen to be the
 # OpenCV one it is (its IncrementalSfM class calls cv2; standins.solution_code now follows the classes a stand-in
-# builds), 54 before 5.6's, 5.7's and 5.8's twins (cv2.projectPoints and its Jacobian). A stand-in taken out must leave KEPT (and
-# SHIPPED_CEILING come down to it); a new one that is a solution fails the test until it is taken out or listed there
-# with its reason.
+# builds), 54 before 5.6's, 5.7's and 5.8's twins (cv2.projectPoints and its Jacobian). A stand-in taken out must
+# leave KEPT (and SHIPPED_CEILING come down to it); a new one that is a solution fails the test until it is taken out
+# or listed there with its reason.
 SHIPPED_SOLUTIONS = frozenset(KEPT)
 SHIPPED_CEILING = 51          # only goes down
 
@@ -283,10 +283,11 @@ def test_release_installs_in_a_fresh_venv_and_every_notebook_sets_up(release, tm
 # reads from a `graders` module must exist in the release: sealing drops the module-level names nothing in the release
 # uses, and a name only a notebook uses would otherwise fail in a learner's kernel. The notebooks of the chapters the
 # release changes beyond its questions (a stand-in swapped for its library twin) run from the top to their last cell
-# that use()s a swapped exercise (02 to its end; 04 only to 4.6's demo: its Sacré-Cœur half never touches the twin
-# but for the grader's pair ranking, whose local checks on the twin the fairness sweep covers). The untouched notebooks
-# run whole against this repository's graders (nbval) and solved (tests/chapters/test_notebooks.py): the student
-# edition's graders differ only in their sealed questions (tested above) and twins.
+# that use()s a swapped exercise (02 to its end; 05 to 5.6's second demo, cell 75 of 120; 04 only to 4.6's demo: its
+# Sacré-Cœur half never touches the twin but for the grader's pair ranking, whose local checks on the twin the
+# fairness sweep covers). The untouched notebooks run whole against this repository's graders (nbval) and solved
+# (tests/chapters/test_notebooks.py): the student edition's graders differ only in their sealed questions (tested
+# above) and twins.
 RELEASE_RUNNER = """
 import ast, importlib, json, re, sys, types
 import nbformat
