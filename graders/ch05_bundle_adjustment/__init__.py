@@ -27,7 +27,7 @@ from .debug import debug_case, debug_truth, naive_gauss_newton
 from .demo import (EXP_TRUE, exp_fit_cost, exp_fit_data, gauss_newton_path, gradient_descent_path, lm_path,
                    lm_step_curve)
 from .frontier import fd_differentiable_pose
-from .jacobians import fd_jacobians, gt_sparse_jacobian, gt_torch_cost, torch_jacobians
+from .jacobians import cv_jacobians, cv_torch_cost, fd_jacobians, gt_sparse_jacobian, gt_torch_cost, torch_jacobians
 from .normal_equations import gt_normal_equations
 from .problems import F, camera_centres, held_out_rms, make_problem, problem_args, transform_problem
 from .robust import gt_robust_weights
@@ -37,7 +37,7 @@ __all__ = [
     "EXP_TRUE", "exp_fit_cost", "exp_fit_data", "gauss_newton_path", "gradient_descent_path", "lm_path",
     "lm_step_curve",
     "F", "bal_cost", "bal_to_reconstruction", "camera_centres", "colmap_bundle_adjust",
-    "debug_case", "debug_truth", "fd_differentiable_pose", "fd_jacobians", "full_normal_equations", "gauge_mask",
+    "cv_jacobians", "cv_torch_cost", "debug_case", "debug_truth", "fd_differentiable_pose", "fd_jacobians", "full_normal_equations", "gauge_mask",
     "gt_normal_equations", "gt_project", "gt_read_bal", "gt_robust_weights", "gt_schur_solve", "gt_sparse_jacobian",
     "gt_torch_cost", "held_out_rms", "library_bundle_adjust", "load_bal_problem", "make_problem",
     "naive_gauss_newton", "problem_args", "reconstruction_to_bal", "reduced_camera_system", "scipy_bundle_adjust",

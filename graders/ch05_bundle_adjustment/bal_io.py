@@ -181,13 +181,15 @@ def _convert_small_rotations(out, case):
 
 
 def _project_variant(case, sign=-1.0, r_power=2, transpose=False, k2_power=4):
-    from scipy.spatial.transform import Rotation
+    """A slip's projection: p = sign P[:2] / P[2] from the course's own projection with f = 1 and no distortion
+    (R^T: the rotation vector negated), then the slip's radial factor."""
     cams, pts, ci, pi = case.args
-    c = cams[ci]
-    rot = Rotation.from_rotvec(c[:, :3])
-    P = (rot.inv() if transpose else rot).apply(pts[pi]) + c[:, 3:6]
-    p = sign * P[:, :2] / P[:, 2:3]
+    plain = np.array(cams, float)
+    plain[:, :3] *= -1.0 if transpose else 1.0
+    plain[:, 6:9] = (1.0, 0.0, 0.0)
+    p = -sign * gt_project(plain, pts, ci, pi)
     r = np.linalg.norm(p, axis=1)
+    c = cams[ci]
     return (c[:, 6] * (1 + c[:, 7] * r**r_power + c[:, 8] * r**k2_power))[:, None] * p
 
 

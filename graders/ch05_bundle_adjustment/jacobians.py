@@ -24,32 +24,89 @@ def torch_jacobians(cameras, points, cam_idx, pt_idx) -> tuple[np.ndarray, np.nd
     Camera columns: left rotation increment dtheta (R <- Exp(dtheta) R), t, f, k1, k2. Exp(d) =
     I + [d]x + O(|d|^2), so P(d) = R X + d x (R X) + t has exactly the right derivative at d = 0
     (and avoids differentiating a norm at 0). One graph with a private copy of the parameters per
-    observation; two backward passes (u and v) give every row.
+    observation; two backward passes (u and v) give every row. (The student release runs cv_jacobians
+    in its place: graders.grading.standins.TWINS.)
     """
     import torch
+    from scipy.spatial.transform import Rotation
 
     with torch_threads(1):
-        return _torch_jacobians(torch, cameras, points, cam_idx, pt_idx)
+        cameras, points = np.asarray(cameras, float), np.asarray(points, float)
+        c = cameras[cam_idx]
+        R = torch.as_tensor(Rotation.from_rotvec(cameras[:, :3]).as_matrix()[cam_idx])
+        d = torch.zeros(len(c), 3, dtype=torch.float64, requires_grad=True)
+        t = torch.as_tensor(c[:, 3:6]).clone().requires_grad_(True)
+        intr = torch.as_tensor(c[:, 6:9]).clone().requires_grad_(True)
+        X = torch.as_tensor(points[pt_idx]).clone().requires_grad_(True)
+        RX = (R @ X[:, :, None])[:, :, 0]
+        P = RX + torch.linalg.cross(d, RX) + t
+        p = -P[:, :2] / P[:, 2:3]
+        r2 = (p * p).sum(dim=1)
+        u = (intr[:, 0] * (1 + intr[:, 1] * r2 + intr[:, 2] * r2 * r2))[:, None] * p
+        rows = [torch.cat(torch.autograd.grad(u[:, k].sum(), [d, t, intr, X], retain_graph=True), dim=1)
+                for k in range(2)]
+        J = torch.stack(rows, dim=1).numpy()  # (M, 2, 12)
+        return J[:, :, :9].copy(), J[:, :, 9:].copy()
 
 
-def _torch_jacobians(torch, cameras, points, cam_idx, pt_idx):
-    from scipy.spatial.transform import Rotation
+def _cv_bal(cameras, points, cam_idx, pt_idx):
+    """BAL projections u (M, 2) and their derivatives from cv2.projectPoints, per camera: K = diag(f, f, 1),
+    distortion (k1, k2, 0, 0), everything negated (BAL projects -P / P_z, OpenCV P / P_z, and the radial factor is
+    even in p). Returns u, du/d(rvec, t, f, k1, k2) (M, 2, 9), du/dX (M, 2, 3) = du/dt R, and R X (M, 3)."""
+    import cv2
     cameras, points = np.asarray(cameras, float), np.asarray(points, float)
-    c = cameras[cam_idx]
-    R = torch.as_tensor(Rotation.from_rotvec(cameras[:, :3]).as_matrix()[cam_idx])
-    d = torch.zeros(len(c), 3, dtype=torch.float64, requires_grad=True)
-    t = torch.as_tensor(c[:, 3:6]).clone().requires_grad_(True)
-    intr = torch.as_tensor(c[:, 6:9]).clone().requires_grad_(True)
-    X = torch.as_tensor(points[pt_idx]).clone().requires_grad_(True)
-    RX = (R @ X[:, :, None])[:, :, 0]
-    P = RX + torch.linalg.cross(d, RX) + t
-    p = -P[:, :2] / P[:, 2:3]
-    r2 = (p * p).sum(dim=1)
-    u = (intr[:, 0] * (1 + intr[:, 1] * r2 + intr[:, 2] * r2 * r2))[:, None] * p
-    rows = [torch.cat(torch.autograd.grad(u[:, k].sum(), [d, t, intr, X], retain_graph=True), dim=1)
-            for k in range(2)]
-    J = torch.stack(rows, dim=1).numpy()  # (M, 2, 12)
-    return J[:, :, :9].copy(), J[:, :, 9:].copy()
+    cam_idx, pt_idx = np.asarray(cam_idx, int), np.asarray(pt_idx, int)
+    m = len(cam_idx)
+    u, J, J_pt, RX = np.zeros((m, 2)), np.zeros((m, 2, 9)), np.zeros((m, 2, 3)), np.zeros((m, 3))
+    for cam in np.unique(cam_idx):
+        sel = np.flatnonzero(cam_idx == cam)
+        w, t, (f, k1, k2) = cameras[cam, :3], cameras[cam, 3:6], cameras[cam, 6:9]
+        X = points[pt_idx[sel]]
+        K = np.array([[f, 0.0, 0.0], [0.0, f, 0.0], [0.0, 0.0, 1.0]])
+        uv, jac = cv2.projectPoints(X.reshape(-1, 1, 3), w, t, K, np.array([k1, k2, 0.0, 0.0]))
+        jac = -jac.reshape(-1, 2, 14)    # columns: rvec 0-2, t 3-5, fx fy 6-7, cx cy 8-9, k1 k2 p1 p2 10-13
+        R = cv2.Rodrigues(w)[0]
+        u[sel] = -uv.reshape(-1, 2)
+        J[sel, :, :6] = jac[:, :, :6]
+        J[sel, :, 6] = jac[:, :, 6] + jac[:, :, 7]
+        J[sel, :, 7:9] = jac[:, :, 10:12]
+        J_pt[sel] = jac[:, :, 3:6] @ R
+        RX[sel] = X @ R.T
+    return u, J, J_pt, RX
+
+
+def cv_jacobians(cameras, points, cam_idx, pt_idx) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV-backed 5.8 (the student release's stand-in): cv2.projectPoints' own Jacobian (`_cv_bal`), its
+    rotation columns for the left increment: du/dP (-[R X]x), du/dP being its t columns. Agrees with
+    torch_jacobians to 8.5e-15 relative (5.8's cases, 40 seeds; tolerance 1e-6)."""
+    _, J, J_pt, RX = _cv_bal(cameras, points, cam_idx, pt_idx)
+    J[:, :, :3] = np.einsum("mij,mjk->mik", J[:, :, 3:6], -skew(RX))
+    return J, J_pt
+
+
+def cv_torch_cost(cameras, points, cam_idx, pt_idx, obs):
+    """OpenCV-backed 5.7 (the student release's stand-in): the BAL cost as a torch autograd Function whose forward
+    projects with cv2.projectPoints and whose backward is cv2.projectPoints' own Jacobian (`_cv_bal`)."""
+    import torch
+
+    ci, pi, obs_ = np.asarray(cam_idx, int), np.asarray(pt_idx, int), np.asarray(obs, float)
+
+    class _Cost(torch.autograd.Function):
+        @staticmethod
+        def forward(ctx, cams, pts):
+            u, J, J_pt, _ = _cv_bal(cams.detach().numpy(), pts.detach().numpy(), ci, pi)
+            r = u - obs_
+            gc, gp = np.zeros((len(cams), 9)), np.zeros((len(pts), 3))
+            np.add.at(gc, ci, np.einsum("mi,mik->mk", r, J))
+            np.add.at(gp, pi, np.einsum("mi,mik->mk", r, J_pt))
+            ctx.grads = torch.as_tensor(gc, dtype=cams.dtype), torch.as_tensor(gp, dtype=pts.dtype)
+            return torch.tensor(0.5 * float((r * r).sum()), dtype=cams.dtype)
+
+        @staticmethod
+        def backward(ctx, g):
+            return g * ctx.grads[0], g * ctx.grads[1]
+
+    return _Cost.apply(cameras, points)
 
 
 def fd_jacobians(cameras, points, cam_idx, pt_idx, h: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:

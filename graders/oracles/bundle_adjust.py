@@ -27,7 +27,7 @@ import hashlib
 
 import numpy as np
 
-__all__ = ["bal_project", "bal_cost", "gauge_mask", "bal_sparsity", "scipy_bundle_adjust"]
+__all__ = ["bal_project", "cv_bal_project", "bal_cost", "gauge_mask", "bal_sparsity", "scipy_bundle_adjust"]
 
 
 def bal_project(cameras: np.ndarray, points: np.ndarray, cam_idx: np.ndarray, pt_idx: np.ndarray) -> np.ndarray:
@@ -40,6 +40,25 @@ def bal_project(cameras: np.ndarray, points: np.ndarray, cam_idx: np.ndarray, pt
         p = -P[:, :2] / P[:, 2:3]
     r2 = np.sum(p**2, axis=1)
     return (c[:, 6] * (1 + c[:, 7] * r2 + c[:, 8] * r2**2))[:, None] * p
+
+
+def cv_bal_project(cameras: np.ndarray, points: np.ndarray, cam_idx: np.ndarray, pt_idx: np.ndarray) -> np.ndarray:
+    """OpenCV-backed `bal_project` (the student release's, graders.grading.standins.TWINS): per camera,
+    cv2.projectPoints with K = diag(f, f, 1) and distortion (k1, k2, 0, 0), negated (BAL projects -P / P_z, OpenCV
+    P / P_z, and the radial factor is even in p); a point at depth 0 is NaN, as in bal_project. Agrees with it to
+    2.3e-12 px (5.6's cases, 40 seeds; tolerance 1e-6 px)."""
+    import cv2
+    cameras, points = np.asarray(cameras, float), np.asarray(points, float)
+    cam_idx, pt_idx = np.asarray(cam_idx, int), np.asarray(pt_idx, int)
+    uv = np.full((len(cam_idx), 2), np.nan)
+    for cam in np.unique(cam_idx):
+        sel = np.flatnonzero(cam_idx == cam)
+        w, t, (f, k1, k2) = cameras[cam, :3], cameras[cam, 3:6], cameras[cam, 6:9]
+        X = points[pt_idx[sel]]
+        K = np.array([[f, 0.0, 0.0], [0.0, f, 0.0], [0.0, 0.0, 1.0]])
+        uv[sel] = -cv2.projectPoints(X.reshape(-1, 1, 3), w, t, K, np.array([k1, k2, 0.0, 0.0]))[0].reshape(-1, 2)
+        uv[sel[X @ cv2.Rodrigues(w)[0][2] + t[2] == 0]] = np.nan
+    return uv
 
 
 def bal_cost(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", scale: float = 1.0) -> float:
