@@ -132,6 +132,13 @@ def sf_no_principal_point(D1, D2, flow, K):
     return scene_flow(D1, D2, flow, K0)
 
 
+def sf_one_focal(D1, D2, flow, K):
+    """fx used for both axes: (y − cy) / fx (right only for square pixels)."""
+    K1 = np.array(K, float).copy()
+    K1[1, 1] = K1[0, 0]
+    return scene_flow(D1, D2, flow, K1)
+
+
 def sf_flow_subtracted(D1, D2, flow, K):
     """The point looked up at x − w(x) in frame 2."""
     x, y, H, W = _grid(D1)
@@ -223,6 +230,7 @@ MUTANTS = [
     ("9.16", "D2 read at x", sf_d2_at_x, "D2 is read at x"),
     ("9.16", "depth as range", sf_range, "not range"),
     ("9.16", "no principal point", sf_no_principal_point, "principal point"),
+    ("9.16", "one focal length (fx for y)", sf_one_focal, "one focal length for both axes"),
     ("9.16", "x - flow", sf_flow_subtracted, "frame 1 to frame 2"),
     ("9.16", "nearest-pixel depth", sf_nearest_depth, "nearest pixel of x + w(x)"),
     ("9.19", "wrong cause", lost_wrong_cause, "independent tracking"),
