@@ -1,7 +1,7 @@
 """9.15 — a small joint tracker: carry occluded points with their visible neighbours' motion.
 
-The sequence (256 x 256 px, T frames): three rigid objects (16-18 points each, moving, turning, slowly
-changing scale) and two vertical bars sweeping across them, one from each side. Every frame, a per-frame
+The sequence (256 x 256 px, T frames): three rigid objects (16-18 points each, moving, turning — by 0.02-0.03
+rad a frame in the graded sequences, two per grade —, slowly changing scale) and two vertical bars sweeping across them, one from each side. Every frame, a per-frame
 matcher (TAPIR's first stage: each query matched on its own) reports for every point a position and a
 score in [0, 1]: a visible point is found within 0.5 px (σ) with a high score — except on repetitive texture
 (3 %), where it jumps 8-30 px with a score as high; an occluded point gets a false match 8-40 px away with a
@@ -24,8 +24,9 @@ SIZE, T, TAU = 256, 40, 0.5
 THRESHOLDS = (1, 2, 4, 8, 16)
 
 
-def _objects(rng: np.random.Generator, n_obj=3):
-    """Each object: points at frame 0 (n, 2), and its motion (centre path, rotation, scale) over T frames."""
+def _objects(rng: np.random.Generator, n_obj=3, turn: tuple[float, float] | None = None):
+    """Each object: points at frame 0 (n, 2), and its motion (centre path, rotation, scale) over T frames.
+    turn: the rotation rate's magnitude range (rad/frame), either sign; None: uniform in ±0.012."""
     t = np.arange(T)[:, None]
     out = []
     for k, cx in enumerate(np.linspace(50, 206, n_obj) + rng.uniform(-6, 6, n_obj)):
@@ -34,7 +35,8 @@ def _objects(rng: np.random.Generator, n_obj=3):
         v = np.array([rng.uniform(-0.4, 0.4), (1 if down else -1) * rng.uniform(1.5, 2.4)])
         wob = rng.uniform(3, 8) * np.sin(2 * np.pi * t / rng.uniform(20, 40) + rng.uniform(0, 2 * np.pi))
         centre = c0 + v * t + np.c_[wob, np.zeros_like(wob)]
-        theta = rng.uniform(-0.012, 0.012) * t[:, 0]
+        rate = rng.uniform(-0.012, 0.012) if turn is None else rng.choice([-1.0, 1.0]) * rng.uniform(*turn)
+        theta = rate * t[:, 0]
         scale = 1 + rng.uniform(-0.1, 0.1) * t[:, 0] / T
         n = int(rng.integers(16, 19))
         r = rng.uniform(26, 30) * np.sqrt(rng.uniform(0.05, 1, n))
@@ -59,13 +61,13 @@ def _bars(rng: np.random.Generator):
     return bars
 
 
-def tracking_sequence(rng: np.random.Generator) -> dict:
+def tracking_sequence(rng: np.random.Generator, turn: tuple[float, float] | None = None, min_seen: int = 5) -> dict:
     """The truth (tracks (T, N, 2), visible (T, N), object (N,)), the matcher's per-frame output (obs (T, N, 2),
     score (T, N)) and the queries (N, 2) at frame 0. Redrawn until the scene is trackable: every point visible
     at frame 0, at least 5 points of each object visible in every frame, over 10 % of the samples hidden
     (so that calling every point visible costs more than 10 % of occlusion accuracy)."""
     for _ in range(100):
-        objs = _objects(rng)
+        objs = _objects(rng, turn=turn)
         gt = np.concatenate([tr for _, tr in objs], 1)
         obj = np.concatenate([np.full(tr.shape[1], k) for k, tr in objs])
         if gt.min() < 4 or gt.max() > SIZE - 5:
@@ -75,7 +77,7 @@ def tracking_sequence(rng: np.random.Generator) -> dict:
             hidden |= np.abs(gt[..., 0] - xb[:, None]) < w
         vis = ~hidden
         seen = np.stack([vis[:, obj == k].sum(1) for k in range(len(objs))], 1)   # (T, objects)
-        if vis[0].all() and seen.min() >= 5 and hidden.mean() > 0.10:
+        if vis[0].all() and seen.min() >= min_seen and hidden.mean() > 0.10:
             break
     else:
         raise RuntimeError("no trackable sequence in 100 draws")   # never seen; would be a generator bug
@@ -208,11 +210,37 @@ def judged_cases(seq: dict, call, label: str, key: str) -> list[Case]:
     return cases
 
 
+# 9.15's graded objects turn by 0.02-0.03 rad a frame (either way; the notebook's and 9.19's by at most 0.012), and
+# every object keeps >= 7 points in view: a group's step fitted as one translation then drifts while its points are
+# hidden and loses them. On 300 draws (seeds 0-299) of one sequence each: the reference and the stand-in worst AJ 0.908,
+# δ_avg 0.962, OA 0.960, hidden median <= 1.27 px (0 fail); a median-translation step fails 95 % (AJ median 0.71,
+# hidden median 2.1 px). Two sequences per grade: that tracker passes both on ~0.2 % of the draws. (Turning faster,
+# 0.025-0.035, the reference itself fails 1 in 300: 6-7 points seen on one side of an object fit its turn poorly.)
+GRADED_TURN, GRADED_MIN_SEEN = (0.02, 0.03), 7
+
+
+def _standin_passes(seq: dict) -> bool:
+    """The grader's stand-in clears every bar of JUDGES on this sequence."""
+    tracks, visible = gt_joint_tracker(seq["query"], seq["obs"], seq["score"], seq["group"])
+    m = tapvid_metrics(tracks, visible, seq["tracks"], seq["visible"])
+    e = occluded_error(tracks, seq["tracks"], seq["visible"])
+    return all(shortfall(m, e) <= 0 for _, _, _, shortfall in JUDGES)
+
+
 def _cases(rng: np.random.Generator):
-    seq = tracking_sequence(rng)
-    args = (seq["query"], seq["obs"], seq["score"], seq["group"])
-    call = shared_run(lambda fn: fn(*(a.copy() for a in args)))
-    return judged_cases(seq, call, "3 objects, 2 bars", "seq")
+    cases = []
+    for i in range(2):
+        # A sequence the stand-in cannot track (both sides of a turning object hidden at once: its 6-7 seen points
+        # fit the turn poorly and the group is lost; AJ 0.77 on fairness seed 854520178, ~1 sequence in 1,000) is
+        # drawn again rather than held against the learner, as 11.9 redraws a mount its stand-in cannot repair.
+        for _ in range(5):
+            seq = tracking_sequence(rng, turn=GRADED_TURN, min_seen=GRADED_MIN_SEEN)
+            if _standin_passes(seq):
+                break
+        args = (seq["query"], seq["obs"], seq["score"], seq["group"])
+        call = shared_run(lambda fn, args=args: fn(*(a.copy() for a in args)))
+        cases += judged_cases(seq, call, f"sequence {i + 1}: 3 turning objects, 2 bars", "seq" if i == 0 else f"seq{i + 1}")
+    return cases
 
 
 def _raw(c, out):
@@ -225,6 +253,21 @@ def _frozen(c, out):
     return c.tags[0] == "hidden" and float(still[hid].mean()) > 0.8
 
 
+def _translated(c, out) -> bool:
+    """Within each group, the points the answer carries (not visible in two frames running) all took the same, non-zero
+    step in most frames: a translation per group (a similarity's step differs from point to point)."""
+    tracks, visible = out
+    group = c.info["seq"]["group"]
+    same = []
+    for t in range(1, len(tracks)):
+        for g in np.unique(group):
+            idx = np.flatnonzero((group == g) & ~visible[t] & ~visible[t - 1])
+            if len(idx) >= 2:
+                step = tracks[t, idx] - tracks[t - 1, idx]
+                same.append(float(np.ptp(step, 0).max()) < 1e-6 and float(np.abs(step).max()) > 1e-3)   # not frozen
+    return len(same) >= 5 and float(np.mean(same)) > 0.8
+
+
 TRACK_HINTS = [
     Hint("every point is marked visible in every frame: a point under a bar must be reported occluded (AJ counts "
          "it as a false positive, occlusion accuracy as an error).", lambda c, o: bool(o[1].all())),
@@ -232,6 +275,9 @@ TRACK_HINTS = [
          "Predict each point from its group's motion and accept a match only near that prediction.", _raw),
     Hint("hidden points stand still: while a point is occluded, move it with its visible neighbours' motion "
          "(the step of its group, fitted to the points that are seen).", _frozen),
+    Hint("your hidden points all take one step per group, a translation: the objects turn (up to 0.03 rad a frame) "
+         "and change scale, so a point far from the seen ones drifts while hidden and is lost. Fit each group's step "
+         "as a similarity (rotation, scale, translation) to its points matched in both frames.", _translated),
     Hint("visibility from the score alone lets the confident false matches of hidden points through: a match "
          "far (> 4 px) from the group's prediction is not the point.",
          lambda c, o: bool(np.array_equal(o[1], c.info["seq"]["score"] > TAU))),

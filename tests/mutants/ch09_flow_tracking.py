@@ -105,6 +105,26 @@ def tracker_score_visibility(query, obs, score, group):
     return tracks, visible
 
 
+def tracker_group_translation(query, obs, score, group, tau=0.5, radius=4.0):
+    """The joint tracker with each group's step a translation (the median step of its points seen in both frames)
+    instead of a similarity: hidden points ignore the object's turn and scale."""
+    obs, score = np.asarray(obs, float), np.asarray(score, float)
+    tracks = np.empty_like(obs)
+    visible = np.zeros(score.shape, bool)
+    tracks[0], visible[0] = query, True
+    for t in range(1, len(obs)):
+        pred = tracks[t - 1].copy()
+        for g in np.unique(group):
+            idx = np.flatnonzero(group == g)
+            seen = idx[(score[t, idx] > tau) & visible[t - 1, idx]]
+            if len(seen):
+                pred[idx] = tracks[t - 1, idx] + np.median(obs[t, seen] - tracks[t - 1, seen], 0)
+        ok = (score[t] > tau) & (np.linalg.norm(obs[t] - pred, axis=1) < radius)
+        tracks[t] = np.where(ok[:, None], obs[t], pred)
+        visible[t] = ok
+    return tracks, visible
+
+
 # ----------------------------------------------------------------- 9.16 scene_flow
 
 def _unproject(x, y, Z, K):
@@ -227,6 +247,7 @@ MUTANTS = [
     ("9.15", "hidden points frozen", tracker_frozen, "hidden points stand still"),
     ("9.15", "always visible", tracker_all_visible, "every point is marked visible"),
     ("9.15", "visibility from the score", tracker_score_visibility, None),
+    ("9.15", "one translation per group", tracker_group_translation, "a translation"),
     ("9.16", "D2 read at x", sf_d2_at_x, "D2 is read at x"),
     ("9.16", "depth as range", sf_range, "not range"),
     ("9.16", "no principal point", sf_no_principal_point, "principal point"),
