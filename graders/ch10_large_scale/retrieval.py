@@ -1,13 +1,15 @@
 """10.6 — a vocabulary tree: hierarchical k-means, tree descent, tf-idf, L1 scores, an inverted file.
 
-Two kinds of case. (1) Places: a set of images of known places — textured planes (crops of the
+Three kinds of case. (1) Places: a set of images of known places — textured planes (crops of the
 skimage textures) rendered by graders.kit.scene under new viewpoints (homographies) and lighting (gain,
 gamma, noise); SIFT descriptors from OpenCV. The learner's ranking is judged by mAP and recall@k
 against the labels, beside brute-force matching (ratio-test matches of every query with every database
 image), the quadratic baseline retrieval replaces. (2) Structured words: descriptors drawn around
 k^L centres nested k per level, so far apart that hierarchical k-means (k-means++) recovers exactly
 those words whatever its labels; the grader knows every descriptor's word, so the tf-idf L1 scores are
-exact and the slips (idf of descriptors instead of images, L2 instead of L1, no idf, one level) show.
+exact and the slips (idf of descriptors instead of images, L2 instead of L1, no idf, one level) show. (3) The same
+words with queries holding descriptors on the boundary between two branches (boundary_problem): the tree's descent
+and a flat vocabulary's nearest leaf disagree there, so a flat k-means with brute-force assignment shows too.
 
 Scores (the spec): for image I with word counts n_w, v_w = n_w · idf_w, idf_w = ln(N / N_w) (N database
 images, N_w of them containing w; w in no database image weighs 0); v̂ = v / ‖v‖₁;
@@ -177,6 +179,65 @@ def structured_problem(rng: np.random.Generator, branching: int = 3, depth: int 
             "branching": k, "depth": L}
 
 
+def _descend(x: np.ndarray, parents: np.ndarray, leaves: np.ndarray, k: int) -> tuple[int, int]:
+    """(the tree's word: the nearest leaf under the nearest parent, the nearest leaf of all) for descriptor x."""
+    a = int(np.argmin(((parents - x) ** 2).sum(1)))
+    d2 = ((leaves - x) ** 2).sum(1)
+    return a * k + int(np.argmin(d2[a * k:(a + 1) * k])), int(np.argmin(d2))
+
+
+def boundary_problem(rng: np.random.Generator, branching: int = 3, n_q: int = 2, per_query: int = 3) -> dict:
+    """structured_problem (depth 2) plus `n_q` queries that each hold `per_query` descriptors on a boundary between
+    two branches: nearer branch a's centre than branch b's (or any other), but nearer one of b's leaves than any of
+    a's, each by >= 0.01 (the centres are ~100 apart, a leaf ~0.1 from its parent), a's nearest leaf by >= 0.005. The tree descends
+    into a; a flat vocabulary (every leaf compared) takes b's leaf. The centres are the means of the database
+    descriptors of each branch and leaf: what k-means converges to on these exactly recovered clusters, so the
+    tree's word is known. Returns the problem with its query lists extended and "margin" (the smallest)."""
+    k = branching
+    P = structured_problem(rng, branching=k, depth=2)
+    X, w = np.concatenate(P["db_descriptors"]), np.concatenate(P["db_words"])
+    leaves = np.array([X[w == c].mean(0) for c in range(k * k)])
+    parents = np.array([X[w // k == a].mean(0) for a in range(k)])
+    margin = np.inf
+    for _ in range(n_q):
+        descs, words = [], []
+        while len(descs) < per_query:
+            a, b = (int(i) for i in rng.choice(k, 2, replace=False))
+            u = (parents[b] - parents[a]) / np.linalg.norm(parents[b] - parents[a])
+            o = leaves[b * k + int(rng.integers(k))] - parents[b]   # the leaf of b to bring nearer
+            z = o - (o @ u) * u
+            x0 = (parents[a] + parents[b]) / 2 + 200.0 * z / np.linalg.norm(z)   # as far from a as from b
+
+            def margins(t):
+                """(d_b − d_a, min over a's leaves − min over b's leaves) at x0 + t u."""
+                x = x0 + t * u
+                la, lb = (np.min(np.linalg.norm(leaves[c * k:(c + 1) * k] - x, axis=1)) for c in (a, b))
+                return np.linalg.norm(parents[b] - x) - np.linalg.norm(parents[a] - x), la - lb
+            lo, hi = -1.0, 1.0                  # d_b − d_a falls as t grows, la − lb rises: bisect to equal them
+            for _ in range(60):
+                mid = (lo + hi) / 2
+                d, m = margins(mid)
+                lo, hi = (mid, hi) if d > m else (lo, mid)
+            x = x0 + lo * u
+            dp = np.sort(np.linalg.norm(parents - x, axis=1))
+            dl = np.sort(np.linalg.norm(leaves[a * k:(a + 1) * k] - x, axis=1))
+            # Every choice of the descent clear by >= 0.01 (the nearest parent) and 0.005 (a's nearest leaf): a
+            # k-means that stops one update early (the reference's, within 1e-3) leaves centres ~1e-4 off the
+            # means, cv2.kmeans in float32 ~1e-5; a's leaves nearly tied sent the reference elsewhere (1 of 300).
+            m = min(min(margins(lo)), dp[1] - dp[0], 2 * (dl[1] - dl[0]))
+            tree_word, flat_word = _descend(x, parents, leaves, k)
+            if m < 0.01 or tree_word // k != a or flat_word // k != b:
+                continue                        # not a clear boundary case (or a third branch is nearer)
+            descs.append(x)
+            words.append(tree_word)
+            margin = min(margin, m)
+        normal = rng.choice(k * k, 3, replace=False)
+        P["query_descriptors"].append(np.vstack([np.array(descs)] + [X[w == c][:1] for c in normal]))
+        P["query_words"].append(np.r_[words, normal])
+    P["margin"] = float(margin)
+    return P
+
+
 # ------------------------------------------------------------------ the stand-in (OpenCV k-means)
 
 def _cv_kmeans(X: np.ndarray, k: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -275,6 +336,17 @@ def _cases(rng: np.random.Generator):
         yield Case(f"k = {b}, L = {L} structured words: top-3 are the 3 best scores", args, S, _top_consistent,
                    1e-9, "", convert=_convert, call=run, key=f"top-{b}-{L}", info=info, tags=("words", "top"))
     yield from _place_cases(rng)
+    # A tree quantises by descent, not by the nearest of all its leaves: descriptors on a boundary between two
+    # branches (boundary_problem, margin >= 0.01 either way) tell the two apart. A flat vocabulary of k^L words with
+    # brute-force assignment passed every case above (the words of the structured cases are the same either way).
+    B = boundary_problem(rng)
+    S = tfidf_scores(B["db_words"], B["query_words"], B["n_words"])
+    args = (B["db_descriptors"], B["query_descriptors"], 3, B["branching"], B["depth"])
+    info = dict(B, shape=(len(B["query_words"]), len(B["db_words"]), 3))
+    yield Case(f"k = {B['branching']}, L = 2 words, queries on the boundaries between branches: tf-idf L1 scores "
+               "of the tree's words", args, S, lambda out, S: float(np.abs(out[1] - S).max()), 1e-9, "",
+               convert=_convert, call=shared_run(lambda fn, a=args: fn(*a)), key="descent", info=info,
+               tags=("words", "descent"))
 
 
 def _bug(**kw):
@@ -295,7 +367,21 @@ def _scores_metric_hint(bug, text):
     return h
 
 
+def _flat_words(c):
+    """Scores if every descriptor took the nearest of all leaves (a flat vocabulary, no descent)."""
+    k = c.info["branching"]
+    X, w = np.concatenate(c.info["db_descriptors"]), np.concatenate(c.info["db_words"])
+    leaves = np.array([X[w == j].mean(0) for j in range(k * k)])
+    parents = np.array([X[w // k == a].mean(0) for a in range(k)])
+    flat = [np.array([_descend(x, parents, leaves, k)[1] for x in np.asarray(D, float)]) for D in c.info["query_descriptors"]]
+    return tfidf_scores(c.info["db_words"], flat, c.info["n_words"])
+
+
 VOCAB_HINTS = [
+    _scores_metric_hint(_flat_words, "these are the words of the nearest leaf of all (a flat vocabulary): a vocabulary "
+                        "tree descends — the nearest centre at each level, then only that node's children — so a "
+                        "descriptor on a boundary between two branches takes the leaf of the branch it is nearer to, "
+                        "and quantising costs k·L comparisons, not k^L."),
     _scores_metric_hint(_bug(idf="descriptors"), "idf counts images: N_w is the number of database images that "
                         "contain word w (ln(N / N_w)), not the number of descriptors quantised to it."),
     _scores_metric_hint(_bug(norm="l2"), "L1, not L2: normalise each vector by ‖v‖₁ and score 1 − ½‖q̂ − d̂‖₁ "

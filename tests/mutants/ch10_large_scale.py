@@ -79,12 +79,31 @@ def vocab_wrong_descent(db, queries, k=5, branching=6, depth=3, seed=0):
     return _retrieve(db, queries, k, branching, depth, seed, descent=_descent_lost)
 
 
+def vocab_flat(db, queries, k=5, branching=6, depth=3, seed=0):
+    """No tree: one flat k-means (the reference's k-means++, best of 3) with branching**depth words, each
+    descriptor assigned to the nearest of all the words by brute force; tf-idf and L1 scores as specified."""
+    X = np.concatenate(db).astype(float)
+    n_words = min(branching ** depth, len(X))
+    fits = [ref_ret.kmeans(X, n_words, np.random.default_rng(seed + r)) for r in range(3)]
+    C = min(fits, key=lambda lc: float(((X - lc[1][lc[0]]) ** 2).sum()))[1]
+    words = lambda D: np.argmin(((np.asarray(D, float)[:, None] - C[None]) ** 2).sum(-1), 1)   # noqa: E731
+    Cd = np.array([np.bincount(words(D), minlength=n_words) for D in db], float)
+    Cq = np.array([np.bincount(words(D), minlength=n_words) for D in queries], float)
+    Nw = (Cd > 0).sum(0)
+    w = np.where(Nw > 0, np.log(len(db) / np.maximum(Nw, 1)), 0.0)
+    unit = lambda V: V / np.maximum(np.abs(V).sum(1, keepdims=True), 1e-300)   # noqa: E731
+    Vd, Vq = unit(Cd * w), unit(Cq * w)
+    S = np.array([[np.minimum(q, d).sum() for d in Vd] for q in Vq])
+    return np.argsort(-S, axis=1, kind="stable")[:, :k], S
+
+
 MUTANTS = [
     ("10.6", "idf over descriptors (the lesson's sketch)", vocab_idf_descriptors, "idf counts images"),
     ("10.6", "L2 normalisation and cosine", vocab_l2, "L1, not L2"),
     ("10.6", "no idf weighting", vocab_no_idf, "not weighted"),
     ("10.6", "one level: k words", vocab_one_level, "first level"),
     ("10.6", "tree descent loses its branch", vocab_wrong_descent, None),
+    ("10.6", "flat vocabulary, brute-force assignment", vocab_flat, "nearest leaf of all"),
 ]
 
 # ----------------------------------------------------------------- 10.7 sim3_ransac
