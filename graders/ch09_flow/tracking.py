@@ -1,12 +1,13 @@
 """9.15 — a small joint tracker: carry occluded points with their visible neighbours' motion.
 
-The sequence (256 x 256 px, T frames): three rigid objects (16-18 points each, moving, turning — by 0.02-0.03
-rad a frame in the graded sequences, two per grade —, slowly changing scale) and two vertical bars sweeping across them, one from each side. Every frame, a per-frame
-matcher (TAPIR's first stage: each query matched on its own) reports for every point a position and a
-score in [0, 1]: a visible point is found within 0.5 px (σ) with a high score — except on repetitive texture
-(3 %), where it jumps 8-30 px with a score as high; an occluded point gets a false match 8-40 px away with a
-score that is often above the threshold. Queries are the true positions at frame 0; `group` says which object each point is on (the points of one
-gripper, one box), so "neighbours" are the other points of its group.
+The sequence (256 x 256 px, T frames): three rigid objects (16-18 points each, moving, turning — by 0.02-0.03 rad a
+frame in the graded sequences, two per grade —, slowly changing scale) and two vertical bars sweeping across them,
+one from each side. Every frame, a per-frame matcher (TAPIR's first stage: each query matched on its own) reports
+for every point a position and a score in [0, 1]: a visible point is found within 0.5 px (σ) with a high score —
+except on repetitive texture (3 %), where it jumps 8-30 px with a score as high; an occluded point gets a false
+match 8-40 px away with a score that is often above the threshold. Queries are the true positions at frame 0;
+`group` says which object each point is on (the points of one gripper, one box), so "neighbours" are the other
+points of its group.
 
 The learner returns (tracks (T, N, 2), visible (T, N) bool). Judged by TAP-Vid's metrics (Doersch et al.
 2022) on frames 1..T-1: δ_avg (position accuracy on truly visible points, averaged over the thresholds
