@@ -129,7 +129,7 @@ def test_registration_log_shows_the_symptom(seed):
     assert n[(cam == 1) & real].min() >= 80 and n[got].min() >= 80
     assert set(case) == {"cameras", "points3D", "images", "log", "metrics"}          # the truth stays hidden
     # knob-twiddling does not repair it: camera 0's K with a 30 px threshold leaves camera 1's images wrong
-    from mutants.ch04_sfm import registration_knobs_loosened
+    from mutants.ch04_sfm_debug import registration_knobs_loosened
     status = ch4.registration_status(registration_knobs_loosened(case), truth)
     assert all(s != "ok" for s, c, r in zip(status, cam, real) if c == 1 and r)
 
@@ -276,7 +276,7 @@ def test_self_consistent_but_wrong_models_fail_the_photos(name, mutant):
 
 def test_focal_never_refined_fails_the_real_photos():
     _need_sacre_coeur()
-    from mutants.ch04_sfm import sfm_focal_never_refined
+    from mutants.ch04_sfm_mapping import sfm_focal_never_refined
     # every focal length at the prior: rotation rows fail on both sets (measured with a registration gate since
     # removed: Sacré-Cœur median 2.6°, worst pair 10.4°; Sceaux Castle median 2.0°, worst 4.6°; without the gate
     # the Sacré-Cœur was at 7.0° and 19°), one of the four may pass, and every photo row it fails names the

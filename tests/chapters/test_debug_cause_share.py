@@ -8,7 +8,7 @@ import pytest
 
 from graders import get, grade
 from mutants.ch06_slam import core as m6, frontend as m6f
-from mutants import ch08_dense as m8, ch08_dense_floaters as m8f, ch09_flow as m9, ch09_flow_tracking as m9b
+from mutants import ch08_dense_stereo as m8, ch08_dense_floaters as m8f, ch09_flow as m9, ch09_flow_tracking as m9b
 
 UNREPAIRED = [
     ("6.18", m6.drift_unchanged, 0.25),          # 6.18's cause is handed over by the settings: a quarter
