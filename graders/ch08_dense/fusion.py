@@ -15,7 +15,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from graders.core.convert import OutputError
-from graders.core.engine import Case, Exercise, Hint, register
+from graders.core.engine import Case, Exercise, Hint, register, shared_run
 
 from . import mvs
 
@@ -111,7 +111,6 @@ def _fusion_cases(rng: np.random.Generator):
         X_o = gt_fuse(*args)
         info = {"planes": prob["planes"], "n_o": len(X_o), "prec_o": _precision(X_o, prob["planes"]),
                 "n_all": sum(int(np.isfinite(Z).sum()) for Z in prob["depths"]), "args": args}
-        from graders.core.engine import shared_run
         run = shared_run(lambda fn, a=args: fn(*a))
         # The filter is deterministic, so the kept set is compared, not only its size: the share of points kept by
         # one of the two only, 1 %. 30 seeds x 2 scenes: the reference 0 on every one; look-up by truncation (floor)
