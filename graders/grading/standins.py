@@ -11,7 +11,8 @@ demo and, where the stand-in is also the local check's oracle, agrees with it fa
 Most of the others are also what the local check computes its expected values or hints with
 (the grader's oracle, e.g. gt_intrinsics_from_homographies for 7.6's real views; imu._model for 6.17's
 hints), and most feed a demo through `use()`: a release can drop those only once its local checks run on
-precomputed cases and its demos on precomputed outputs or a twin. KEPT lists those still shipped, each with why.
+precomputed cases and its demos on precomputed outputs or a twin. KEPT lists those still shipped, each with why;
+graded mode refuses an answer that copies one of them, renamed or not (graders.grading.copies).
 A stand-in that calls a refused library anywhere in what it runs (functions, and the classes it builds: 4.14's
 IncrementalSfM calls cv2.findEssentialMat and solvePnPRansac; 7.11's takes its rotation log from cv2.Rodrigues) is a
 library stand-in, not a solution: copied, it scores nothing in graded mode (its non-library structure stays readable).
@@ -22,6 +23,7 @@ import ast
 import inspect
 import re
 import textwrap
+from functools import lru_cache
 from pathlib import Path
 from types import FunctionType
 
@@ -31,12 +33,33 @@ from graders.core.chapters import by_number
 SHARED_KITS = ("graders.kit.", "graders.core.")        # shared helpers (skew, so3_exp): not one exercise's solution
 
 
-def _calls(fn: FunctionType) -> set[str]:
+@lru_cache(maxsize=None)
+def _source(fn: FunctionType) -> str | None:
+    """fn's source (inspect.getsource tokenises the file each time: read once per function)."""
     try:
-        tree = ast.parse(textwrap.dedent(inspect.getsource(fn)))
-    except (OSError, TypeError, SyntaxError):
-        return set()
-    return {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)}
+        return inspect.getsource(fn)
+    except (OSError, TypeError):
+        return None
+
+
+@lru_cache(maxsize=None)
+def _tree(fn: FunctionType) -> ast.Module | None:
+    try:
+        return ast.parse(textwrap.dedent(_source(fn) or ""))
+    except SyntaxError:
+        return None
+
+
+def def_node(fn: FunctionType) -> ast.FunctionDef | ast.AsyncFunctionDef | None:
+    """fn's `def` as an AST node (None for a lambda or a function without source)."""
+    tree = _tree(fn)
+    node = tree.body[0] if tree is not None and tree.body else None
+    return node if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) else None
+
+
+def _calls(fn: FunctionType) -> set[str]:
+    tree = _tree(fn)
+    return set() if tree is None else {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)}
 
 
 def _library_object(obj: object, libraries: tuple[str, ...]) -> bool:
@@ -47,9 +70,8 @@ def _library_object(obj: object, libraries: tuple[str, ...]) -> bool:
 def uses_library(fn: FunctionType, libraries: tuple[str, ...]) -> bool:
     """Whether fn calls one of `libraries`: its source imports or names one (`cv2.…`, `import pycolmap`), or a
     global it uses comes from one (a name imported from cv2 at the top of its module)."""
-    try:
-        src = inspect.getsource(fn)
-    except (OSError, TypeError):
+    src = _source(fn)
+    if src is None:
         return False
     names = "|".join(libraries)
     if re.search(r"\b(import|from)\s+(%s)\b|\b(%s)\." % (names, names), src):
@@ -89,11 +111,8 @@ def body_key(node: ast.FunctionDef | ast.AsyncFunctionDef) -> str:
 
 
 def _source_key(fn: FunctionType) -> str | None:
-    try:
-        node = ast.parse(textwrap.dedent(inspect.getsource(fn))).body[0]
-    except (OSError, TypeError, SyntaxError, IndexError):
-        return None
-    return body_key(node) if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) else None
+    node = def_node(fn)
+    return body_key(node) if node is not None else None
 
 
 def solution_bodies(numbers: list[int]) -> dict[str, tuple[str, str]]:

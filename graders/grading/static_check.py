@@ -36,7 +36,7 @@ def _bound_imports(tree: ast.Module) -> dict[str, str]:
     return bound
 
 
-def _reachable(tree: ast.Module, name: str) -> list[ast.AST]:
+def reachable(tree: ast.Module, name: str) -> list[ast.AST]:
     """The top-level definitions the exercise's code runs: `name` and what it refers to, transitively."""
     defs = {n.name: n for n in tree.body if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))}
     constants = {t.id: n for n in tree.body if isinstance(n, (ast.Assign, ast.AnnAssign))
@@ -73,7 +73,7 @@ def findings(source: str, name: str, refused: tuple[str, ...], allowed: tuple[st
     found: list[str] = []
     if name in bound and _blocked(bound[name], refused):
         found.append(f"`{name}` is imported from {bound[name]}")
-    for node in _reachable(tree, name):
+    for node in reachable(tree, name):
         where = getattr(node, "name", name)
         bases = {id(n.value): f"{bound[n.value.id]}.{n.attr}" for n in ast.walk(node) if isinstance(n, ast.Attribute)
                  and isinstance(n.value, ast.Name) and n.value.id in bound and _blocked(bound[n.value.id], refused)}

@@ -112,7 +112,15 @@ class _Graded:
         return learner.value(ex.name) if ex.value else learner.function(ex.name, ex)
 
     def refusal(self, ex) -> str:
-        """Process mode only: what the static check found in the code this exercise runs."""
+        """In a CODE exercise, a copy of one of the course's stand-ins in the code it runs (both levels: the
+        student release ships them; a DEBUG repair starts from given code, so it is not compared); in process
+        mode also what the static check found there."""
+        from graders.grading.copies import copied
+        chapters = tuple(sorted({int(e.id.split(".")[0]) for e in self.exercises}))
+        copies = copied(self.source, ex.name, chapters) if ex.kind == "code" else []
+        if copies:
+            return ("graded work: " + "; ".join(copies[:3]) + ". The course's stand-ins, oracles and reference "
+                    "answers are not an answer in graded work (self-study checks allow them)")
         found = self.static.get(ex.id)
         if not found:
             return ""
