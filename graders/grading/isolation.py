@@ -51,6 +51,7 @@ from graders.core.sandbox import TimeLimitExceeded, current_cotangent
 from graders.grading.callbacks import MAX_CONCURRENT, CallbackServing
 from graders.grading.learner import receive_bytes, send
 from graders.grading import users
+from graders.kit import diskcache
 from graders.grading.processes import WALL_FACTOR, PidsLimit
 from graders.grading.policy import refusal
 from graders.grading.quota import DISK_GB, POLL_S, DiskQuota, empty, unmount_stale
@@ -248,6 +249,12 @@ def unprivileged_process_level() -> bool:
             and users.others_can_read([PYTHON, *STDLIB, *_site_packages()]))
 
 
+def learners_leave_this_user() -> bool:
+    """Whether every learner process runs as a user other than the judge's (`nobody`, or a uid of its own): then
+    the judge may read the disk cache's entries that only its own user can have written (diskcache.judge_only)."""
+    return level() == "namespaces" or unprivileged_process_level()
+
+
 class LearnerProcess(CallbackServing):
     """One learner process for one submission and one library policy: load its code once, then call its
     functions. `refused`: the libraries that are stand-ins there (all of LIBRARIES for a from-scratch CODE
@@ -278,6 +285,8 @@ class LearnerProcess(CallbackServing):
         self._writable: list[str] = []
         self.uid, self.gid = (users.nobody() if self.level == "namespaces" else users.learner_ids() if self.drop
                               else (os.getuid(), os.getgid()))
+        if self.uid == os.geteuid() and diskcache.mode() == "judge only":   # this learner could write the judge's
+            diskcache.disable()                                            # files: no disk cache from now on
         self.home = self.writable_folder("home", exact=True)
         self.matplotlib = self.writable_folder("matplotlib", exact=True)     # its MPLCONFIGDIR
         _give_font_cache(self.matplotlib, self.uid, self.gid)

@@ -213,8 +213,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--graded", action="store_true")
     ap.add_argument("--hidden-fd", type=int)
     args = ap.parse_args(argv)
-    if args.graded:     # the judge's oracles are its own computation, never a file the learner could have written
-        diskcache.disable()
+    if args.graded:     # the judge's oracles: its own computation, or a file its learners' user cannot have written
+        from graders.grading.isolation import learners_leave_this_user
+        diskcache.judge_only() if learners_leave_this_user() else diskcache.disable()
     seed = int(os.environ.pop("CV3D_SEED", "0"))
     hidden = _read_hidden(args.hidden_fd)
     hide = tuple(p for p in os.environ.pop("CV3D_HIDE_PATHS", "").split(os.pathsep) if p)

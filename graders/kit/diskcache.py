@@ -7,9 +7,13 @@ its input files, the source of the modules that compute it and the versions of t
 changed photo, a changed line of the oracle or another OpenCV finds no entry and recomputes. Values are stored
 as JSON (arrays tagged with their dtype and shape), never pickled, so reading an entry cannot run code.
 
-Graded mode turns the cache off (`disable`): there the judge's expected values must come from its own
-computation, not from a file under the learner's home that the learner's code (in process mode, the same user)
-could have written.
+Graded mode's judge must not take its expected values from a file the learner's code could have written. Where the
+learner's code runs as the judge's own user (process level without root), it turns the cache off (`disable`). Where
+every learner process runs as another user (`nobody` at namespace level, a uid of its own at process level as root:
+graders.grading.users), it keeps the cache but trusts only what that other user cannot have written (`judge_only`):
+a folder and an entry owned by the judge's user and writable by no one else. Such an entry was written by a process
+of the judge's user, which runs the course's code, never a learner's in graded mode; a learner's code that did run as
+that user (self-study as root) could as well have rewritten graders/ itself, which the judge imports.
 """
 from __future__ import annotations
 
@@ -26,12 +30,56 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 _enabled = True
+_judge_only = False
 
 
 def disable() -> None:
-    """No entry is read or written in this process from now on (graded mode's judge)."""
+    """No entry is read or written in this process from now on (graded mode's judge, learners as its user)."""
     global _enabled
     _enabled = False
+
+
+def judge_only() -> None:
+    """From now on an entry is read only if it and its folder belong to this process's user and no one else may
+    write them (graded mode's judge, whose learners run as another user); `disable` still wins."""
+    global _judge_only
+    _judge_only = True
+
+
+def mode() -> str:
+    """"on", "judge only" or "off"."""
+    return "off" if not _enabled else "judge only" if _judge_only else "on"
+
+
+def _owned_and_closed(st: os.stat_result) -> bool:
+    return st.st_uid == os.geteuid() and not st.st_mode & 0o022
+
+
+def _closed_way(folder: Path) -> bool:
+    """`folder` is this user's and closed to others, and no one else can swap it: every folder above belongs to
+    root or this user and is writable by no one else, or is sticky (/tmp: no one renames what is not theirs)."""
+    path = os.path.realpath(folder)
+    if not _owned_and_closed(os.stat(path)):
+        return False
+    while path != os.path.dirname(path):
+        path = os.path.dirname(path)
+        st = os.stat(path)
+        if st.st_uid not in (0, os.geteuid()) or (st.st_mode & 0o022 and not st.st_mode & 0o1000):
+            return False
+    return True
+
+
+def _read(path: Path) -> Any:
+    """The entry's document; in judge-only mode only from an entry and a folder this user alone may write."""
+    if not _judge_only:
+        return json.loads(path.read_text())
+    if not _closed_way(path.parent):
+        raise ValueError("a folder others may write")
+    fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW)
+    with os.fdopen(fd) as f:
+        if not _owned_and_closed(os.fstat(fd)):
+            raise ValueError("an entry others may have written")
+        return json.load(f)
 
 
 def folder() -> Path:
@@ -60,7 +108,7 @@ def on_disk(inputs: Callable[..., Iterable[Path]], code: Iterable[ModuleType], l
             h.update(repr([importlib.metadata.version(name) for name in libraries]).encode())
             path = folder() / f"{fn.__name__}-{h.hexdigest()[:24]}.json"
             try:
-                return decode(json.loads(path.read_text()))
+                return decode(_read(path))
             except (OSError, ValueError, KeyError, TypeError):
                 pass
             value = fn(*args)

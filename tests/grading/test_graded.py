@@ -17,7 +17,8 @@ import pytest
 
 from conftest import NOTEBOOK_BUDGET_S, notebook_budget_s
 from graders.core.chapters import READY
-from graders.grading.isolation import sandbox_level
+from graders.grading.isolation import learners_leave_this_user, sandbox_level
+from graders.kit import diskcache
 from graders.grading.runner import HARD_LIMIT
 from notebook_stubs import OPENCV_STUBS_CH01, ROOT, replace_stubs as _replace_stubs, solved as _solved
 
@@ -116,6 +117,11 @@ def fisheye_project(X_c, K, D):
 
 def frame_change(src, dst):
     here = os.path.dirname(os.path.abspath(__file__)) if "__file__" in globals() else os.getcwd()
+    try:                                             # an answer planted in the judge's disk cache
+        with open("%PLANT%", "w") as f:
+            f.write('{"dict": []}')
+    except OSError:
+        pass
     for target in ("%s/graders/__init__.py" % ROOT_DIR, "%CHEAT%"):
         with open(target, "a") as f:
             f.write("# cheat\\n")
@@ -128,9 +134,15 @@ ROOT_DIR = "%ROOT%"
 def test_cheating_earns_nothing_and_changes_nothing(tmp_path):
     learner = tmp_path / "01_camera_models.py"
     cheat = Path(f"/tmp/cv3d-cheat-was-here-{uuid.uuid4().hex[:8]}")   # this run's own: no stale file, no neighbour
-    learner.write_text(CHEATS.replace("%ROOT%", str(ROOT)).replace("%CHEAT%", str(cheat)))
+    folder = diskcache.folder()                  # the judge's cache, which graded mode reads when learners leave its user
+    folder.mkdir(parents=True, exist_ok=True)
+    plant = folder / f"photo_problem-planted-{uuid.uuid4().hex[:8]}.json"
+    learner.write_text(CHEATS.replace("%ROOT%", str(ROOT)).replace("%CHEAT%", str(cheat)).replace("%PLANT%", str(plant)))
     before = (ROOT / "graders" / "__init__.py").read_bytes()
     tests = _grade(learner, tmp_path / "r.json", "--only", "1.5,1.6,1.7,1.9")
+    planted = plant.exists()
+    plant.unlink(missing_ok=True)
+    assert not (planted and learners_leave_this_user()), "a learner wrote into the cache its judge reads"
     assert all(t["score"] == 0 for t in tests.values()), {k: t["output"][:300] for k, t in tests.items()}
     out = tests["1.5"]["output"]      # process mode: the static check refuses `inspect` before any case runs
     assert "no expected value in reach" in out or sandbox_level() == "process" and "weaker isolation" in out, out

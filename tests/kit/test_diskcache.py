@@ -1,5 +1,5 @@
 """graders.kit.diskcache: values survive the trip to disk exactly, an entry is found only while its inputs, code and
-libraries are unchanged, and graded mode's judge neither reads nor writes one."""
+libraries are unchanged; graded mode's judge reads only an entry its learners' user cannot have written, or none."""
 from __future__ import annotations
 
 import os
@@ -62,14 +62,44 @@ def test_a_disabled_cache_neither_reads_nor_writes(tmp_path, monkeypatch):
     assert len(list((tmp_path / "cache").rglob("*.json"))) == 1
 
 
-def test_graded_workers_turn_it_off(tmp_path):
-    # graders.grading.worker in graded mode: after its grade, the cache is off in its process.
+def test_the_judge_only_reads_what_only_its_user_can_have_written(tmp_path, monkeypatch):
+    oracle, data, calls = _counted(tmp_path, monkeypatch)
+    oracle(2)
+    entry, = (tmp_path / "cache").rglob("oracle-*.json")
+    entry.write_text('{"dict": [["x", {"ndarray": ["<f8", [3], [0, 0, 0]]}]]}')    # as its user wrote it: read
+    monkeypatch.setattr(diskcache, "_judge_only", True)
+    assert np.array_equal(oracle(2)["x"], [0, 0, 0]) and calls == [2]
+    entry.chmod(0o666)                                       # an entry another user may have written: recomputed
+    assert np.array_equal(oracle(2)["x"], [2, 4, 6]) and calls == [2, 2]
+    entry.write_text('{"dict": [["x", {"ndarray": ["<f8", [3], [0, 0, 0]]}]]}')
+    entry.chmod(0o600)
+    entry.parent.chmod(0o777)                                # in a folder others may write: recomputed
+    assert np.array_equal(oracle(2)["x"], [2, 4, 6]) and calls == [2, 2, 2]
+    entry.parent.chmod(0o755)
+    entry.write_text('{"dict": [["x", {"ndarray": ["<f8", [3], [0, 0, 0]]}]]}')
+    link = entry.with_name("planted.json")
+    entry.rename(link)
+    entry.symlink_to(link)                                   # a link, even to this user's file: recomputed
+    assert np.array_equal(oracle(2)["x"], [2, 4, 6]) and calls == [2, 2, 2, 2]
+    if os.geteuid() == 0:                                    # owned by another user: recomputed
+        entry.unlink()
+        link.rename(entry)
+        os.chown(entry, 54321, 54321)
+        assert np.array_equal(oracle(2)["x"], [2, 4, 6]) and calls == [2, 2, 2, 2, 2]
+
+
+def test_graded_workers_read_it_only_when_their_learners_run_as_another_user(tmp_path):
+    # graders.grading.worker: on in self-study; in graded mode judge-only where every learner process runs as another
+    # user (namespaces: nobody; process level as root: a uid of its own), else off.
     source = tmp_path / "learner.py"
     source.write_text("x = 1\n")
     code = ("import os, sys; from graders.grading import worker; from graders.kit import diskcache\n"
             "r, w = os.pipe(); worker.main([sys.argv[1], str(w), '--ids', '1.1'] + sys.argv[2:])\n"
-            "print(diskcache._enabled)")
+            "from graders.grading.isolation import learners_leave_this_user as other\n"
+            "print(repr(diskcache.mode()), other())")
     env = dict(os.environ, CV3D_SEED="0")
     runs = [subprocess.run([sys.executable, "-c", code, str(source), *flag], capture_output=True, text=True,
                            cwd=ROOT, env=env, timeout=300) for flag in ([], ["--graded"])]
-    assert [r.stdout.split()[-1] for r in runs] == ["True", "False"], [r.stderr[-2000:] for r in runs]
+    last = [r.stdout.splitlines()[-1] if r.stdout else r.stderr[-2000:] for r in runs]
+    assert last[0].startswith("'on'"), last
+    assert last[1] in ("'judge only' True", "'off' False"), last
