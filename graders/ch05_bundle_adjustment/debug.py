@@ -34,11 +34,19 @@ def debug_diverges(rng: np.random.Generator) -> tuple[dict, dict]:
     R0 = Rotation.from_rotvec(prob["cameras"][0, :3]).as_matrix()
     cams, pts = transform_problem(prob["cameras"], prob["points"], 1.0, R0, prob["cameras"][0, 3:6])
     cams[0, :6] = 0.0
-    # ... and wrote (0, 0, 0) for the points it failed to triangulate.
-    failed = rng.choice(np.unique(prob["pt_idx"][prob["cam_idx"] == 0]), 3, replace=False)
+    # ... and wrote (0, 0, 0) for the points it failed to triangulate: tracks seen by camera 0 and 2+ other
+    # cameras whose matches in those other cameras are wrong (each the image of another point), so that no
+    # point explains them. Keeping them (only their NaN observations dropped) bends an L2 fit: 1.9 px or more on
+    # held-out points (median 5.7 px; 240 draws, seeds 0-119), where with true tracks LM could slide them onto
+    # their rays and 43 % of draws passed. The reference drops them: worst 0.31 px over 200 fresh seeds (0.30 before).
+    ci, pi, obs = prob["cam_idx"], prob["pt_idx"], prob["obs"].copy()
+    n_views = np.bincount(pi, minlength=len(pts))
+    failed = rng.choice(np.unique(pi[(ci == 0) & (n_views[pi] >= 3)]), 3, replace=False)
+    for k in np.flatnonzero(np.isin(pi, failed) & (ci != 0)):
+        obs[k] = prob["obs"][rng.choice(np.flatnonzero((ci == ci[k]) & ~np.isin(pi, failed)))]
     pts[failed] = 0.0
-    case = {"cameras": cams, "points": pts, "cam_idx": prob["cam_idx"], "pt_idx": prob["pt_idx"],
-            "obs": prob["obs"], "settings": {"lambda0": 1e-12, "max_iter": 20}}
+    case = {"cameras": cams, "points": pts, "cam_idx": ci, "pt_idx": pi,
+            "obs": obs, "settings": {"lambda0": 1e-12, "max_iter": 20}}
     return case, prob["truth"]
 
 
@@ -253,8 +261,9 @@ def _kept_far(case, out) -> bool:
 DIVERGE_HINTS = [
     UNCHANGED_HINT,
     Hint("the points the front end wrote as (0, 0, 0) — failed triangulations, at camera 0's centre — were adjusted "
-         "along with the rest: removing their NaN observations is not enough, their other observations belong to "
-         "no point at that place. Drop those points from the BA (every observation of them).",
+         "along with the rest: removing their NaN observations is not enough, their other observations are wrong "
+         "matches (that is why triangulation failed) and an L2 fit bends the cameras to them. Drop those points "
+         "from the BA (every observation of them).",
          _failed_points_adjusted),
     raised(r"LinAlgError|[Ss]ingular|NaN|did not converge",
            "the linear algebra broke down (a singular or NaN system): the failed triangulations at (0, 0, 0) and "

@@ -78,7 +78,7 @@ def _cv_bal(cameras, points, cam_idx, pt_idx):
 def cv_jacobians(cameras, points, cam_idx, pt_idx) -> tuple[np.ndarray, np.ndarray]:
     """OpenCV-backed 5.8 (the student release's stand-in): cv2.projectPoints' own Jacobian (`_cv_bal`), its
     rotation columns for the left increment: du/dP (-[R X]x), du/dP being its t columns. Agrees with
-    torch_jacobians to 8.5e-15 relative (5.8's cases, 40 seeds; tolerance 1e-6)."""
+    torch_jacobians to 1.1e-14 relative (5.8's cases, 125 seeds; tolerance JACOBIAN_TOL = 1e-11)."""
     _, J, J_pt, RX = _cv_bal(cameras, points, cam_idx, pt_idx)
     J[:, :, :3] = np.einsum("mij,mjk->mik", J[:, :, 3:6], -skew(RX))
     return J, J_pt
@@ -241,15 +241,25 @@ TORCH_COST_HINTS = [
 ]
 
 
+# 5.8 asks for the analytic Jacobians, so the bar is float64 rounding, not "the right derivative": 1e-11 per column
+# (relative to the column's largest entry) covers any exact chain rule in float64. Measured against the torch oracle
+# on 5.8's cases, seeds 0-4 and 100-219: the reference ≤ 7.2e-15 (fairness, 250 fresh seeds: ≤ 1e-14),
+# cv2.projectPoints' own Jacobian (cv_jacobians, the release's oracle) ≤ 1.1e-14, variants (R X by Rodrigues'
+# vector formula or by quaternions, du/dp · dp/dP as matmuls) ≤ 1.0e-14: ≥ 900x below the bar. It does not cover
+# approximations of the derivative: central differences with h = 1e-6 (the shipped fd_jacobians; 65 seeds)
+# ≥ 1.3e-9, h = 1e-5 ≥ 2.6e-10, h = 1e-4 or 1e-7 ≥ 1.5e-8 and Richardson extrapolation of h = 2e-5 and 1e-5
+# ≥ 2.3e-10 (25 seeds): ≥ 23x above it; nor float32 arithmetic (3-6e-7). A wrong term costs > 1e-3 (the hints'
+# 1e-6 tell the two kinds apart).
+JACOBIAN_TOL = 1e-11
+
+
 def cases_jacobians(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, kw in [("6 cameras, 80 points", dict(n_cams=6, n_points=80)),
                      ("20 cameras, 2,000 points (vectorise!)", dict(n_cams=20, n_points=2000, visibility=0.5))]:
         args = distorted_args(rng, make_problem(rng, **kw))
         m = len(args[2])
-        # torch autograd is exact to rounding (~1e-14 relative); finite differences agree to ~1e-8
-        # (tests/chapters/test_ch05_bundle_adjustment.py checks both). 1e-6 per column: any wrong term is > 1e-3.
-        out.append(Case(name, args, Lazy(lambda a=args: torch_jacobians(*a)), _metric_jac, 1e-6, "rel.",
+        out.append(Case(name, args, Lazy(lambda a=args: torch_jacobians(*a)), _metric_jac, JACOBIAN_TOL, "rel.",
                         convert=lambda o, c, m=m: tuple_of_arrays(o, [(m, 2, 9), (m, 2, 3)], ["J_cam", "J_pt"])))
     return out
 
@@ -296,10 +306,14 @@ def _jac_constant_distortion(case):
 
 
 JACOBIAN_HINTS = [
+    Hint(lambda c, out: f"your Jacobians match the oracle to {_metric_jac(out, c.expected):.1g} relative: the right "
+         "derivatives, but not exact — the floor of finite differences (central: ~1e-9-1e-8) or of float32. Write "
+         "the chain rule above in float64: an analytic Jacobian matches to rounding (~1e-14).",
+         lambda c, out: _metric_jac(out, c.expected) <= 1e-6),
     Hint("J_cam is right but J_pt is not: du/dX = du/dP · R (P = R X + t), with the same du/dP as the translation "
          "columns — not R^T.",
          lambda c, out: column_relative(out[0], val(c.expected)[0]) <= c.tol
-         and column_relative(out[1], val(c.expected)[1]) > c.tol),
+         and column_relative(out[1], val(c.expected)[1]) > 1e-6),
     _jac_hint(lambda c: _jac_variant(c, rot_sign=-1.0),
               "the rotation columns have the wrong sign: Exp(d) R X ≈ R X + d × R X, so dP/dd = -[R X]x."),
     _jac_hint(lambda c: _jac_variant(c, right=True),

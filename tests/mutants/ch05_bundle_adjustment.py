@@ -581,3 +581,7 @@ MUTANTS = [
     ("5.23", "J detached from the pose", pose_detached_jacobian, "create_graph"),
     ("5.23", "gradient sign", pose_gradient_sign, "wrong sign"),
 ]
+
+# ----------------------------------------------------------------- 5.8 central finite differences (its own file)
+from mutants.ch05_bundle_adjustment_fd import MUTANTS as _FD_MUTANTS  # noqa: E402
+MUTANTS += _FD_MUTANTS
