@@ -159,6 +159,17 @@ def cases_keyframes(rng: np.random.Generator):
         yield Case(f"corridor {i + 1} ({what}), fps {fps}, local mapping busy {mapping} frames per keyframe",
                    args, (kf, gt_covisibility(seq["obs"], kf)), _metric, 0.0, "wrong", convert=_convert,
                    key=f"corridor-{i + 1}", tags=("reloc",) if reloc else ())
+    # A sparse corridor, where tracking hovers at c2's floor: redrawn (~2 tries of 12 ms) until some frame tracks
+    # exactly 15 map points when the other conditions hold, so `tracked >= 15` picks other keyframes than `> 15`.
+    for _ in range(50):
+        seq = corridor_sequence(rng, n_points=260)
+        args = (seq["obs"], 10, 3, seq["relocalised"])
+        kf = gt_keyframes(*args)
+        if kf != gt_keyframes(*args, strict=False):
+            break
+    yield Case("corridor 4 (sparse: tracking hovers at the 15-point floor), fps 10, local mapping busy 3 frames per "
+               "keyframe", args, (kf, gt_covisibility(seq["obs"], kf)), _metric, 0.0, "wrong", convert=_convert,
+               key="corridor-4", tags=("sparse",))
 
 
 def _keyframes_like(no_reloc: bool = False, **kw):
@@ -185,6 +196,8 @@ HINTS = [
     Hint("your reference count uses all the reference keyframe's points: nRefMatches counts only those observed "
          "by >= 3 keyframes (2 while the map has <= 2 keyframes) — TrackedMapPoints(nMinObs).",
          _keyframes_like(min_obs=False)),
+    Hint("c2 needs more than 15 tracked map points (ORB-SLAM2: mnMatchesInliers > 15): a frame tracking exactly 15 "
+         "does not become a keyframe.", _keyframes_like(strict=False)),
     Hint("your keyframes ignore relocalisation: no keyframe within fps frames after a relocalisation once the "
          "map holds more than fps keyframes.", _keyframes_like(no_reloc=True)),
     Hint("your covisibility graph drops keyframes with no neighbour at >= 15 shared points: UpdateConnections "

@@ -236,7 +236,7 @@ MUTANTS += [  # front-end entries (6.14)
 # /fe:mut614
 # fe:mut616
 def _fe_keyframes(obs, fps, mapping_frames, relocalised=(), init=4, min_frames=0, *, paper=False, all_ref=False,
-                  ignore_busy=False, any_shared=False, keep_diagonal=False):
+                  ignore_busy=False, any_shared=False, keep_diagonal=False, floor_inclusive=False):
     kfs = [0, init]
     seen = {}
     for k in kfs:
@@ -256,8 +256,8 @@ def _fe_keyframes(obs, fps, mapping_frames, relocalised=(), init=4, min_frames=0
         if paper:
             ok = f - last >= 20 and idle and tracked < 0.9 * n_ref and tracked > 15
         else:
-            ok = (f - last >= fps or (f - last >= min_frames and idle)) and tracked < 0.9 * n_ref and tracked > 15 \
-                and idle
+            enough = tracked >= 15 if floor_inclusive else tracked > 15
+            ok = (f - last >= fps or (f - last >= min_frames and idle)) and tracked < 0.9 * n_ref and enough and idle
         if ok:
             kfs.append(f)
             for p in obs[f]:
@@ -294,11 +294,17 @@ def kf_covisibility_self_loops(*a, **k):
     return _fe_keyframes(*a, **k, keep_diagonal=True)
 
 
+def kf_fifteen_inclusive(*a, **k):
+    """c2's floor read as 'at least 15 tracked points' (the paper's wording) instead of the code's > 15."""
+    return _fe_keyframes(*a, **k, floor_inclusive=True)
+
+
 MUTANTS += [  # front-end entries (6.16)
     ("6.16", "the paper's '20 frames since the last keyframe'", kf_paper_twenty_frames, "ORB-SLAM paper"),
     ("6.16", "n_ref counts every point of the reference keyframe", kf_reference_counts_every_point, "nRefMatches"),
     ("6.16", "covisibility edge for any shared point", kf_covisibility_any_shared_point, "sharing any point"),
     ("6.16", "covisibility with self-loops", kf_covisibility_self_loops, "diagonal"),
+    ("6.16", "tracked >= 15 instead of > 15", kf_fifteen_inclusive, "more than 15 tracked"),
 ]
 # /fe:mut616
 # fe:mut615

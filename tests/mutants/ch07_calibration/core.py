@@ -306,6 +306,15 @@ def rectify_zoomed_10x(K1, d1, K2, d2, R, t, image_size):
     return R1, R2, P1, P2
 
 
+def rectify_principal_point_at_origin(K1, d1, K2, d2, R, t, image_size):
+    """Rows aligned, one K', but P = [f 0 0; 0 f 0; 0 0 1] (image_size never used): the rectified view's centre lands
+    at the image's top-left corner, three quarters of it outside the frame."""
+    R1, R2, P1, P2 = ref_stereo.stereo_rectify(K1, d1, K2, d2, R, t, image_size)
+    P1, P2 = P1.copy(), P2.copy()
+    P1[:2, 2] = P2[:2, 2] = 0.0
+    return R1, R2, P1, P2
+
+
 MUTANTS += [
     ("7.9", "T12 inverted", stereo_inverse_rig, "inverse rig"),
     ("7.9", "first view's relative pose", stereo_first_view_only, "single view"),
@@ -318,6 +327,7 @@ MUTANTS += [
     ("7.10", "tilted 8 deg about the baseline", rectify_tilted_about_baseline, "further than needed"),
     ("7.10", "upside down", rectify_upside_down, "upside down"),
     ("7.10", "zoomed 10x", rectify_zoomed_10x, "needlessly scaled"),
+    ("7.10", "principal point at (0, 0)", rectify_principal_point_at_origin, "out of the frame"),
 ]
 
 
