@@ -13,7 +13,10 @@ N cameras on a ring around the scene, each image seeing its own P points; each p
 orders (as DUSt3R does); a few image pairs are wrong (the second view's points turned by 10-25 degrees
 about their centroid: a wide baseline the network got wrong) and say so by a low confidence. Wrong by
 much more (a symmetric scene flipped), a pair is an outlier that the unsquared norm already shrugs off;
-wrong by this much, only its confidence keeps it out.
+wrong by this much, only its confidence keeps it out. In the good pairs too, 40-60 % of each image's
+pixels (textureless walls, occlusion edges) are wrong, turned together by 3-8 degrees, and say so by a
+low confidence: dropping the flagged pairs and fitting the rest unweighted is not the same as weighting
+(with the good pixels in the minority of a view's predictions, the wrong ones pull its pose by degrees).
 
 Judged after the Sim(3) gauge that best maps the returned camera centres onto the true ones (Umeyama,
 `graders.kit.geometry.umeyama`): rotation error of every camera, camera-centre error relative to the ring's
@@ -42,13 +45,20 @@ def pair_graph(n_views: int) -> list[tuple[int, int]]:
 
 def pointmap_scene(rng: np.random.Generator, n_views: int = 8, n_pix: int = 40, noise: float = 0.01,
                    n_bad: int | None = None, bad_conf: tuple[float, float] = (0.001, 0.005),
-                   bad_turn_deg: tuple[float, float] = (10.0, 25.0)) -> dict:
+                   bad_turn_deg: tuple[float, float] = (10.0, 25.0),
+                   wrong_pixels: tuple[float, float] | None = None) -> dict:
     """Pairwise pointmaps of a simulated network on a known scene.
 
     Returns {"pairs": [{"i", "j", "X_i" (P, 3), "X_j" (P, 3), "C_i" (P,), "C_j" (P,)}, ...] (every image
     pair in both orders), "n_views", "Rs" (N, 3, 3), "ts" (N, 3) world-to-camera truth, "sigma" (E,) true
     pair scales (metric = sigma_e X), "bad" (E,) bool, "W" (N, P, 3) the world points of every view}.
     noise: relative (of the depth) Gaussian noise of a point of confidence 10 (std noise * 10 / C).
+    wrong_pixels (lo, hi): in every good pair, a fraction in [lo, hi] of each image's pixels (textureless
+    walls, occlusion edges) the network also got wrong — turned together by 3-8 degrees about their centroid —
+    and says so by C in [0.02, 0.2]. Then confidence varies among the good pairs' points as much as between
+    good and wrong pairs: dropping the flagged pairs and fitting the rest unweighted lets the wrong pixels
+    (the majority of some views' predictions) pull the poses. None: no such pixels (no draws: the scene is
+    the same as without the argument).
     """
     rig = scene.random_rig(rng, n_views, radius=RADIUS, arc_deg=360.0, elevation_deg=(10.0, 35.0), jitter=0.1)
     Rs = np.array([R for R, _ in rig])
@@ -64,7 +74,7 @@ def pointmap_scene(rng: np.random.Generator, n_views: int = 8, n_pix: int = 40, 
     for a, b in undirected:
         corrupt = (a, b) in bad_pairs
         turn = np.eye(3)
-        if corrupt:   # a rotation of 40-90 degrees about a random axis
+        if corrupt:   # a rotation of bad_turn_deg about a random axis
             w = rng.normal(size=3)
             turn = so3_exp(w / np.linalg.norm(w) * np.radians(rng.uniform(*bad_turn_deg)))
         for n, m in ((a, b), (b, a)):
@@ -80,11 +90,25 @@ def pointmap_scene(rng: np.random.Generator, n_views: int = 8, n_pix: int = 40, 
             noisy = [X * (1 + (noise * 10 / c)[:, None] * rng.normal(size=X.shape)) / s for X, c in zip((Xn, Xm), conf)]
             if corrupt:
                 conf = [rng.uniform(*bad_conf, n_pix) for _ in range(2)]
+            elif wrong_pixels is not None:
+                for X, c in zip(noisy, conf):
+                    _wrong_pixels(rng, X, c, wrong_pixels)
             pairs.append({"i": n, "j": m, "X_i": noisy[0], "X_j": noisy[1], "C_i": conf[0], "C_j": conf[1]})
             sigma.append(s)
             bad.append(corrupt)
     return {"pairs": pairs, "n_views": n_views, "Rs": Rs, "ts": ts, "sigma": np.array(sigma), "bad": np.array(bad),
             "W": W}
+
+
+def _wrong_pixels(rng: np.random.Generator, X: np.ndarray, C: np.ndarray, frac: tuple[float, float]) -> None:
+    """In place: a fraction `frac` of the points X (P, 3) turned together by 3-8 degrees about their centroid,
+    their confidences C (P,) set to 0.02-0.2."""
+    idx = rng.choice(len(X), int(round(rng.uniform(*frac) * len(X))), replace=False)
+    w = rng.normal(size=3)
+    turn = so3_exp(w / np.linalg.norm(w) * np.radians(rng.uniform(3.0, 8.0)))
+    c = X[idx].mean(0)
+    X[idx] = (X[idx] - c) @ turn.T + c
+    C[idx] = rng.uniform(0.02, 0.2, len(idx))
 
 
 # ----------------------------------------------------------------- the stand-in (scipy least squares)
@@ -225,13 +249,29 @@ def alignment_loss(out: dict, pairs: list[dict], weighted: bool = True) -> np.nd
     return np.mean(w * np.sum((chi[views] - pred) ** 2, -1), axis=(1, 2)) / scale2
 
 
+def _unweighted_l1(out: dict, pairs: list[dict]) -> float:
+    """The mean unweighted distance |chi - prediction| over `pairs` (chi: the plain mean of its predictions), in
+    units of the returned scene's size: the loss of an alignment that treats every point alike."""
+    first, views, X, _ = _stack(pairs)
+    Rcw = np.transpose(out["Rs"], (0, 2, 1))
+    centres = -np.einsum("nba,nb->na", out["Rs"], out["ts"])
+    pred = out["sigma"][:, None, None, None] * np.einsum("eab,ekpb->ekpa", Rcw[first], X) + centres[first][:, None, None]
+    chi = _view_means(pred, np.ones(pred.shape[:3]), views, len(out["Rs"]))
+    size = np.sqrt(np.mean(np.sum((centres - centres.mean(0)) ** 2, 1)))
+    return float(np.mean(np.linalg.norm(chi[views] - pred, axis=-1)) / size)
+
+
 def _fits_bad_pairs(case: Case, out: dict) -> bool:
-    """The answer fits the noisy, low-confidence points as well as the confident ones: its unweighted
-    misfit is no worse than the truth's while its confidence-weighted one is clearly worse."""
+    """The answer fits every point alike better than the truth does — over all pairs (confidences ignored) or over
+    the good pairs (the flagged pairs dropped, the rest unweighted) — while its confidence-weighted misfit of the
+    good pairs is clearly worse."""
     pairs, good, truth = case.info["pairs"], ~case.info["bad"], case.expected
     w_out, w_true = (alignment_loss(o, pairs)[good].mean() for o in (out, truth))
-    u_out, u_true = (alignment_loss(o, pairs, weighted=False)[good].mean() for o in (out, truth))
-    return bool(w_out > 1.02 * w_true and u_out < u_true)
+    kept = [p for p, g in zip(pairs, good) if g]
+    on_kept = [dict(o, sigma=o["sigma"][good]) for o in (out, truth)]
+    fits_all = _unweighted_l1(out, pairs) < _unweighted_l1(truth, pairs)
+    fits_kept = _unweighted_l1(on_kept[0], kept) < _unweighted_l1(on_kept[1], kept)
+    return bool(w_out > 1.02 * w_true and (fits_all or fits_kept))
 
 
 def _local_minimum(case: Case, out: dict) -> bool:
@@ -253,8 +293,8 @@ ALIGN_HINTS = [
     Hint("your poses are camera-to-world: return world-to-camera (R, t) with X_c = R X_w + t, i.e. R = Rcw^T and "
          "t = -R C.", _camera_to_world),
     Hint("your alignment treats every point alike: the confidence is the network's own error estimate (a point of "
-         "confidence 1 is 30x noisier than one of 30, and wrong pairs say so by C << 1): weight every point's "
-         "residual by its confidence C.", _fits_bad_pairs),
+         "confidence 1 is 30x noisier than one of 30; wrong pairs, and the wrong pixels of good pairs, say so by "
+         "C << 1): weight every point's residual by its confidence C.", _fits_bad_pairs),
     Hint("the answer is a poor local minimum (the confidence-weighted misfit of the reliable pairs is several times "
          "that of the true poses): initialise by chaining pairwise Umeyama fits along the spanning tree of the "
          "MOST confident pairs, then descend.", _local_minimum),
@@ -267,7 +307,7 @@ def _rms(a: np.ndarray) -> float:
 
 def _cases(rng: np.random.Generator):
     for k, n_views in enumerate((8, 10)):
-        d = pointmap_scene(rng, n_views=n_views, noise=0.01)
+        d = pointmap_scene(rng, n_views=n_views, n_pix=64, noise=0.01, wrong_pixels=(0.4, 0.6))
         truth = {"Rs": d["Rs"], "ts": d["ts"], "sigma": d["sigma"]}
         loss = alignment_loss(truth, d["pairs"])
         good = ~d["bad"]
@@ -276,10 +316,11 @@ def _cases(rng: np.random.Generator):
         call = shared_run(lambda fn, d=d: fn(d["pairs"], d["n_views"]))
         conv = _convert_alignment
         label = f"{n_views} views, {len(d['pairs'])} pairs ({int(d['bad'].sum())} wrong, low confidence)"
-        # Tolerances from 30 draws of the reference (Adam) and the stand-in (least squares): RMS rotation
-        # <= 0.24 deg, centres <= 0.6 % of the radius, scales of the reliable pairs <= 0.007 in log. Ignoring
-        # the confidences costs 0.47-1.4 deg RMS; one scale for all pairs 3-4 deg; no tree start 30-170 deg.
-        yield Case(f"{label}: rotations", (), truth, lambda o, e: _rms(alignment_errors(o, e)["rot_deg"]), 0.38,
+        # Tolerances from draws of the reference (Adam) and the stand-in (least squares): over 420 scenes (210
+        # fairness seeds) the reference's RMS rotation reached 0.35 deg (hence 0.5); centres and scales came no
+        # nearer their tolerances (<= 0.91 of them). Dropping the low-confidence pairs and fitting the rest unweighted costs 0.78-1.8
+        # deg RMS (the wrong pixels of the good pairs); one scale for all pairs 3-4 deg; no tree start 30-170 deg.
+        yield Case(f"{label}: rotations", (), truth, lambda o, e: _rms(alignment_errors(o, e)["rot_deg"]), 0.5,
                    "deg RMS", convert=conv, info=info, call=call, key=f"rotations-{k + 1}")
         yield Case(f"{label}: camera centres", (), truth, lambda o, e: float(alignment_errors(o, e)["centre"].max()),
                    0.012, "of the radius", convert=conv, info=info, call=call, key=f"centres-{k + 1}")

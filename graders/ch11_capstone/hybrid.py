@@ -12,7 +12,9 @@ estimate is 10x more accurate than the direct one where the front end is healthy
 decimetres inside a fault window (features lost, or inliers lost); inside a window one or two isolated frames
 pass the test while the classical estimate is still wrong there (a flickering dirty lens) — what the
 hysteresis is for. Judged by the trajectory against the rule's trajectory on the same inputs (exact up to
-float rounding), its error against the truth reported beside it.
+float rounding), its error against the truth reported beside it. Each grade uses every k from 2 to 4, and two
+runs come from another front end's scale (features, or inlier ratios, and their threshold times 0.4-0.5), so
+code that writes in k = 2 or the thresholds 80 and 0.3 instead of the arguments fails.
 """
 from __future__ import annotations
 
@@ -124,10 +126,16 @@ DRAWS = [("features lost in a window, one frame flickers back", ("features",)),
 
 def _cases(rng: np.random.Generator) -> list[Case]:
     cases = []
-    for name, windows in DRAWS:
+    ks = rng.permutation([2, 3, 4, int(rng.integers(2, 5))])     # every k from 2 to 4 in each grade
+    for (name, windows), k in zip(DRAWS, ks):
         r = hybrid_run(rng, windows)
-        k = int(rng.integers(2, 4))
-        args = (r["features"], r["inlier_ratio"], r["T_classical"], r["T_direct"], 80, 0.3, k)
+        k = int(k)
+        # Another front end's scale, the thresholds moved with it: the features of the first run and the inlier
+        # ratios of the second times 0.4-0.5 (healthy frames fall under 80 and 0.3). Multiplying both sides of
+        # `x >= threshold` by one factor keeps every decision (rounding is monotonic), so the rule's trajectory
+        # is the same; code that writes in 80 and 0.3 for the thresholds it is given is not.
+        sf, si = (rng.uniform(0.4, 0.5) if name == DRAWS[j][0] else 1.0 for j in (0, 1))
+        args = (r["features"] * sf, r["inlier_ratio"] * si, r["T_classical"], r["T_direct"], 80 * sf, 0.3 * si, k)
         expected = gt_hybrid_odometry(*args)
         truth = chain(r["T_true"])
         path = np.linalg.norm(np.diff(centres(truth), axis=0), axis=1).sum()
@@ -177,6 +185,11 @@ HYBRID_HINTS = [
          "and the inlier ratio are at or above their thresholds.", rel=0),
     like(_post_multiplied, "the motions are chained on the wrong side: T_cw[i] = T_rel[i] @ T_cw[i-1] "
          "(x_i = R x_{i-1} + t maps frame i-1 to frame i).", rel=0),
+    like(lambda c: _with(c, min_features=80, min_inliers=0.3) if c.args[4:6] != (80, 0.3) else None,
+         lambda c, out: f"that is the switch with the thresholds 80 and 0.3 written in: this case gives min_features "
+         f"{c.args[4]:.4g} and min_inliers {c.args[5]:.4g}; use the arguments.", rel=0),
+    like(lambda c: _with(c, k=2) if c.args[6] != 2 else None,
+         lambda c, out: f"that is the switch with k = 2 written in: this case gives k = {c.args[6]}.", rel=0),
 ]
 
 register(Exercise(

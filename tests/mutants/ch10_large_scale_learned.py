@@ -1,8 +1,9 @@
 """Chapter 10 (learned and distributed part) mutant catalogue: realistic wrong implementations.
 
 Each entry is (exercise id, short name, function, hint fragment or None). 10.9's are the classic slips of
-writing DUSt3R's global alignment (one scale for every pair, confidences ignored, no spanning-tree start,
-a spanning tree over the wrong weights, camera-to-world poses returned); 10.10's those of a first
+writing DUSt3R's global alignment (one scale for every pair, confidences ignored or used only to drop the
+flagged pairs, no spanning-tree start, a spanning tree over the wrong weights, camera-to-world poses returned);
+10.10's those of a first
 distributed pipeline (no retries, results in completion order, duplicated pairs, a result file written in
 place, no Dask, a cluster left open, no checkpoint per batch, images read on the client); the DEBUG ones the wrong fixes of 10.12-10.13. Building blocks that are not the point of a mutant
 come from the reference solution, so each mutant differs from a correct implementation in one mistake.
@@ -73,6 +74,18 @@ def alignment_ignores_confidence(pairs, n_views):
     return ref_pm.global_alignment(flat, n_views)
 
 
+def alignment_drops_flagged_pairs(pairs, n_views):
+    """Confidence used as a filter, not a weight: the pairs the network flags (mean C < 0.1) are dropped and the
+    rest fitted with every point alike, the wrong pixels of the good pairs included. A dropped pair's scale is
+    left at 1 (it is not judged)."""
+    keep = [e for e, p in enumerate(pairs) if min(p["C_i"].mean(), p["C_j"].mean()) >= 0.1]
+    flat = [dict(pairs[e], C_i=np.ones_like(pairs[e]["C_i"]), C_j=np.ones_like(pairs[e]["C_j"])) for e in keep]
+    Rs, ts, kept_sigma = ref_pm.global_alignment(flat, n_views)
+    sigma = np.ones(len(pairs))
+    sigma[keep] = kept_sigma
+    return Rs, ts, sigma
+
+
 def alignment_identity_start(pairs, n_views):
     """No spanning-tree start: every camera at the origin, unrotated; each view's pointmap from its first pair."""
     chi0 = np.zeros((n_views,) + pairs[0]["X_i"].shape)
@@ -98,6 +111,8 @@ def alignment_camera_to_world(pairs, n_views):
 MUTANTS = [
     ("10.9", "one scale for every pair", alignment_one_scale, "each pair needs its own sigma"),
     ("10.9", "confidences ignored", alignment_ignores_confidence, "weight every point's residual by its confidence"),
+    ("10.9", "flagged pairs dropped, the rest unweighted", alignment_drops_flagged_pairs,
+     "weight every point's residual by its confidence"),
     ("10.9", "no spanning-tree start", alignment_identity_start, "poor local minimum"),
     ("10.9", "camera-to-world returned", alignment_camera_to_world, "your poses are camera-to-world"),
 ]

@@ -178,7 +178,25 @@ def blame_first_metric_only(stages, observed, baseline, z_max=4.0):
     return None
 
 
+def blame_fixed_threshold(stages, observed, baseline, z_max=4.0):
+    """The rule with the lesson's 4 sigma written in: the z_max the caller passes is ignored."""
+    for s in stages:
+        if _z(observed, baseline, s).max() > 4.0:
+            return s
+    return None
+
+
+def blame_in_dict_order(stages, observed, baseline, z_max=4.0):
+    """Walks `observed` in its own (insertion) order, not the pipeline order `stages` gives."""
+    for s in observed:
+        if _z(observed, baseline, s).max() > z_max:
+            return s
+    return None
+
+
 MUTANTS += [
+    ("11.7", "z_max ignored (4 written in)", blame_fixed_threshold, "use the threshold you are given"),
+    ("11.7", "dict order, not the stages' order", blame_in_dict_order, "not in the pipeline order"),
     ("11.7", "largest deviation", blame_largest_deviation, "largest deviation"),
     ("11.7", "last stage", blame_last_stage, "last stage out of its baseline"),
     ("11.7", "ignores the baseline spread", blame_relative_change, "relative change is not a deviation"),
@@ -236,8 +254,20 @@ def hybrid_chains_on_the_right(features, inlier_ratio, T_classical, T_direct, mi
     return _hybrid(features, inlier_ratio, T_classical, T_direct, min_features, min_inliers, k, right_multiply=True)
 
 
+def hybrid_fixed_thresholds(features, inlier_ratio, T_classical, T_direct, min_features=80, min_inliers=0.3, k=2):
+    """The lesson's 80 features and 0.3 inlier ratio written in: the thresholds passed are ignored."""
+    return _hybrid(features, inlier_ratio, T_classical, T_direct, 80, 0.3, k)
+
+
+def hybrid_fixed_k(features, inlier_ratio, T_classical, T_direct, min_features=80, min_inliers=0.3, k=2):
+    """Two confident frames in a row, whatever k is passed."""
+    return _hybrid(features, inlier_ratio, T_classical, T_direct, min_features, min_inliers, 2)
+
+
 MUTANTS += [
     ("11.8", "never switches", hybrid_never_switches, "never switched"),
+    ("11.8", "thresholds written in", hybrid_fixed_thresholds, "thresholds 80 and 0.3 written in"),
+    ("11.8", "k = 2 written in", hybrid_fixed_k, "k = 2 written in"),
     ("11.8", "no hysteresis", hybrid_no_hysteresis, "k confident frames in a row"),
     ("11.8", "features only", hybrid_counts_features_only, "only the feature count is tested"),
     ("11.8", "switches a frame late", hybrid_switches_a_frame_late, None),
