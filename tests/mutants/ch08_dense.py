@@ -169,7 +169,7 @@ MUTANTS += [
 # colour gradient exists), one mistake each.
 
 def _tiles(means2d, conic, color, opacity, depth, radius, W, H, *, order="near", stop="before", binning="square",
-           half=True, torch_out=True):
+           half=True, torch_out=True, cap=0.99):
     import torch
     m, cn, o, d, r = (np.asarray(x.detach() if hasattr(x, "detach") else x, float)
                       for x in (means2d, conic, opacity, depth, radius))
@@ -178,6 +178,8 @@ def _tiles(means2d, conic, color, opacity, depth, radius, W, H, *, order="near",
     Tf = np.ones(H * W)
     if binning == "square":
         lo, hi = np.floor((m - r[:, None]) / 16), np.floor((m + r[:, None]) / 16)
+    elif binning == "every":                        # mistake: every Gaussian in every tile (no binning)
+        lo, hi = np.full((N, 2), -1e9), np.full((N, 2), 1e9)
     else:                                           # mistake: only the centre's tile
         lo = hi = np.floor(m / 16)
     for ty in range(-(-H // 16)):
@@ -190,7 +192,7 @@ def _tiles(means2d, conic, color, opacity, depth, radius, W, H, *, order="near",
             pix = (ys * W + xs).ravel()
             dx, dy = xs.ravel()[:, None] - m[idx, 0], ys.ravel()[:, None] - m[idx, 1]
             q = cn[idx, 0] * dx * dx + 2 * cn[idx, 1] * dx * dy + cn[idx, 2] * dy * dy
-            a = np.minimum(0.99, o[idx] * np.exp(-0.5 * q if half else -q))
+            a = np.minimum(cap, o[idx] * np.exp(-0.5 * q if half else -q))
             a[a < 1 / 255] = 0
             T = np.ones(len(pix))
             live = np.ones(len(pix), bool)
@@ -207,6 +209,17 @@ def _tiles(means2d, conic, color, opacity, depth, radius, W, H, *, order="near",
     if not torch_out:
         return (Wt @ np.asarray(color.detach() if hasattr(color, "detach") else color)).reshape(H, W, 3), Tf.reshape(H, W)
     return (torch.as_tensor(Wt, dtype=color.dtype) @ color).reshape(H, W, 3), torch.as_tensor(Tf).reshape(H, W)
+
+
+def rz_no_cap(*a):
+    """α = o e^(−q/2) without the 0.99 cap. Passed 2 draws in 4 before the batch held opaque Gaussians (o = 1)."""
+    return _tiles(*a, cap=np.inf)
+
+
+def rz_every_tile(*a):
+    """Every Gaussian composited at every pixel (no binning: the brute force without the tiles' rule). Passed 1 draw
+    in 4 before the batch held Gaussians whose 3σ square ends just before a tile border."""
+    return _tiles(*a, binning="every")
 
 
 def rz_back_to_front(*a):
@@ -240,6 +253,8 @@ MUTANTS += [
     ("8.15", "centre tile only", rz_centre_tile_only, "EVERY tile"),
     ("8.15", "exp(-q) without the 1/2", rz_no_half, None),
     ("8.15", "numpy image, no gradient", rz_numpy_no_grad, "not differentiable"),
+    ("8.15", "no 0.99 cap on α", rz_no_cap, "capped at 0.99"),
+    ("8.15", "every Gaussian in every tile", rz_every_tile, "faint tail"),
 ]
 
 # ----------------------------------------------------------------- 8.16 splatting fit
