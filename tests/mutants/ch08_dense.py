@@ -306,6 +306,17 @@ def blurry_more_steps(case):
             "gaussians": _fit(case["target"], case["init"], 2 * s["steps"], s["max_gaussians"], densify_until=-1)}
 
 
+def blurry_longer_padded(case):
+    """The knob: 4x the steps without densification (~1 dB better), and one transparent Gaussian out of the frame
+    appended so the count exceeds the start's. Full marks on seed 0 while the bar was the colleague's + 0.5 dB."""
+    s = case["settings"]
+    g = _fit(case["target"], case["init"], 4 * s["steps"], s["max_gaussians"], densify_until=-1)
+    extra = {"means": [[-60.0, -60.0]], "scales": [[1.0, 1.0]], "theta": [0.0], "color": [[0.5, 0.5, 0.5]],
+             "opacity": [0.01]}
+    return {"cause": "no_densification",
+            "gaussians": {k: np.concatenate([np.asarray(g[k], float), np.asarray(extra[k], float)]) for k in g}}
+
+
 def blurry_unchanged(case):
     """Right cause, the colleague's Gaussians handed back."""
     return {"cause": "no_densification", "gaussians": case["gaussians"]}
@@ -315,6 +326,7 @@ MUTANTS += [
     ("8.21", "blames the learning rate", blurry_wrong_cause, "look at the log"),
     ("8.21", "more steps, no densification", blurry_more_steps, "no more Gaussians than the initialisation"),
     ("8.21", "unchanged", blurry_unchanged, "no more Gaussians than the initialisation"),
+    ("8.21", "4x the steps, one transparent Gaussian added", blurry_longer_padded, "training longer"),
 ]
 
 # ----------------------------------------------------------------- 8.13 tiny NeRF (its own module: size)
