@@ -38,22 +38,47 @@ def splat_batch(rng: np.random.Generator, W: int = 64, H: int = 48, N: int | Non
     conic = np.stack([cov[:, 1, 1], -cov[:, 0, 1], cov[:, 0, 0]], 1) / np.linalg.det(cov)[:, None]
     lam = np.linalg.eigvalsh(cov)[:, 1]
     depth = rng.permutation(np.linspace(1.0, 5.0, N)) + rng.uniform(0, 1e-3, N)
-    return {"means2d": m, "conic": conic, "color": rng.uniform(0, 1, (N, 3)), "opacity": np.r_[rng.uniform(0.8, 1.0, k), rng.uniform(0.05, 1.0, N - k)],
-            "depth": depth, "radius": np.ceil(3 * np.sqrt(lam)), "W": W, "H": H}
+    b = {"means2d": m, "conic": conic, "color": rng.uniform(0, 1, (N, 3)), "opacity": np.r_[rng.uniform(0.8, 1.0, k), rng.uniform(0.05, 1.0, N - k)],
+         "depth": depth, "radius": np.ceil(3 * np.sqrt(lam)), "W": W, "H": H}
+    return _with_front(rng, b)
 
 
-def brute_force_weights(means2d, conic, opacity, depth, radius, W, H, tile=TILE, stop=True):
-    """(H·W, N) compositing weights T_i α_i per pixel, and the final transmittance (H·W,)."""
+def _with_front(rng: np.random.Generator, b: dict) -> dict:
+    """Six opaque isotropic Gaussians in front of the rest, so that two rules the scatter tests on some draws only
+    are tested on every draw: two wide ones (σ 11-14 px, o = 1, one in each half of the image so their capped
+    discs never overlap), whose centres reach α > 0.99 over ~2 px (the 0.99 cap: uncapped, α ≈ 1 takes T below
+    1e-4 and the early stop skips them), and four with σ 4.5-6 px, o 0.95-0.98, whose 3σ square ends within
+    0.3 px of a tile border (the pixels across the border lie 3-3.3σ from the centre, α ≥ 1/255, yet in no tile
+    of the Gaussian's list: compositing every Gaussian at every pixel draws them). Without them, no tiling
+    passed 1 draw in 4 and no cap 2 in 4."""
+    W, H = b["W"], b["H"]
+    sig = np.r_[rng.uniform(11, 14, 2), rng.uniform(4.5, 6, 4)]
+    r = np.ceil(3 * np.sqrt(sig ** 2 + 0.3))
+    mx = np.r_[rng.uniform(12, W / 2 - 8), rng.uniform(W / 2 + 8, W - 12), np.zeros(4)]   # capped discs apart
+    my = np.r_[rng.uniform(12, H - 12, 2), rng.uniform(10, H - 10, 4)]
+    edges = TILE * rng.choice(np.arange(1, -(-W // TILE)), 4)                  # interior tile borders in x
+    mx[2:] = edges - r[2:] - rng.uniform(0.02, 0.3, 4)                          # the square ends just before
+    cov = sig ** 2 + 0.3
+    conic = np.stack([1 / cov, np.zeros(6), 1 / cov], 1)
+    front = {"means2d": np.c_[mx, my], "conic": conic, "color": rng.uniform(0, 1, (6, 3)), "opacity": np.r_[1.0, 1.0, rng.uniform(0.95, 0.98, 4)],
+             "depth": rng.uniform(0.3, 0.9, 6), "radius": r}
+    return dict(b, **{k: np.concatenate([b[k], front[k]]) for k in front})
+
+
+def brute_force_weights(means2d, conic, opacity, depth, radius, W, H, tile=TILE, stop=True, cap=ALPHA_MAX,
+                        binning=True):
+    """(H·W, N) compositing weights T_i α_i per pixel, and the final transmittance (H·W,) (`cap`, `binning`:
+    the hints' variants)."""
     m, cn, o, d, r = (to_numpy(a) for a in (means2d, conic, opacity, depth, radius))
     order = np.argsort(d, kind="stable")
     ys, xs = np.mgrid[0:H, 0:W]
     px, py = xs.ravel().astype(float), ys.ravel().astype(float)
     dx, dy = px[:, None] - m[None, :, 0], py[:, None] - m[None, :, 1]
     power = -0.5 * (cn[:, 0] * dx * dx + 2 * cn[:, 1] * dx * dy + cn[:, 2] * dy * dy)
-    alpha = np.minimum(ALPHA_MAX, o * np.exp(power))
+    alpha = np.minimum(cap, o * np.exp(power))
     tx, ty = (px // tile)[:, None], (py // tile)[:, None]
     binned = (np.floor((m[:, 0] - r) / tile) <= tx) & (tx <= np.floor((m[:, 0] + r) / tile)) & \
-             (np.floor((m[:, 1] - r) / tile) <= ty) & (ty <= np.floor((m[:, 1] + r) / tile)) & (r > 0)
+             (np.floor((m[:, 1] - r) / tile) <= ty) & (ty <= np.floor((m[:, 1] + r) / tile)) & (r > 0) | (not binning)
     alpha = np.where(binned & (alpha >= ALPHA_MIN), alpha, 0.0)[:, order]
     T_excl = np.cumprod(np.concatenate([np.ones((len(px), 1)), 1 - alpha[:, :-1]], 1), 1)
     if stop:
@@ -140,7 +165,8 @@ def _variant(c, **kw):
     args = [b["means2d"], b["conic"], b["opacity"], b["depth"], b["radius"], b["W"], b["H"]]
     if kw.get("reverse"):
         args[3] = -args[3]
-    w, T = brute_force_weights(*args, stop=kw.get("stop", True), tile=kw.get("tile", TILE))
+    w, T = brute_force_weights(*args, stop=kw.get("stop", True), tile=kw.get("tile", TILE), cap=kw.get("cap", ALPHA_MAX),
+                               binning=kw.get("binning", True))
     return (w @ b["color"]).reshape(b["H"], b["W"], 3), T.reshape(b["H"], b["W"])
 
 
@@ -155,6 +181,12 @@ RASTER_HINTS = [
     Hint("no early stop: stop a pixel before the first Gaussian that would take T below 1e-4 (do not add it), as 3DGS "
          "does — T_final never drops below 1e-4 where it stopped.",
          lambda c, o: c.key == "T" and np.mean(o["T"] < 0.9e-4) > np.mean(c.info["T"] < 0.9e-4) + 1e-3),
+    Hint("α is capped at 0.99 (α = min(0.99, o e^(−q/2))): uncapped, an opaque Gaussian's centre reaches α ≈ 1, "
+         "which would take T below 1e-4, so the early stop skips it there.",
+         lambda c, o: c.key == "image" and _like(c, o, cap=np.inf)),
+    Hint("a Gaussian is composited only in the tiles its 3σ square [μ − r, μ + r] overlaps: evaluating every Gaussian "
+         "at every pixel draws its faint tail (α ≥ 1/255 just past 3σ) in tiles whose lists do not hold it.",
+         lambda c, o: c.key == "image" and _like(c, o, binning=False)),
     Hint("a Gaussian goes into EVERY tile its 3σ square [μ − r, μ + r] overlaps, not only the tile of its centre.",
          lambda c, o: c.key == "image" and np.mean(o["img"].sum(2) < c.info["img"].sum(2) - 1e-5) > 0.01),
 ]
