@@ -199,9 +199,9 @@ def _methods(args: tuple, before_tree: str | None, ceres_solve: list) -> dict:
     solver = "dense" if len(args[0]) <= 50 else "sparse"      # COLMAP's rule: DENSE_SCHUR up to 50 images
     tol = dict(ftol=FTOL, gtol=GTOL, xtol=XTOL, max_iter=MAX_ITER)
 
-    def reference(package, method):
+    def reference(package, method, **threads):
         def run():
-            cams, pts, costs = package.bundle_adjust(*args, solver=method, **tol)
+            cams, pts, costs = package.bundle_adjust(*args, solver=method, **tol, **threads)
             return cams, pts, len(costs) - 1
         return run
 
@@ -216,6 +216,7 @@ def _methods(args: tuple, before_tree: str | None, ceres_solve: list) -> dict:
     if before_tree:
         methods["reference, before (its default: SuperLU)"] = reference(_package_from(before_tree, "ch05_before"), "auto")
     methods[f"reference ({solver} Schur)"] = reference(ba, solver)
+    methods[f"reference ({solver} Schur, 2 threads)"] = reference(ba, solver, threads=2)
     methods["pycolmap / Ceres"] = ceres
     return methods
 
