@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
+from functools import partial
 from typing import NamedTuple
 
 import numpy as np
@@ -18,6 +19,18 @@ def thread_pool() -> ThreadPoolExecutor:
     if not _POOL:
         _POOL.append(ThreadPoolExecutor(2))
     return _POOL[0]
+
+
+def in_halves(fn, m: int, threads: int = 1):
+    """fn(s) for per-observation work on the observations s (a slice of range(m)): with threads > 1,
+    on the two halves in `thread_pool`'s two threads (numpy's array operations release Python's GIL),
+    the results (an array or a tuple of arrays) concatenated; else fn(slice(None)), all in one go."""
+    if threads <= 1:
+        return fn(slice(None))
+    parts = list(thread_pool().map(fn, (slice(0, m // 2), slice(m // 2, None))))
+    if isinstance(parts[0], tuple):
+        return tuple(np.concatenate(p) for p in zip(*parts))
+    return np.concatenate(parts)
 
 
 def _summing_matrix(idx: np.ndarray, n: int) -> sp.csr_matrix:
@@ -113,13 +126,14 @@ def _by_camera(a: np.ndarray, index: ObservationIndex) -> np.ndarray:
 
 
 def normal_equations(J_cam, J_pt, r, cam_idx, pt_idx, n_cams, n_points, weights=None,
-                     index: ObservationIndex | None = None):
+                     index: ObservationIndex | None = None, threads: int = 1):
     """Exercise 5.10: Blocks of the (weighted) normal equations J^T W J dx = -J^T W r, never forming J^T J densely.
 
     J_cam (M, 2, 9), J_pt (M, 2, 3), r (M, 2); weights (M,) per observation or None (all 1).
     Returns U (nc, 9, 9) camera blocks, V (np, 3, 3) point blocks, W (M, 9, 3) one camera-point
     block per observation, g_c (nc, 9) and g_p (np, 3): the gradient J^T W r.
     index: the problem's `ObservationIndex`, if already built (saves rebuilding the summing matrices).
+    threads: 2 computes the per-observation blocks V_k, W_k in two threads (`in_halves`).
     """
     J_cam, J_pt, r = (np.asarray(a, float) for a in (J_cam, J_pt, r))
     if index is None:
@@ -142,9 +156,12 @@ def normal_equations(J_cam, J_pt, r, cam_idx, pt_idx, n_cams, n_points, weights=
     # Per observation k: V_k = w J_pt^T J_pt, the sum of the outer products of J_pt's two rows (as
     # broadcast products: 1.8x faster than M batched 3x2 @ 2x3 matmuls, measured for M = 31,843),
     # and W_k^T = w J_pt^T J_cam; W (M, 9, 3) is a view of W^T (M, 3, 9), which schur_solve uses.
-    V_k = wJ_pt[:, 0, :, None] * J_pt[:, 0, None, :] + wJ_pt[:, 1, :, None] * J_pt[:, 1, None, :]
+    def blocks(s):                                              # observations s
+        V_k = wJ_pt[s, 0, :, None] * J_pt[s, 0, None, :] + wJ_pt[s, 1, :, None] * J_pt[s, 1, None, :]
+        return V_k, wJ_pt[s].transpose(0, 2, 1) @ J_cam[s]
+    V_k, WT = in_halves(blocks, len(r), threads)
     V = _segment_sum(to_points, V_k, n_points)
-    W = (wJ_pt.transpose(0, 2, 1) @ J_cam).transpose(0, 2, 1)
+    W = WT.transpose(0, 2, 1)
     g_p = _segment_sum(to_points, wJ_pt[:, 0] * r[:, :1] + wJ_pt[:, 1] * r[:, 1:], n_points)
     return U, V, W, g_c, g_p
 
@@ -180,22 +197,28 @@ def _wvw_blocks(YT: np.ndarray, WT: np.ndarray, index: ObservationIndex, chunk: 
     The pairs k = l (camera c's diagonal block) are camera c's own run of observations, one product
     per camera with no gather when the observations are sorted by camera. The other pairs are
     gathered `chunk` pairs at a time (whole blocks), so that the gathered rows are still in the
-    cache when their products read them. threads > 1: the chunks are shared out between the two
-    threads of `thread_pool` (numpy's gathers and BLAS products release Python's GIL; each chunk
-    writes its own blocks).
+    cache when their products read them. threads > 1: the chunks (and the diagonal products, as one more
+    task) are shared out between the two threads of `thread_pool` (numpy's gathers and BLAS products
+    release Python's GIL; each task writes its own blocks).
     """
     blocks = np.zeros((len(index.block_row), 9, 9))
-    Yc, Wc = _by_camera(YT, index), _by_camera(WT, index)
-    for c, (s, e) in enumerate(zip(index.cam_ptr[:-1].tolist(), index.cam_ptr[1:].tolist())):
-        blocks[index.diag_block[c]] = Yc[s:e].reshape(-1, 9).T @ Wc[s:e].reshape(-1, 9)
+    diagonal = np.empty((len(index.cam_ptr) - 1, 9, 9))
+
+    def own_pairs():
+        Yc, Wc = _by_camera(YT, index), _by_camera(WT, index)
+        for c, (s, e) in enumerate(zip(index.cam_ptr[:-1].tolist(), index.cam_ptr[1:].tolist())):
+            diagonal[c] = Yc[s:e].reshape(-1, 9).T @ Wc[s:e].reshape(-1, 9)
+
     ptr = index.block_ptr
     cuts = np.unique(np.r_[np.searchsorted(ptr[:-1], np.arange(0, ptr[-1], chunk)), len(ptr) - 1])
-    chunks = list(zip(cuts[:-1].tolist(), cuts[1:].tolist()))
+    tasks = [own_pairs] + [partial(_add_pair_products, YT, WT, index, blocks, first, last)
+                           for first, last in zip(cuts[:-1].tolist(), cuts[1:].tolist())]
     if threads > 1:
-        list(thread_pool().map(lambda fl: _add_pair_products(YT, WT, index, blocks, *fl), chunks))
+        list(thread_pool().map(lambda task: task(), tasks))
     else:
-        for first, last in chunks:
-            _add_pair_products(YT, WT, index, blocks, first, last)
+        for task in tasks:
+            task()
+    blocks[index.diag_block] += diagonal
     return blocks
 
 
@@ -289,8 +312,8 @@ def schur_solve(U, V, W, g_c, g_p, cam_idx, pt_idx, method: str = "auto", pcg_to
     method: 'dense' (Cholesky of S as a dense array, Ceres' DENSE_SCHUR), 'sparse' (SuperLU
     factorisation of S, one thread), 'pcg' (conjugate gradients with a block-Jacobi preconditioner,
     never factorising S), or 'auto': sparse up to 20,000 unknowns (2,200 cameras), PCG beyond.
-    index: the problem's `ObservationIndex`, if already built. threads: how many threads assemble
-    W V^-1 W^T (`_wvw_blocks`).
+    index: the problem's `ObservationIndex`, if already built. threads: 2 shares the per-observation
+    products (`in_halves`) and the assembly of W V^-1 W^T (`_wvw_blocks`) between two threads.
     Returns (dc (nc, 9), dp (np, 3)).
     """
     U, V, W = (np.asarray(a, float) for a in (U, V, W))
@@ -300,7 +323,7 @@ def schur_solve(U, V, W, g_c, g_p, cam_idx, pt_idx, method: str = "auto", pcg_to
     index = observation_index(cam_idx, pt_idx, nc, n_pts) if index is None else index
     Vinv = inverse_3x3(V)                                      # np independent 3x3 inverses
     WT = np.ascontiguousarray(W.transpose(0, 2, 1))            # (M, 3, 9): W_k^T
-    YT = Vinv[pt_idx] @ WT                                     # (M, 3, 9): (W_k V_j^-1)^T = V_j^-1 W_k^T
+    YT = in_halves(lambda s: Vinv[pt_idx[s]] @ WT[s], len(pt_idx), threads)   # (M, 3, 9): (W_k V_j^-1)^T = V_j^-1 W_k^T
     q = (Vinv @ g_p[:, :, None])[:, :, 0][pt_idx]               # (M, 3): V_j^-1 g_p,j of each observation's point
     Wq = WT[:, 0] * q[:, :1] + WT[:, 1] * q[:, 1:2] + WT[:, 2] * q[:, 2:]   # (M, 9): W_k V_j^-1 g_p,j
     rhs = -g_c.ravel() + _segment_sum(index.to_cams, Wq, nc).ravel()
@@ -312,7 +335,8 @@ def schur_solve(U, V, W, g_c, g_p, cam_idx, pt_idx, method: str = "auto", pcg_to
     else:
         dc = _solve_reduced(S, rhs, method)
     dc = dc.reshape(nc, 9)
-    WT_dc = _segment_sum(index.to_points, np.einsum("mij,mj->mi", WT, dc[cam_idx]), n_pts)  # (np, 3)
+    WT_dc = _segment_sum(index.to_points, in_halves(lambda s: np.einsum("mij,mj->mi", WT[s], dc[cam_idx[s]]),
+                                                    len(cam_idx), threads), n_pts)  # (np, 3)
     dp = (Vinv @ (-g_p - WT_dc)[:, :, None])[:, :, 0]
     return dc, dp
 

@@ -84,8 +84,9 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
     Stops when an accepted step lowers the cost by at most ftol times the cost before it (Ceres'
     function_tolerance: |cost change| <= ftol * cost), the largest gradient entry is below gtol,
     the step is at most xtol (|x| + xtol), or after max_iter iterations.
-    threads: 1, or 2 to share the per-observation work (projections, Jacobians) and the assembly of
-    the reduced camera system between two threads, as Ceres uses all cores (its num_threads).
+    threads: 1, or 2 to share the per-observation work (projections, Jacobians, the blocks W_k, V_k,
+    V_j^-1 W_k^T) and the assembly of the reduced camera system between two threads, as Ceres uses
+    all cores (its num_threads).
     The observations are sorted by camera once, so that each camera's are a contiguous run.
     Returns (cameras (nc, 9), points (np, 3), costs: list of the cost after every iteration,
     costs[0] the initial cost).
@@ -112,7 +113,8 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
     for it in range(max_iter):
         J_cam, J_pt = _in_halves(pool, lambda ci, pi: reprojection_jacobians(cams, pts, ci, pi), cam_idx, pt_idx)
         w = None if loss == "linear" else robust_weights(r, loss, scale)   # plain least squares: all weights 1
-        U, V, W, g_c, g_p = normal_equations(J_cam, J_pt, r, cam_idx, pt_idx, nc, n_pts, weights=w, index=index)
+        U, V, W, g_c, g_p = normal_equations(J_cam, J_pt, r, cam_idx, pt_idx, nc, n_pts, weights=w, index=index,
+                                             threads=threads)
         _hold(U, V, W, g_c, g_p, fixed, fixed_pts, cam_idx, pt_idx)
         if max(np.abs(g_c).max(), np.abs(g_p).max(initial=0.0)) < gtol:
             break
