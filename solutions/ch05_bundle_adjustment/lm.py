@@ -1,15 +1,13 @@
 """Chapter 5 reference, Levenberg-Marquardt: 5.14 `bundle_adjust`."""
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 
 from solutions.geometry import rodrigues
 
 from .bal import compose_left, residuals
 from .jacobians import reprojection_jacobians
-from .linear_algebra import normal_equations, observation_index, schur_solve, thread_pool
+from .linear_algebra import in_halves, normal_equations, observation_index, schur_solve
 from .robust import robust_cost, robust_weights
 
 
@@ -52,19 +50,6 @@ def _hold(U, V, W, g_c, g_p, fixed, fixed_pts, cam_idx, pt_idx) -> None:
         g_p[fixed_pts] = 0.0
 
 
-def _in_halves(pool: ThreadPoolExecutor | None, fn, cam_idx: np.ndarray, pt_idx: np.ndarray, *per_obs):
-    """fn(cam_idx, pt_idx, *per_obs) for per-observation work (projections, Jacobians): with a pool,
-    on the two halves of the observations in two threads (numpy's array operations release Python's
-    GIL), the halves' results concatenated; without one, in one go."""
-    if pool is None:
-        return fn(cam_idx, pt_idx, *per_obs)
-    halves = (slice(0, len(cam_idx) // 2), slice(len(cam_idx) // 2, None))
-    parts = list(pool.map(lambda h: fn(cam_idx[h], pt_idx[h], *(a[h] for a in per_obs)), halves))
-    if isinstance(parts[0], tuple):
-        return tuple(np.concatenate(p) for p in zip(*parts))
-    return np.concatenate(parts)
-
-
 def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", scale: float = 1.0,
                   fix_gauge: bool = False, max_iter: int = 50, lambda0: float = 1e-4,
                   ftol: float = 1e-8, gtol: float = 1e-10, xtol: float = 1e-10, solver: str = "auto",
@@ -101,17 +86,17 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
     order = np.lexsort((pt_idx, cam_idx))   # observations sorted by camera once: each camera's a contiguous run
     cam_idx, pt_idx, obs = cam_idx[order], pt_idx[order], obs[order]
     index = observation_index(cam_idx, pt_idx, nc, n_pts)  # who sees whom: fixed, so built once
-    pool = thread_pool() if threads > 1 else None
+    m = len(obs)
 
-    def project(cameras, points):
-        return _in_halves(pool, lambda ci, pi, o: residuals(cameras, points, ci, pi, o), cam_idx, pt_idx, obs)
+    def project(cameras, points):   # residuals, on two halves of the observations in two threads if threads > 1
+        return in_halves(lambda s: residuals(cameras, points, cam_idx[s], pt_idx[s], obs[s]), m, threads)
 
     r = project(cams, pts)
     cost = robust_cost(r, loss, scale)
     costs = [cost]
     lam, nu = lambda0, 2.0
     for it in range(max_iter):
-        J_cam, J_pt = _in_halves(pool, lambda ci, pi: reprojection_jacobians(cams, pts, ci, pi), cam_idx, pt_idx)
+        J_cam, J_pt = in_halves(lambda s: reprojection_jacobians(cams, pts, cam_idx[s], pt_idx[s]), m, threads)
         w = None if loss == "linear" else robust_weights(r, loss, scale)   # plain least squares: all weights 1
         U, V, W, g_c, g_p = normal_equations(J_cam, J_pt, r, cam_idx, pt_idx, nc, n_pts, weights=w, index=index,
                                              threads=threads)
