@@ -20,9 +20,12 @@ Solvers, each stopped the same way
   default LEVENBERG_MARQUARDT trust region does the same: radius 1e4 = 1 / lambda0, success
   radius /= max(1/3, 1 - (2 rho - 1)^3), failure radius /= v, v *= 2), Schur complement,
   reduced camera system by dense Cholesky up to 50 cameras and SuperLU beyond (COLMAP's
-  choice: DENSE_SCHUR up to 50 images, SPARSE_SCHUR up to 1,000). S's upper-triangle blocks are
-  assembled one BLAS product per camera pair over the observation pairs behind it (the pairs listed
-  once per adjustment), U and g_c one product per camera.
+  choice: DENSE_SCHUR up to 50 images, SPARSE_SCHUR up to 1,000). The observations are sorted by
+  camera once; S's upper-triangle blocks are assembled one BLAS product per camera pair over the
+  observation pairs behind it (the pairs listed once per adjustment, gathered 4,096 at a time), the
+  diagonal blocks and U, g_c one product per camera over its contiguous run. Two rows: one thread,
+  and `threads=2` (projections, Jacobians and per-observation blocks on two halves of the
+  observations, W V^-1 W^T's chunks shared, in a pool of two Python threads: numpy releases the GIL).
 - Ceres through `pycolmap.create_default_bundle_adjuster(...).solve()`, gauge fixed as
   `pycolmap.bundle_adjustment` does (TWO_CAMS_FROM_WORLD), RADIAL cameras, principal point fixed.
 Tolerances, the same definitions in both (Ceres 2.2, internal/ceres/trust_region_minimizer.cc):
@@ -48,7 +51,7 @@ Measured 2026-12-05 on the shared 2-core machine, CPU time the fair column (proc
   Before this round (d5ac15b, street-300 already without outliers; load 56 -> 13 -> 31):
     BAL-49, 3 rounds: reference 5.44 CPU s (1.44x Ceres' 3.77), wall 19.5 (Ceres 15.8, its solve 10.8);
     street-300, 1 round: reference 12.03 CPU s (0.45x Ceres' 26.69), 10 steps vs Ceres' 40, both at 2.74539e4.
-  Now (11d4d3d + docstrings, `--before` = d5ac15b; load 9.5 at the start, 9.3 between, 14.2 at the end,
+  Then (11d4d3d + docstrings, `--before` = d5ac15b; load 9.5 at the start, 9.3 between, 14.2 at the end,
   with chapter 5's fairness sweep running beside it):
     BAL-49, 3 rounds: before 6.83 CPU s (1.59x; its default solver is SuperLU), now 4.90 (1.14x), Ceres 4.29;
       costs 1.33443e4 (32 steps) vs Ceres' 1.33712e4 (31 steps); scipy cookbook 39.4 CPU s, 1.34089e4.
@@ -56,15 +59,28 @@ Measured 2026-12-05 on the shared 2-core machine, CPU time the fair column (proc
       final costs 27453.91 (reference, 10 steps) vs 27453.94 (Ceres).
   Wall times this round are void for Ceres: under nice 19 on the loaded machine its 2 threads waited
   (street-300: 241 s wall for 28 s CPU), so the printed "goal met" on wall says nothing; compare CPU.
-Goal (time <= Ceres' at a cost <= Ceres'): met on street-300 (0.38x CPU, lower cost); NOT met on BAL-49
-(1.14x CPU at a lower cost). Per BAL-49 iteration (~150 ms CPU; Ceres ~140 ms, both threads): assembling
-W V^-1 W^T ~50 ms (one BLAS product per camera pair, upper triangle, 123,086 observation pairs in 1,027
-blocks; the gathers of the pairs' 3x9 blocks are half of it), the normal equations ~25 ms, the Jacobians
-~25 ms, the rest of the Schur solve ~20 ms (cProfile with a process-time clock). Not tried this round:
-block-Jacobi PCG on the implicit S (Ceres' ITERATIVE_SCHUR), which skips the assembly; but one implicit
-product S x alone costs 6.8 ms in numpy on BAL-49 (measured), so ~7 CG iterations per step would
-already eat the 50 ms saved. On street-300, SuperLU on S (2,700 unknowns, 6,058 blocks) takes ~75 ms,
-less than assembling it, so PCG would not pay there either.
+This round (issue 32; 7d0e887 and 8e9b107, `--before` = 27b5532, the state above; the machine at load
+16-19 from other jobs, everything under nice 19, so each process got ~12-14 % of a core and wall times
+are ~7x CPU times; Ceres' two threads get two shares of that, as do the reference's with threads=2):
+  run 1 (7d0e887, all rows; load 16.0 at the start, 19.1 between, BAL-49 3 rounds, street-300 1 round):
+    BAL-49: before 4.43 CPU s (1.22x Ceres' 3.64), wall 1.88x Ceres' solve (17.75 s); one thread 3.01 s
+      (0.83x), wall 1.18x; two threads 3.07 s (0.84x), wall 1.07x; costs 1.33443e4 (0.9980x Ceres'),
+      32 steps vs 31; scipy cookbook 36.36 CPU s (9.99x), 1.34089e4.
+    street-300: before 8.57 CPU s (0.35x Ceres' 24.80), wall 0.62x Ceres' solve; one thread 5.91 (0.24x),
+      wall 0.42x; two threads 5.81 (0.23x), wall 0.35x; all at 2.74539e4 (1.0000x), 10 steps vs 40.
+  run 2 (8e9b107: threads=2 also splits V_k, W_k, V^-1 W^T and the back-substitution; BAL-49 only, no
+    scipy, 3 rounds; load 17.6 -> 19.2): before 4.59 CPU s (1.29x Ceres' 3.55), wall 1.77x Ceres'
+    solve (21.71 s); one thread 2.93 (0.82x), wall 1.23x; two threads 3.23 (0.91x), wall 0.90x.
+Goal (time <= Ceres' at a cost <= Ceres'): street-300 met with one thread and two. BAL-49: CPU met
+(0.82x with one thread); wall met with two threads in run 2 (0.90x Ceres' solve time, 0.82x its total wall),
+not with one (1.18-1.23x), and run 1's two-thread figure (1.07x, before 8e9b107) missed it: on this
+loaded machine the wall ratio mostly counts how many runnable threads each solver has, so read it
+beside the CPU column. Where the one-thread time went (BAL-49, 7d0e887, cProfile with a process-time
+clock, ~95 ms an iteration): the Jacobians ~23 ms, W V^-1 W^T ~30 ms (gathers now ~7 ms of it: the
+pairs k = l need none, the rest are gathered in cache-sized chunks), the rest of the Schur solve ~16 ms
+(V_j^-1 W_k^T alone ~8 ms), the normal equations ~17 ms. Not tried: block-Jacobi PCG on the implicit S
+(Ceres' ITERATIVE_SCHUR; one implicit product S x costs 6.8 ms in numpy on BAL-49, so ~7 CG iterations
+would eat the assembly it saves) and torch.
 """
 from __future__ import annotations
 
@@ -199,9 +215,9 @@ def _methods(args: tuple, before_tree: str | None, ceres_solve: list) -> dict:
     solver = "dense" if len(args[0]) <= 50 else "sparse"      # COLMAP's rule: DENSE_SCHUR up to 50 images
     tol = dict(ftol=FTOL, gtol=GTOL, xtol=XTOL, max_iter=MAX_ITER)
 
-    def reference(package, method):
+    def reference(package, method, **threads):
         def run():
-            cams, pts, costs = package.bundle_adjust(*args, solver=method, **tol)
+            cams, pts, costs = package.bundle_adjust(*args, solver=method, **tol, **threads)
             return cams, pts, len(costs) - 1
         return run
 
@@ -216,6 +232,7 @@ def _methods(args: tuple, before_tree: str | None, ceres_solve: list) -> dict:
     if before_tree:
         methods["reference, before (its default: SuperLU)"] = reference(_package_from(before_tree, "ch05_before"), "auto")
     methods[f"reference ({solver} Schur)"] = reference(ba, solver)
+    methods[f"reference ({solver} Schur, 2 threads)"] = reference(ba, solver, threads=2)
     methods["pycolmap / Ceres"] = ceres
     return methods
 

@@ -68,12 +68,20 @@ def reprojection_jacobians(cameras: np.ndarray, points: np.ndarray, cam_idx: np.
     du_dP[:, :, 2] = (f * d + e * r2)[:, None] * p
     du_dP *= -1.0 / z[:, None, None]
     J_cam = np.empty((len(z), 2, 9))
-    J_cam[:, :, 0:3] = np.cross(RX[:, None, :], du_dP)          # -du/dP [RX]x, row by row: RX x (row)
+    # -du/dP [RX]x, row by row: RX x (row), the cross product written out (np.cross's
+    # broadcasting machinery costs more than the arithmetic on (M, 2) columns).
+    a0, a1, a2 = RX[:, 0, None], RX[:, 1, None], RX[:, 2, None]
+    b0, b1, b2 = du_dP[:, :, 0], du_dP[:, :, 1], du_dP[:, :, 2]
+    J_cam[:, :, 0] = a1 * b2 - a2 * b1
+    J_cam[:, :, 1] = a2 * b0 - a0 * b2
+    J_cam[:, :, 2] = a0 * b1 - a1 * b0
     J_cam[:, :, 3:6] = du_dP
     J_cam[:, :, 6] = d[:, None] * p
     J_cam[:, :, 7] = (f * r2)[:, None] * p
     J_cam[:, :, 8] = (f * r2 * r2)[:, None] * p
-    return J_cam, du_dP @ R
+    # du/dX = du/dP R: the sum over P's three coordinates of column i of du/dP times row i of R.
+    J_pt = b0[:, :, None] * R[:, None, 0] + b1[:, :, None] * R[:, None, 1] + b2[:, :, None] * R[:, None, 2]
+    return J_cam, J_pt
 
 
 def sparse_jacobian(J_cam: np.ndarray, J_pt: np.ndarray, cam_idx: np.ndarray, pt_idx: np.ndarray,

@@ -7,7 +7,7 @@ from solutions.geometry import rodrigues
 
 from .bal import compose_left, residuals
 from .jacobians import reprojection_jacobians
-from .linear_algebra import normal_equations, observation_index, schur_solve
+from .linear_algebra import in_halves, normal_equations, observation_index, schur_solve
 from .robust import robust_cost, robust_weights
 
 
@@ -53,7 +53,8 @@ def _hold(U, V, W, g_c, g_p, fixed, fixed_pts, cam_idx, pt_idx) -> None:
 def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", scale: float = 1.0,
                   fix_gauge: bool = False, max_iter: int = 50, lambda0: float = 1e-4,
                   ftol: float = 1e-8, gtol: float = 1e-10, xtol: float = 1e-10, solver: str = "auto",
-                  verbose: bool = False, fixed: np.ndarray | None = None, fixed_points: np.ndarray | None = None):
+                  verbose: bool = False, fixed: np.ndarray | None = None, fixed_points: np.ndarray | None = None,
+                  threads: int = 1):
     """Exercise 5.14: Levenberg-Marquardt bundle adjustment of BAL cameras and points with Schur elimination.
 
     cameras (nc, 9), points (np, 3), cam_idx, pt_idx (M,), obs (M, 2): the problem and the start.
@@ -68,6 +69,10 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
     Stops when an accepted step lowers the cost by at most ftol times the cost before it (Ceres'
     function_tolerance: |cost change| <= ftol * cost), the largest gradient entry is below gtol,
     the step is at most xtol (|x| + xtol), or after max_iter iterations.
+    threads: 1, or 2 to share the per-observation work (projections, Jacobians, the blocks W_k, V_k,
+    V_j^-1 W_k^T) and the assembly of the reduced camera system between two threads, as Ceres uses
+    all cores (its num_threads).
+    The observations are sorted by camera once, so that each camera's are a contiguous run.
     Returns (cameras (nc, 9), points (np, 3), costs: list of the cost after every iteration,
     costs[0] the initial cost).
     """
@@ -78,15 +83,23 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
     fixed_cams = _gauge_mask(cams) if fix_gauge else np.zeros(cams.shape, bool)
     fixed = fixed_cams if fixed is None else fixed_cams | np.asarray(fixed, bool)
     fixed_pts = None if fixed_points is None or not np.any(fixed_points) else np.asarray(fixed_points, bool)
+    order = np.lexsort((pt_idx, cam_idx))   # observations sorted by camera once: each camera's a contiguous run
+    cam_idx, pt_idx, obs = cam_idx[order], pt_idx[order], obs[order]
     index = observation_index(cam_idx, pt_idx, nc, n_pts)  # who sees whom: fixed, so built once
-    r = residuals(cams, pts, cam_idx, pt_idx, obs)
+    m = len(obs)
+
+    def project(cameras, points):   # residuals, on two halves of the observations in two threads if threads > 1
+        return in_halves(lambda s: residuals(cameras, points, cam_idx[s], pt_idx[s], obs[s]), m, threads)
+
+    r = project(cams, pts)
     cost = robust_cost(r, loss, scale)
     costs = [cost]
     lam, nu = lambda0, 2.0
     for it in range(max_iter):
-        J_cam, J_pt = reprojection_jacobians(cams, pts, cam_idx, pt_idx)
-        w = robust_weights(r, loss, scale)
-        U, V, W, g_c, g_p = normal_equations(J_cam, J_pt, r, cam_idx, pt_idx, nc, n_pts, weights=w, index=index)
+        J_cam, J_pt = in_halves(lambda s: reprojection_jacobians(cams, pts, cam_idx[s], pt_idx[s]), m, threads)
+        w = None if loss == "linear" else robust_weights(r, loss, scale)   # plain least squares: all weights 1
+        U, V, W, g_c, g_p = normal_equations(J_cam, J_pt, r, cam_idx, pt_idx, nc, n_pts, weights=w, index=index,
+                                             threads=threads)
         _hold(U, V, W, g_c, g_p, fixed, fixed_pts, cam_idx, pt_idx)
         if max(np.abs(g_c).max(), np.abs(g_p).max(initial=0.0)) < gtol:
             break
@@ -96,14 +109,15 @@ def bundle_adjust(cameras, points, cam_idx, pt_idx, obs, loss: str = "linear", s
             Ud, Vd = U.copy(), V.copy()
             Ud[:, np.arange(9), np.arange(9)] += lam * dU
             Vd[:, np.arange(3), np.arange(3)] += lam * dV
-            dc, dp = schur_solve(Ud, Vd, W, g_c, g_p, cam_idx, pt_idx, method=solver, index=index)
+            dc, dp = schur_solve(Ud, Vd, W, g_c, g_p, cam_idx, pt_idx, method=solver, index=index,
+                                 threads=threads)
             dc[fixed] = 0.0
             if fixed_pts is not None:
                 dp[fixed_pts] = 0.0
             # Predicted decrease of the (IRLS) quadratic model: 0.5 dx^T (lambda D dx - g).
             predicted = 0.5 * (np.sum(dc * (lam * dU * dc - g_c)) + np.sum(dp * (lam * dV * dp - g_p)))
             new_cams, new_pts = _apply_step(cams, pts, dc, dp)
-            r_new = residuals(new_cams, new_pts, cam_idx, pt_idx, obs)
+            r_new = project(new_cams, new_pts)
             new_cost = robust_cost(r_new, loss, scale)
             gain = (cost - new_cost) / predicted if predicted > 0 else -1.0
             if np.isfinite(new_cost) and gain > 0:
