@@ -40,13 +40,18 @@ def cases_bundle_adjust(rng: np.random.Generator) -> Iterator[Case]:
     # 3) 5% outliers with a Cauchy loss (scale 2 px): the robust cost against Ceres', same loss.
     #    The oracle is Ceres through pycolmap, whose losses act per observation like the course's
     #    (scipy applies its loss to each scalar residual: another cost). The start is close (0.3°,
-    #    1 %), so the minimum reached does not depend on the path.
+    #    1 %), so the minimum reached does not depend on the path. max_iter=200: most draws converge in 7-10
+    #    iterations, but about 1 in 200 has a flat valley where LM creeps for 100-170 (Cauchy's weights fall as
+    #    residuals grow): with the default 50 the reference stopped 1.3e-4 and 7.1e-3 above Ceres' cost (fresh
+    #    seeds 4074206627 and 440918324, a correct answer losing points), and 1.7e-7 above and 1.6e-4 below
+    #    with 200 (7 slow draws in 400 fresh seeds: every one within 1e-4 or below Ceres' cost).
     prob = make_problem(rng, n_cams=8, n_points=120, noise=0.5, outliers=0.05, rot_deg=0.3, pos_frac=0.01,
                         pt_frac=0.01, f_frac=0.005)
     args = problem_args(prob)
     yield Case("5 % outliers, loss='cauchy', scale=2: robust cost vs Ceres (pycolmap)", args,
                Lazy(lambda a=args: colmap_bundle_adjust(*a, loss="cauchy", scale=2.0, tight=True)[2][-1]),
-               _metric_cost, 1e-4, "rel. excess", convert=_convert_ba, kwargs={"loss": "cauchy", "scale": 2.0},
+               _metric_cost, 1e-4, "rel. excess", convert=_convert_ba,
+               kwargs={"loss": "cauchy", "scale": 2.0, "max_iter": 200},
                info={"args": args, "loss": "cauchy", "scale": 2.0})
     # 4) 10 % outliers with loss='huber', scale=1 px: judged against the truth (held_out_rms). Huber still
     #    gives each outlier a bounded but linear pull, so the robust optimum itself sits 0.24-0.78 px
