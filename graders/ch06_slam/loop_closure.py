@@ -9,7 +9,8 @@ geometry: true shared landmarks survive, look-alike ones do not). Two kinds of p
 planted: a *corridor* — several consecutive places that look exactly like another stretch of the loop
 (temporally consistent, but their geometry fails) — and a *poster* — one place whose large, repeated
 poster also hangs at another place (its matches even pass a geometric check, but no neighbouring keyframe
-agrees; in the slow run the copy goes up after the first lap, so the best score alone picks the look-alike). Judged by outcome: every accepted loop closure must be true (precision 1.0) and at least half of
+agrees; in the slow run the copy goes up after the first lap, so the best score alone picks the look-alike).
+Judged by outcome: every accepted loop closure must be true (precision 1.0) and at least half of
 the revisiting keyframes must be detected (the rules of the reference detect 90-100 %).
 """
 from __future__ import annotations
@@ -103,8 +104,8 @@ def loop_keyframes(rng: np.random.Generator, n_places: int = 30, per_place: int 
     # the rules accepted a verified pair 2 places apart in 4 of 2000 seeds.
     gap = np.abs(np.arange(N)[:, None] - np.arange(N)[None, :])
     true = (dp <= 2) & (gap > 10)
-    return {"S": S, "inliers": inl, "place": place, "lap2": P, "true": true, "corridor": corridor, "poster": (int(c), int(d)),
-            "has_poster": has_poster}
+    return {"S": S, "inliers": inl, "place": place, "lap2": P, "true": true, "corridor": corridor,
+            "poster": (int(c), int(d)), "has_poster": has_poster}
 
 
 def gt_detect_loops(S, count_inliers, recent=10, min_inliers=20, consistency=3, group=2, *, use_recent=True,
