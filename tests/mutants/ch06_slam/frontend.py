@@ -347,7 +347,33 @@ def loops_no_minimum_score(*a, **k):
     return _fe_loops(*a, **k, consistent_on=False, min_score_on=False)
 
 
+def loops_constant_lag_half(S, count_inliers, *a, **k):
+    N = len(S)                                       # "the second half revisits the first, keyframe by keyframe"
+    return [(i, i - N // 2) for i in range(N // 2, N)]
+
+
+def loops_constant_lag_places(S, count_inliers, *a, **k):
+    return [(i, i - 30) for i in range(30, len(S))]  # the same, with the right lap length (30 places)
+
+
+def loops_score_argmax_only(S, count_inliers, recent=10, *a, **k):
+    return [(i, int(np.argmax(S[i, :i - recent]))) for i in range(recent + 1, len(S))]
+
+
+def loops_argmax_verified_second_lap(S, count_inliers, recent=10, min_inliers=20, *a, **k):
+    out = []                                         # best score first, verified, only where a revisit can be
+    for i in range(30, len(S)):
+        j = next((int(j) for j in np.argsort(-S[i, :i - recent]) if count_inliers(i, int(j)) >= min_inliers), None)
+        if j is not None:
+            out.append((i, j))
+    return out
+
+
 MUTANTS += [  # front-end entries (6.15)
+    ("6.15", "constant lag N // 2 (the laps assumed identical)", loops_constant_lag_half, "another speed"),
+    ("6.15", "constant lag of one lap (30 places)", loops_constant_lag_places, "another speed"),
+    ("6.15", "S argmax only", loops_score_argmax_only, None),
+    ("6.15", "best verified score on the second lap, no consistency", loops_argmax_verified_second_lap, "poster"),
     ("6.15", "recent keyframes not excluded", loops_recent_not_excluded, "recent keyframes"),
     ("6.15", "no temporal consistency", loops_no_temporal_consistency, "poster"),
     ("6.15", "no geometric verification", loops_no_geometric_verification, "geometry fails"),
