@@ -52,6 +52,16 @@ def floaters_prune_half(case):
     return _keep(case, case["gaussians"]["opacity"] >= 0.5)
 
 
+def floaters_crop_held_out(case):
+    """Deletes every Gaussian within 3.2 m of a held-out camera (where the floaters are drawn, 0.8-3 m before them)
+    and o < 0.005: uses the test poses instead of the training views' support, and deletes the post standing there."""
+    g = case["gaussians"]
+    mu = np.asarray(g["mu"])
+    C = [-np.asarray(R).T @ np.asarray(t) for R, t in zip(case["held_out"]["Rs"], case["held_out"]["ts"])]
+    d = np.min([np.linalg.norm(mu - c, axis=1) for c in C], 0)
+    return _keep(case, (d > 3.2) & (g["opacity"] >= 0.005))
+
+
 def floaters_unchanged(case):
     """Right cause, the colleague's Gaussians handed back."""
     return {"cause": "floaters", "gaussians": case["gaussians"]}
@@ -63,5 +73,6 @@ MUTANTS: list[tuple] = [
     ("8.19", "prunes large Gaussians", floaters_prune_large, "floaters remain"),
     ("8.19", "prunes at 0.9", floaters_prune_high, "removed surface Gaussians"),
     ("8.19", "prunes at 0.5 (the knob)", floaters_prune_half, "removed surface Gaussians"),
+    ("8.19", "crops 3.2 m around the held-out cameras", floaters_crop_held_out, "removed surface Gaussians"),
     ("8.19", "unchanged", floaters_unchanged, "floaters remain"),
 ]
