@@ -28,7 +28,7 @@ from graders.core.convert import OutputError
 from graders.core.engine import Case, Exercise, Hint, debug_practice, register, shared_run
 from graders.oracles.flow import cv_lucas_kanade, cv_pyramidal_lk
 
-from .lk import _draw
+from .lk import _bias_tol, _draw
 
 # ----------------------------------------------------------------- shared: the named cause
 
@@ -225,6 +225,18 @@ def _p90(pts2, truth):
     return float(np.percentile(np.linalg.norm(pts2[g] - truth["exact"][g], axis=1), 90))
 
 
+def _mean_off(pts2, truth) -> float:
+    """Length of the mean position error over the judged points: a shift every point shares (9.11's bias row)."""
+    g = truth["good"]
+    return float(np.linalg.norm((pts2[g] - truth["exact"][g]).mean(0)))
+
+
+def _positions_over(o, t) -> float:
+    """How far the positions are over their bars: the 90th percentile's, and the mean error's (a 0.1-0.15 px
+    offset added to a right answer stays under the percentile's bar, and correct tracks average out to <= 0.01)."""
+    return max(0.0, _p90(o["pts2"], t) - t["bar"], _mean_off(o["pts2"], t) - t["bias_bar"])
+
+
 def debug_large_motion(rng: np.random.Generator) -> tuple[dict, dict]:
     """A textured plane moving 24-34 px between the frames (9.11's scenes: flat and edge squares pasted in,
     0.5 grey levels of noise), the colleague's single-level LK (13-px window, 30 iterations) on a grid."""
@@ -237,6 +249,9 @@ def debug_large_motion(rng: np.random.Generator) -> tuple[dict, dict]:
         cv2_, _ = cv_pyramidal_lk(I1, I2, pts, win=WIN, max_level=3)
         if _p90_off_translation(truth) >= 2 * max(0.2, 2 * _p90(cv2_, truth)):    # one shift for all cannot pass
             break
+    else:
+        raise RuntimeError("9.18: no draw in 20 showed the symptom with a plane one shift cannot fit: the grader's "
+                           "scene generator needs a look (please report the seed)")
     steps = np.linalg.norm(pts2 - pts, axis=1)[status]
     back, st_b = cv_lucas_kanade(I2, I1, pts2, win=WIN, iters=30, max_level=0)
     fb = np.linalg.norm(back - pts, axis=1)[status & st_b]
@@ -252,7 +267,7 @@ def debug_large_motion(rng: np.random.Generator) -> tuple[dict, dict]:
     # The bar: twice OpenCV's pyramidal LK's 90th percentile on the same judged points, at least 0.2 px
     # (9.11's tolerance: the reference is within 0.02 px of OpenCV there); the colleague's is > 3 px.
     truth = dict(truth, cause="no_pyramid", shift=shift, broken=pts2, bar=max(0.2, 2 * _p90(cv2_, truth)),
-                 broken_p90=_p90(pts2, truth))
+                 broken_p90=_p90(pts2, truth), bias_bar=_bias_tol(truth))
     return case, truth
 
 
@@ -274,9 +289,9 @@ def _motion_cases(rng: np.random.Generator):
     case, truth = debug_large_motion(rng)
     call = shared_run(lambda fn, c=case: fn(copy.deepcopy(c)))
     yield _cause_case(case, truth, _convert_motion, call, weight=1.0)
-    yield Case(f"positions: 90th percentile <= {truth['bar']:.2f} px on {int(truth['good'].sum())} trackable points "
-               f"(the colleague's: {truth['broken_p90']:.1f} px)", (case,), truth,
-               lambda o, t: max(0.0, _p90(o["pts2"], t) - t["bar"]), 0.0, "px over", convert=_convert_motion,
+    yield Case(f"positions: 90th percentile <= {truth['bar']:.2f} px, mean error <= {truth['bias_bar']:.2f} px on "
+               f"{int(truth['good'].sum())} trackable points (the colleague's: {truth['broken_p90']:.1f} px)", (case,),
+               truth, _positions_over, 0.0, "px over", convert=_convert_motion,
                call=call, key="positions", tags=("positions",))
 
 
@@ -302,6 +317,10 @@ MOTION_HINTS = [
          "correlation) is not tracking — the plane turns and tilts, so its points move by different amounts. Track "
          "each point (9.11's pyramid); a global shift may at most be its first guess.",
          lambda c, o: c.key != "cause" and _one_motion(c, o)),
+    Hint("every tracked point is off by about the same vector (the mean error is over its bar): a sampler or "
+         "pixel-centre offset? The centre of the top-left pixel is (0, 0); sample I2 at x + d exactly.",
+         lambda c, o: c.key != "cause" and _mean_off(o["pts2"], c.expected) > c.expected["bias_bar"]
+         and _p90(o["pts2"], c.expected) <= 2 * c.expected["bar"]),
     Hint(lambda c, o: f"{100 * _far(c, o):.0f} % of the trackable points still end > 1 px off on a "
          f"{c.expected['shift']:.0f} px motion: more iterations or a larger window leave a single level "
          "linearised far from the answer. Go coarse to fine (9.11): track pts / 2^L at level L and pass the "

@@ -450,10 +450,19 @@ def _not_on_dask(out, expected) -> float:
     return float(out["local"] + (out["stale_workers"] > 0) + (out["tasks"] == 0))
 
 
+def _redo_bar(out) -> int:
+    """The most pairs the run after the crash may verify again: M - B + 1 with B = ceil(M / JUDGE_BATCH) batches.
+    The crashing run verified M - 1 pairs; a batch it left unfinished holds at most its size - 1 of them, so the
+    finished batches hold at least B - 1, however many ran at once (the reference redoes 1-2 of 9)."""
+    m = int(out["pairs"])
+    return m - -(-m // JUDGE_BATCH) + 1
+
+
 def _resume_problems(out, expected: np.ndarray) -> float:
-    """The second run's rows against the serial pipeline's, + 1 if it verified every pair again (nothing was
-    kept from before the crash), + 1 if the crashing run returned instead of failing."""
-    return _rows_differ(out["rows"], expected) + (out["verified"] >= out["pairs"]) + (not out["crashed"])
+    """The second run's rows against the serial pipeline's, + 1 if it verified more pairs again than the batches
+    left unfinished by the crash can hold (a checkpoint that keeps only the last batch redoes nearly all), + 1 if
+    the crashing run returned instead of failing."""
+    return _rows_differ(out["rows"], expected) + (out["verified"] > _redo_bar(out)) + (not out["crashed"])
 
 
 def _convert_resume(out, case: Case) -> dict:
@@ -519,10 +528,12 @@ PIPELINE_HINTS = [
          "(and never an image with itself).", _duplicates),
     Hint(_file_text, lambda c, out: "atomic" in c.tags and _file_problems(out, c.expected) > 0),
     Hint(_dask_text, lambda c, out: "dask" in c.tags and _not_on_dask(out, c.expected) > 0),
-    Hint(lambda c, out: f"the run after the crash verified all {out['pairs']} pairs again: what was done before the "
-         "crash was lost. Write each batch's rows atomically the moment it completes (as_completed), named by the "
-         "batch's content, and skip the batches already written when the pipeline runs again.",
-         lambda c, out: "resume" in c.tags and out["verified"] >= out["pairs"]),
+    Hint(lambda c, out: f"the run after the crash verified {out['verified']} of {out['pairs']} pairs again (at most "
+         f"{_redo_bar(out)}: only the batches unfinished at the crash): what was done before the crash was lost. "
+         "Write each batch's rows atomically the moment it completes (as_completed), each to its own file named by "
+         "the batch's content (not one file that the next batch replaces), and skip the batches already written "
+         "when the pipeline runs again.",
+         lambda c, out: "resume" in c.tags and out["verified"] > _redo_bar(out)),
     Hint("a verification kept failing after its retries and your run still returned: a run that cannot finish "
          "must raise (the batches already written stay for the next run), never return partial rows.",
          lambda c, out: "resume" in c.tags and not out["crashed"]),

@@ -178,6 +178,13 @@ def pyr_swapped(I1, I2, pts, win=21, max_level=3, iters=30, eps=0.01, min_eig=1.
     return pts + (p2 - pts)[:, ::-1], ok
 
 
+def pyr_shared_offset(I1, I2, pts, win=21, max_level=3, iters=30, eps=0.01, min_eig=1.0):
+    """Every position off by the same 0.12 px: I2 sampled a fraction of a pixel off (a sampler's or pixel-centre
+    offset); the 90th percentile alone stays under its 0.2 px."""
+    p2, ok = ref_lk.pyramidal_lk(I1, I2, pts, win, max_level, iters, eps, min_eig)
+    return p2 + np.array([0.12, 0.0]), ok
+
+
 def lk_swapped(I1, I2, pts, win=9, iters=20, eps=0.01, min_eig=1.0):
     """The displacement stacked as (dy, dx)."""
     p2, ok = ref_lk.lucas_kanade(I1, I2, pts, win, iters, eps, min_eig)
@@ -198,6 +205,7 @@ MUTANTS += [
     ("9.11", "I_t flipped (frames swapped)", pyr_flipped_it, None),
     ("9.11", "no eigenvalue test", pyr_no_eig_test, "no eigenvalue test"),
     ("9.11", "(dy, dx) stacked", pyr_swapped, "swapped"),
+    ("9.11", "a 0.12 px offset shared by every point", pyr_shared_offset, "same vector"),
 ]
 
 
@@ -406,6 +414,13 @@ def motion_global_shift(case):
     return {"cause": "no_pyramid", "pts2": np.asarray(case["pts"], float) + np.array([dx, dy])}
 
 
+def motion_shared_offset(case):
+    """The right repair, every position then off by the same 0.1 px in x and y (a sampler's offset): under the
+    90th percentile's bar alone."""
+    out = ref_debug.fix_large_motion(case)
+    return dict(out, pts2=np.asarray(out["pts2"], float) + np.array([0.1, 0.1]))
+
+
 def motion_unchanged(case):
     return {"cause": "no_pyramid", "pts2": case["pts2"]}
 
@@ -421,5 +436,6 @@ MUTANTS += [
     ("9.18", "41-px window, one level", motion_bigger_window, "coarse to fine"),
     ("9.18", "pyramid, guess not doubled", motion_pyramid_not_doubled, "coarse to fine"),
     ("9.18", "unchanged", motion_unchanged, "colleague's positions"),
+    ("9.18", "a 0.1 px offset shared by every point", motion_shared_offset, "same vector"),
     ("9.18", "one global shift (phase correlation)", motion_global_shift, "same vector"),
 ]

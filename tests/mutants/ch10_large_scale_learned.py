@@ -227,6 +227,26 @@ def pipeline_no_checkpoint(image_paths, pairs, stages, out_path, address=None, n
     return _pipeline(image_paths, pairs, stages, out_path, batch_size=batch_size, checkpoint=False)
 
 
+def pipeline_last_checkpoint_only(image_paths, pairs, stages, out_path, address=None, n_workers=2, retries=3,
+                                  batch_size=64):
+    """One checkpoint kept: each finished batch's file replaces the previous one's (the others deleted), so a crash
+    keeps one batch and the next run redoes nearly every pair (verified 7-8 of 9: it passed while the bar was
+    'fewer than all')."""
+    import os
+    write, parts = ref_dist.write_atomically, out_path + ".parts"
+
+    def write_last(path, obj):
+        if os.path.dirname(path) == parts:
+            for name in os.listdir(parts):
+                os.remove(os.path.join(parts, name))
+        write(path, obj)
+    ref_dist.write_atomically = write_last
+    try:
+        return _pipeline(image_paths, pairs, stages, out_path, batch_size=batch_size)
+    finally:
+        ref_dist.write_atomically = write
+
+
 def pipeline_loads_on_client(image_paths, pairs, stages, out_path, address=None, n_workers=2, retries=3,
                              batch_size=64):
     """Every image read on the client and shipped to the workers inside the tasks."""
@@ -240,7 +260,8 @@ MUTANTS += [
     ("10.10", "completion order", pipeline_completion_order, "in another order"),
     ("10.10", "duplicated pairs", pipeline_duplicate_pairs, "duplicated pairs"),
     ("10.10", "written in place", pipeline_writes_in_place, "os.replace"),
-    ("10.10", "no checkpoint per batch", pipeline_no_checkpoint, "verified all"),
+    ("10.10", "no checkpoint per batch", pipeline_no_checkpoint, "pairs again"),
+    ("10.10", "only the last batch's checkpoint kept", pipeline_last_checkpoint_only, "pairs again"),
     ("10.10", "images read on the client", pipeline_loads_on_client, "read on the client"),
 ]
 
@@ -273,9 +294,19 @@ def choose_by_confidence(case):
     return out
 
 
+def choose_by_high_confidence(case):
+    """A confidence threshold the other way: classical where the network's median confidence is above 0.9 of its
+    indoor value and classical registered every view (full marks on 30 seeds in 60 before each draw held an
+    out-of-domain scene at 0.6-0.7 of indoor)."""
+    return ["classical" if np.isfinite(s["classical"]["Rs"]).all()
+            and np.median(s["learned"]["confidence"]) > 0.9 * case["indoor_confidence"] else "learned"
+            for s in case["scenes"]]
+
+
 MUTANTS += [
     ("10.12", "always learned", choose_always_learned, "out of its training domain"),
     ("10.12", "confidence as an out-of-domain detector", choose_by_confidence, "stays confident"),
+    ("10.12", "classical above 0.9 of indoor confidence", choose_by_high_confidence, "stays confident"),
     ("10.12", "always classical", choose_always_classical, "left views unregistered"),
     ("10.12", "any view registered", choose_any_view_registered, "left views unregistered"),   # caught on 60 of 60 seeds
 ]
