@@ -14,8 +14,8 @@ time, and where the task runs on a Dask worker that worker is closed too: "a wor
 result file, which must end complete at `out_path` while a reader that opened the previous version keeps
 reading it whole (write a temporary file beside it, then `os.replace`), with nothing else left beside it;
 and a crash: every verification after the first M - 1 raises `PermanentTaskError` (the run must fail), then
-the same call again with healthy stages must give the right rows while verifying fewer than M pairs (the
-batches finished before the crash are read back, not recomputed).
+the same call again with healthy stages must give the right rows while verifying at most M - B + 1 pairs again
+(B batches: the batches finished before the crash are read back, not recomputed).
 
 The judge prepares the folder of `out_path` (in graded mode, inside the learner process's own writable
 folder) and holds the previous file open; stages sleep 0-12 ms per task so that completion order is not
@@ -65,14 +65,17 @@ class PipelineStages:
     at once are two stage calls in the judge at once, which `_after_run` sees in the markers' time windows.
     """
     served_concurrently = True
+    # The failure injection (_flaky, _scratch, _crash_after) and `_reliable` are private: graded mode's proxy refuses
+    # `_` names, so learner code can neither read which run is meant to crash nor fetch an unmarked copy whose calls
+    # the resume row would not count (a found bypass: `stages.reliable()` then scored the resume row).
 
     def __init__(self, n_corners: int = 40, flaky: tuple[str, ...] = (), scratch: str | None = None,
                  latency_s: float = 0.012, paths: tuple[str, ...] = (), crash_after: int | None = None):
-        self.n_corners, self.flaky, self.scratch, self.latency_s = n_corners, tuple(flaky), scratch, latency_s
-        self.paths, self.crash_after = tuple(str(p) for p in paths), crash_after
+        self.n_corners, self._flaky, self._scratch, self.latency_s = n_corners, tuple(flaky), scratch, latency_s
+        self.paths, self._crash_after = tuple(str(p) for p in paths), crash_after
 
     def _state(self) -> tuple:
-        return self.n_corners, self.flaky, self.scratch, self.latency_s, self.paths, self.crash_after
+        return self.n_corners, self._flaky, self._scratch, self.latency_s, self.paths, self._crash_after
 
     def __eq__(self, other) -> bool:      # by value: the sandbox compares a copy of the inputs after the call
         return isinstance(other, PipelineStages) and self._state() == other._state()
@@ -80,7 +83,7 @@ class PipelineStages:
     def __hash__(self) -> int:
         return hash(self._state())
 
-    def reliable(self) -> "PipelineStages":
+    def _reliable(self) -> "PipelineStages":
         return PipelineStages(self.n_corners, (), None, 0.0, self.paths)
 
     # -- failure injection and scrambled latencies
@@ -89,17 +92,17 @@ class PipelineStages:
         start = time.monotonic_ns()
         if self.latency_s:
             time.sleep(self.latency_s * (zlib.crc32(key.encode()) % 97) / 96)
-        if self.scratch is not None:
-            _record_where(self.scratch, kind, start)
-        if self.crash_after is not None and kind == "verify" and _runs(self.scratch, "verify") > self.crash_after:
+        if self._scratch is not None:
+            _record_where(self._scratch, kind, start)
+        if self._crash_after is not None and kind == "verify" and _runs(self._scratch, "verify") > self._crash_after:
             raise PermanentTaskError(f"task {key} failed: the cluster is down (simulated); the run cannot finish")
-        if key not in self.flaky or self.scratch is None:
+        if key not in self._flaky or self._scratch is None:
             return
         try:   # first call only: O_EXCL makes "first" exact across threads and processes
-            os.close(os.open(os.path.join(self.scratch, f".failed-{key}"), os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+            os.close(os.open(os.path.join(self._scratch, f".failed-{key}"), os.O_CREAT | os.O_EXCL | os.O_WRONLY))
         except FileExistsError:
             return
-        _lose_this_worker(self.scratch)
+        _lose_this_worker(self._scratch)
         raise TransientTaskError(f"task {key} failed transiently (simulated: its worker was lost); retry it")
 
     # -- the stages
@@ -231,7 +234,7 @@ def pipeline_images(rng: np.random.Generator, n_images: int = 6, size: int = 48)
 
 def gt_serial_pipeline(images, pairs, stages: PipelineStages) -> np.ndarray:
     """The serial pipeline: rows (i, j, inliers) for every unordered pair i < j once, sorted: (M, 3) int."""
-    stages = stages.reliable()
+    stages = stages._reliable()
     feats = [stages.extract(img) for img in images]
     unique = sorted({(min(i, j), max(i, j)) for i, j in pairs if i != j})
     return np.array([(i, j, stages.verify(feats[i], feats[j], stages.match(feats[i], feats[j]))) for i, j in unique],
@@ -362,7 +365,7 @@ def _run_and_inspect(fn, images, pairs, flaky_kinds: tuple[str, ...]) -> dict:
         with _open_no_link(out_path, "w") as f:
             json.dump(STALE, f)
         inode = os.stat(out_path).st_ino
-        reference = PipelineStages().reliable()
+        reference = PipelineStages()._reliable()
         feats = [reference.extract(img) for img in images]
         keys = {"extract": task_key("extract", images[len(images) // 2]),
                 "verify": task_key("verify", feats[0][0], feats[2][0])}
@@ -381,7 +384,7 @@ def _run_and_inspect(fn, images, pairs, flaky_kinds: tuple[str, ...]) -> dict:
 def _crash_and_resume(fn, images, pairs) -> dict:
     """Run the learner's pipeline with stages whose every verification after the first M - 1 fails for good (the
     run must fail: the client 'crashes'); then the same call with healthy stages. Reports the second run's rows,
-    whether the first failed, and how many pairs the second verified (fewer than M: it resumed)."""
+    whether the first failed, and how many pairs the second verified (at most M - B + 1: it resumed)."""
     folder, scratch = _folders_for(fn)
     try:
         paths = save_images(images, folder)
