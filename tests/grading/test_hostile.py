@@ -23,19 +23,14 @@ from notebook_stubs import ROOT, replace_stubs as _replace_stubs
 MARKER = f"cv3d-hostile-{uuid.uuid4().hex[:8]}"
 
 
-def _looping(name: str, busy: bool | Path = True) -> str:
-    """A stub that leaves a process and a file behind, then loops: burning CPU (busy), or waiting. With a path for
-    `busy`, only the first call anywhere burns CPU (it leaves that file); the later ones wait."""
-    first = (f"    import os\n    burn = not os.path.exists({str(busy)!r})\n    open({str(busy)!r}, 'a').close()\n"
-             if isinstance(busy, Path) else f"    burn = {busy}\n")
+def _looping(name: str, busy: bool = True) -> str:
+    """A stub that leaves a process and a file behind, then loops: burning CPU (busy), or waiting."""
     return (f"def {name}(*args, **kwargs):\n"
             f"    import subprocess, tempfile, time\n"
             f"    subprocess.Popen(['sleep', '600', '{MARKER}'], start_new_session=False)\n"
             f"    open(tempfile.mkstemp(prefix='{MARKER}-')[1], 'w').write('left behind')\n"
-            f"{first}"
             f"    while True:\n"
-            f"        if not burn:\n"
-            f"            time.sleep(0.05)\n")
+            f"        {'pass' if busy else 'time.sleep(0.05)'}\n")
 
 
 def _stub_function_names(path: Path) -> set[str]:
@@ -56,14 +51,12 @@ def _alive(marker: str) -> list[str]:
 def test_loop_in_every_stub_grades_quickly_and_cleanly(ch, tmp_path):
     path = ROOT / ch.notebook
     functions = _stub_function_names(path)
-    # Chapter 1 runs the default time-out budget (3 exercises) on the exercises' own limits (10 s of CPU each): its
-    # first stub called burns CPU, the next two wait and are stopped at WALL_FACTOR x 10 s of wall-clock time (three
-    # burning stubs were 32 CPU s of a CPU-bound suite). The other chapters' stubs wait in a loop, and the grader's
-    # per-exercise limit (5 s of CPU, loading included, or 3 x 5 s of wall-clock time for code that waits) stops the
-    # first, then the rest are "not run": nothing left behind either way, and the cores free for the other tests.
+    # Chapter 1's stubs burn CPU: the default time-out budget (3 exercises) runs on the exercises' own CPU limits
+    # (10 s each). The other chapters' stubs wait in a loop, and the grader's per-exercise limit (5 s of CPU, loading
+    # included, or 3 x 5 s of wall-clock time for code that waits) stops the first, then the rest are "not run": the
+    # other path to a time-out, with nothing left behind either, and the cores free for the other tests meanwhile.
     busy = ch.number == 1
-    burn = tmp_path / "burned-once" if busy else False
-    nb = _replace_stubs(path, lambda name: _looping(name, burn) if name in functions else None)
+    nb = _replace_stubs(path, lambda name: _looping(name, busy) if name in functions else None)
     nbformat.write(nb, tmp_path / path.name)
     scratch = tmp_path / "tmp"      # the grade's own temp directory: whatever it leaves is its own
     scratch.mkdir()
