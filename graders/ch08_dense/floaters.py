@@ -98,18 +98,23 @@ def views_seeing(mu, cams, margin: float = 0.0) -> np.ndarray:
     return count
 
 
+def _in_view(rng: np.random.Generator, K, R, t, m: int, margin: float, depth: tuple[float, float]):
+    """m random points a camera sees: pixels `margin` px inside its W x W image, at depths (z_cam) drawn in `depth`
+    (m). Returns X (m, 3) world points and their depths d (m,)."""
+    px = rng.uniform(margin, W - margin, (m, 2))
+    rays = np.linalg.solve(K, np.c_[px, np.ones(m)].T).T @ R           # world directions, z_cam = 1
+    d = rng.uniform(*depth, m)
+    return -R.T @ t + d[:, None] * rays, d
+
+
 def _floaters(rng: np.random.Generator, cams, held, wall_imgs, n: int) -> list[dict]:
     """Up to n floaters in the held-out views' frusta (0.8-3 m in front of them) that at most one training
     camera sees: a point no view constrains keeps its initial colour; one seen by a single view is coloured
     like the wall it covers there (it explains that view)."""
     out = []
     for h in rng.permutation(len(held)):
-        K, R, t = held[h]
         m = 300
-        px = rng.uniform(3, W - 3, (m, 2))
-        rays = np.linalg.solve(K, np.c_[px, np.ones(m)].T).T @ R           # world directions, z_cam = 1
-        d = rng.uniform(0.8, 3.0, m)
-        X = -R.T @ t + d[:, None] * rays
+        X, d = _in_view(rng, *held[h], m, margin=3.0, depth=(0.8, 3.0))
         s = np.repeat((rng.uniform(2.0, 5.0, m) * d / FOCAL)[:, None], 3, 1)
         q = np.tile([1.0, 0, 0, 0], (m, 1))
         seen = np.array([gt_project(X, q, s, R2, t2, K2, W, H)["visible"] for K2, R2, t2 in cams])
@@ -148,12 +153,8 @@ def _foreground(rng: np.random.Generator, cams, held) -> dict | None:
     of each camera that sees it): surface that a crop around the held-out cameras (or a radius around them) deletes with
     the floaters. None when no such place is found (the draw is redrawn)."""
     for h in rng.permutation(len(held)):
-        K, R, t = held[h]
         m = 400
-        px = rng.uniform(4, W - 4, (m, 2))
-        rays = np.linalg.solve(K, np.c_[px, np.ones(m)].T).T @ R           # world directions, z_cam = 1
-        d = rng.uniform(1.2, 2.4, m)
-        X = -R.T @ t + d[:, None] * rays
+        X, d = _in_view(rng, *held[h], m, margin=4.0, depth=(1.2, 2.4))
         X = X[:, None] + rng.uniform(-0.04, 0.04, (m, 3, 3))              # 3 Gaussians around each candidate
         ok = (views_seeing(X.reshape(-1, 3), cams, margin=4.0) >= 2).reshape(m, 3).all(1)
         for _, R2, t2 in cams:
