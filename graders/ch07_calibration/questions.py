@@ -38,7 +38,7 @@ register(
     choice_question(
         id="7.2", title="Reading a calibration's RMS", name="rms_verdicts", kind="concept",
         answers=["excellent", "acceptable", "recapture"], options=["excellent", "acceptable", "recapture"],
-        explanation="< 0.3 px: excellent (0.21 px); 0.3-0.8 px: acceptable (0.55 px, e.g. the real left views at "
+        explanation="< 0.3 px: excellent (0.21 px); 0.3-1 px: acceptable (0.55 px, e.g. the real left views at "
             "0.41 px); > 1 px: recapture (1.4 px: blur, a bad detection or a lens model too simple). A low RMS "
             "with views that all sit in the image centre is not a good calibration: check the coverage too.",
         hints={2: "1.4 px is above 1 px: recapture (look for blurred views or a wrong detection)."}),
