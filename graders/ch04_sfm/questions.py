@@ -26,8 +26,8 @@ SFM_CHOICE = choice_question(
     ["incremental", "global"], points=2,
     hints={0: "(a) wrong pairs from symmetric facades become wrong relative rotations; global SfM averages them "
               "into every camera, incremental SfM rejects them one image at a time.",
-           1: "(b) clean, dense, well-connected: global SfM solves all rotations, then all positions, then one "
-              "bundle adjustment — much faster than thousands of incremental BA rounds.",
+           1: "(b) clean, dense, well-connected: global SfM solves all rotations, then all positions, then a few "
+              "global bundle adjustments — much faster than thousands of incremental BA rounds.",
            2: "(c) a long video with loop closures: rotation averaging uses every loop at once and does not "
               "drift; incremental SfM is slow at 20,000 frames and accumulates error.",
            3: "(d) weakly connected views: global translation averaging needs well-connected, accurate pairs; "
