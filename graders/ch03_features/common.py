@@ -4,7 +4,7 @@ Detectors and descriptors are judged by what their users care about, on textured
 under an exact, known homography (`scene.random_homography_pair`, skimage textures) and on the
 real Graffiti pair (graf1 -> graf3, true H) when `$COURSE_DATA` has it:
   repeatability  fraction of keypoints of view 1 re-detected within 2.5 px in view 2 (both ways,
-                 in the region both views see), HPatches-style;
+                 in the region both views see), as Mikolajczyk et al. (IJCV 2005) measure it;
   MMA@t          mean matching accuracy: fraction of ratio-test matches whose reprojection error
                  under the true H is at most t px.
 Conventions (docs/CONVENTIONS.md): images (H, W) indexed [y, x]; keypoints (x, y) with the centre of
