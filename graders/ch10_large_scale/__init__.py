@@ -7,7 +7,8 @@ ground truth (textured-plane renders of known places, sub-reconstructions with k
 
 Modules (part A): `questions` (10.1-10.3, 10.14-10.16), `retrieval` (10.6), `sim3` (10.7),
 `merge` (10.8), `debug` (10.11).
-Modules (part B): `questions_learned` (10.4-10.5), `pointmaps` (10.9), `distributed` (10.10), `debug_learned` (10.12-10.13),
+Modules (part B): `questions_learned` (10.4-10.5), `pointmaps` (10.9), `distributed` (10.10; its stages in `stages`),
+`debug_learned` (10.12-10.13),
 `frontier` (10.17 and the classical-vs-pointmaps race of the widget).
 Importing the package registers the chapter; the names below are the API of the notebook, the tests
 and the benchmark.
@@ -35,8 +36,8 @@ __all__ = ["components", "components_after", "cv_fix_components", "top_k_pairs",
 # ---- part B (pointmaps, distributed, debug_learned, frontier, demo): add imports, DEBUG_GENERATORS entries
 # and __all__ names below this line.
 from . import questions_learned  # noqa: F401,E402 (registers 10.4-10.5)
-from .distributed import (PermanentTaskError, PipelineStages, TransientTaskError, gt_run_pipeline,  # noqa: E402
-                          gt_serial_pipeline, pipeline_images, save_images, task_key)
+from .distributed import gt_run_pipeline, gt_serial_pipeline, pipeline_images, save_images  # noqa: E402
+from .stages import PermanentTaskError, PipelineStages, TransientTaskError, task_key  # noqa: E402
 from .pointmaps import (alignment_errors, alignment_loss, gt_global_alignment, pair_graph,  # noqa: E402
                         pointmap_scene)
 

@@ -14,8 +14,12 @@ time, and where the task runs on a Dask worker that worker is closed too: "a wor
 result file, which must end complete at `out_path` while a reader that opened the previous version keeps
 reading it whole (write a temporary file beside it, then `os.replace`), with nothing else left beside it;
 and a crash: every verification after the first M - 1 raises `PermanentTaskError` (the run must fail), then
-the same call again with healthy stages must give the right rows while verifying at most M - B + 1 pairs again
-(B batches: the batches finished before the crash are read back, not recomputed).
+the same call again with healthy stages, in a fresh program (graded mode: a new learner process; self-study: a
+copy of the code with the module state it had before the crash), must give the right rows while verifying at most
+M - B + 1 pairs again (B batches: the batches finished before the crash are read back from disk, not recomputed)
+and every pair the crash left unverified through those stages (not an unmarked copy, not the learner's own code).
+Stages the learner's code changed (their failure injection switched off: self-study only, graded mode's stages
+stay in the judge) fail the rows that judge them.
 
 The judge prepares the folder of `out_path` (in graded mode, inside the learner process's own writable
 folder) and holds the previous file open; stages sleep 0-12 ms per task so that completion order is not
@@ -29,190 +33,17 @@ import json
 import os
 import shutil
 import tempfile
-import time
-import zlib
 
 import numpy as np
 
 from graders.kit import scene
 from graders.core.convert import OutputError
 from graders.core.engine import Case, Exercise, Hint, raised, register, shared_run
-from graders.core.sandbox import learner_of
+from graders.core.sandbox import learner_of, restart_point
+
+from .stages import PipelineStages, _open_no_link, _runs, pair_key, task_key
 
 STALE = {"pairs": [[0, 1, -1]], "note": "the previous run's result"}
-
-
-class TransientTaskError(RuntimeError):
-    """A task that fails once and succeeds when retried (a pre-empted node, a network blip)."""
-
-
-class PermanentTaskError(RuntimeError):
-    """A task that fails however often it is retried (here: the cluster going down mid-run)."""
-
-
-class PipelineStages:
-    """The pipeline's four stages (not callable itself: its methods are the tasks).
-
-    load(path) -> image (H, W) float, read from a `.npy` file (`save_images` writes them);
-    extract(image (H, W)) -> (kp (K, 2) float, desc (K, 25) float); match(f1, f2) -> (M, 2) int indices;
-    verify(f1, f2, matches) -> int, the inliers of the best translation (within 1.5 px).
-    flaky: task keys (`task_key`: the stage's name and a checksum of its inputs) that fail the first time
-    they run (marker files in `scratch` make "first" exact across threads and processes).
-    paths: if given, the only paths `load` reads (the judge's own images: learner code never makes it read
-    another file). crash_after: every verification after that many (counted in `scratch`) raises
-    `PermanentTaskError`.
-    Graded mode serves its methods concurrently (`served_concurrently`): two tasks the learner's Dask workers run
-    at once are two stage calls in the judge at once, which `_after_run` sees in the markers' time windows.
-    """
-    served_concurrently = True
-    # The failure injection (_flaky, _scratch, _crash_after) and `_reliable` are private: graded mode's proxy refuses
-    # `_` names, so learner code can neither read which run is meant to crash nor fetch an unmarked copy whose calls
-    # the resume row would not count (a found bypass: `stages.reliable()` then scored the resume row).
-
-    def __init__(self, n_corners: int = 40, flaky: tuple[str, ...] = (), scratch: str | None = None,
-                 latency_s: float = 0.012, paths: tuple[str, ...] = (), crash_after: int | None = None):
-        self.n_corners, self._flaky, self._scratch, self.latency_s = n_corners, tuple(flaky), scratch, latency_s
-        self.paths, self._crash_after = tuple(str(p) for p in paths), crash_after
-
-    def _state(self) -> tuple:
-        return self.n_corners, self._flaky, self._scratch, self.latency_s, self.paths, self._crash_after
-
-    def __eq__(self, other) -> bool:      # by value: the sandbox compares a copy of the inputs after the call
-        return isinstance(other, PipelineStages) and self._state() == other._state()
-
-    def __hash__(self) -> int:
-        return hash(self._state())
-
-    def _reliable(self) -> "PipelineStages":
-        return PipelineStages(self.n_corners, (), None, 0.0, self.paths)
-
-    # -- failure injection and scrambled latencies
-    def _task(self, kind: str, *inputs) -> None:
-        key = task_key(kind, *inputs)
-        start = time.monotonic_ns()
-        if self.latency_s:
-            time.sleep(self.latency_s * (zlib.crc32(key.encode()) % 97) / 96)
-        if self._scratch is not None:
-            _record_where(self._scratch, kind, start)
-        if self._crash_after is not None and kind == "verify" and _runs(self._scratch, "verify") > self._crash_after:
-            raise PermanentTaskError(f"task {key} failed: the cluster is down (simulated); the run cannot finish")
-        if key not in self._flaky or self._scratch is None:
-            return
-        try:   # first call only: O_EXCL makes "first" exact across threads and processes
-            os.close(os.open(os.path.join(self._scratch, f".failed-{key}"), os.O_CREAT | os.O_EXCL | os.O_WRONLY))
-        except FileExistsError:
-            return
-        _lose_this_worker(self._scratch)
-        raise TransientTaskError(f"task {key} failed transiently (simulated: its worker was lost); retry it")
-
-    # -- the stages
-    def load(self, path: str) -> np.ndarray:
-        path = os.fspath(path)
-        if self.paths and path not in self.paths:
-            raise ValueError(f"{path!r} is not one of the pipeline's images")
-        self._task("load", path)
-        with _open_no_link(path, "rb") as f:            # never through a link planted in the folder
-            image = np.load(f, allow_pickle=False)
-        if image.ndim != 2 or image.dtype != np.float64:
-            raise ValueError(f"{path!r} is not an (H, W) float image")
-        return image
-
-    def extract(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        self._task("extract", image)
-        img = np.asarray(image, float)
-        gy, gx = np.gradient(img)
-        box = lambda a: sum(np.roll(np.roll(a, dy, 0), dx, 1) for dy in (-1, 0, 1) for dx in (-1, 0, 1))
-        Sxx, Syy, Sxy = box(gx * gx), box(gy * gy), box(gx * gy)
-        H = Sxx * Syy - Sxy ** 2 - 0.05 * (Sxx + Syy) ** 2           # Harris response
-        H[:4], H[-4:], H[:, :4], H[:, -4:] = -np.inf, -np.inf, -np.inf, -np.inf
-        peak = H == np.max([np.roll(np.roll(H, dy, 0), dx, 1) for dy in (-2, -1, 0, 1, 2) for dx in (-2, -1, 0, 1, 2)], 0)
-        ys, xs = np.nonzero(peak & np.isfinite(H))
-        order = np.lexsort((xs, ys, -H[ys, xs]))[:self.n_corners]  # strongest first, ties by position
-        ys, xs = ys[order], xs[order]
-        patches = np.array([img[y - 2:y + 3, x - 2:x + 3].ravel() for y, x in zip(ys, xs)]).reshape(-1, 25)
-        patches = patches - patches.mean(1, keepdims=True)
-        desc = patches / np.maximum(np.linalg.norm(patches, axis=1, keepdims=True), 1e-12)
-        return np.c_[xs, ys].astype(float), desc
-
-    def match(self, f1, f2) -> np.ndarray:
-        self._task("match", f1[0], f2[0])
-        d = 2 - 2 * f1[1] @ f2[1].T                                    # squared distance of unit descriptors
-        if d.size == 0:
-            return np.zeros((0, 2), int)
-        a, b = np.argmin(d, 1), np.argmin(d, 0)
-        i = np.flatnonzero(b[a] == np.arange(len(a)))                  # mutual nearest neighbours
-        return np.c_[i, a[i]].astype(int)
-
-    def verify(self, f1, f2, matches) -> int:
-        self._task("verify", f1[0], f2[0])
-        m = np.asarray(matches, int).reshape(-1, 2)
-        if len(m) == 0:
-            return 0
-        shift = f2[0][m[:, 1]] - f1[0][m[:, 0]]                        # each match's translation
-        close = np.linalg.norm(shift[:, None] - shift[None], axis=2) <= 1.5
-        return int(close.sum(1).max())                                 # every match tried as the hypothesis
-
-
-def task_key(kind: str, *inputs) -> str:
-    """A task's identity from its inputs (what a content-addressed cache would use)."""
-    crc = 0
-    for a in inputs:
-        crc = zlib.crc32(a.encode() if isinstance(a, str) else np.ascontiguousarray(a, float).tobytes(), crc)
-    return f"{kind}-{crc:08x}"
-
-
-def _scheduler_of(worker) -> str | None:
-    return getattr(getattr(worker, "scheduler", None), "address", None)
-
-
-def _workers_here():
-    """(this task's Dask worker or None, running workers of this process on its scheduler, running workers of
-    this process on other schedulers — a cluster an earlier run left open)."""
-    try:
-        from distributed import Worker, get_worker
-        from distributed.core import Status
-        worker = get_worker()
-        running = [w for w in list(Worker._instances) if w.status == Status.running]
-    except Exception:        # not on a Dask worker (serial loop, threads scheduler)
-        return None, [], []
-    ours = [w for w in running if _scheduler_of(w) == _scheduler_of(worker)]
-    return worker, ours, [w for w in running if _scheduler_of(w) != _scheduler_of(worker)]
-
-
-def _record_where(scratch: str, kind: str, start_ns: int) -> None:
-    """One marker file per task run: on a Dask worker or not, how many workers of other schedulers (a cluster
-    left open by an earlier run) were running in the process, and the time window of its latency
-    (time.monotonic_ns() at its start and now)."""
-    worker, _, others = _workers_here()
-    name = (f".ran-{kind}-{'worker' if worker is not None else 'local'}-{len(others)}-{os.getpid()}-{start_ns}-"
-            f"{time.monotonic_ns()}")
-    try:
-        os.close(os.open(os.path.join(scratch, name), os.O_CREAT | os.O_EXCL | os.O_WRONLY))
-    except OSError:
-        pass
-
-
-def _runs(scratch: str | None, kind: str) -> int:
-    """How many runs of a stage the markers in `scratch` record."""
-    return sum(n.startswith(f".ran-{kind}-") for n in os.listdir(scratch)) if scratch else 0
-
-
-def _lose_this_worker(scratch: str) -> None:
-    """If this task runs on a Dask worker and another worker of the same scheduler is still running, close
-    this one (the scheduler then reruns its tasks elsewhere), once per run. The last worker of a scheduler is
-    never closed: the run would wait forever for a worker, which is a test of patience, not of retries. Workers
-    of another scheduler (a cluster an earlier run left open) do not count: with them counted, the run's own last
-    worker was closed and the check hung until its time limit. Once per run: two flaky tasks running at the same
-    time on the two workers each saw the other still running and both closed theirs (the close is asynchronous),
-    and the run hung the same way (seen in the contract suite, 10.10's mutants graded one after another)."""
-    worker, ours, _ = _workers_here()
-    if worker is None or len(ours) < 2:
-        return
-    try:   # O_EXCL: exactly one task of the run closes its worker, across threads and processes
-        os.close(os.open(os.path.join(scratch, ".lost-worker"), os.O_CREAT | os.O_EXCL | os.O_WRONLY))
-    except FileExistsError:
-        return
-    worker.loop.add_callback(worker.close, timeout=2)
 
 
 # ----------------------------------------------------------------- the data and the serial oracle
@@ -324,12 +155,6 @@ def _folders_for(fn) -> tuple[str, str]:
     return learner.writable_folder("cv3d-10.10-"), tempfile.mkdtemp(prefix="cv3d-10.10-judge-", dir=learner.exchange)
 
 
-def _open_no_link(path: str, mode: str):
-    """The judge never follows a link the learner's code may have put in its folder."""
-    flags = (os.O_WRONLY | os.O_CREAT | os.O_TRUNC if "w" in mode else os.O_RDONLY) | os.O_NOFOLLOW
-    return os.fdopen(os.open(path, flags, 0o644), mode)
-
-
 def _overlapping(windows: list[tuple[int, int]]) -> int:
     """How many task runs' latency windows (start, end) overlap another run's: 0 when they ran one after another."""
     return sum(any(a < d and c < b for m, (c, d) in enumerate(windows) if m != k) for k, (a, b) in enumerate(windows))
@@ -343,7 +168,7 @@ def _after_run(folder: str, scratch: str, out_path: str, graded: bool) -> dict:
             written = json.load(f)
     except (OSError, ValueError) as exc:
         written = f"unreadable ({type(exc).__name__}: {exc})"
-    ours = (".failed-", ".ran-", ".lost-worker") if scratch == folder else ()    # the stages' markers, if there
+    ours = (".failed-", ".ran-", ".ok-", ".lost-worker") if scratch == folder else ()   # the stages' markers, if there
     leftovers = sorted(n for n in os.listdir(folder) if n not in ("matches.json", "images") and not n.startswith(ours))
     markers = [m for n in os.listdir(scratch) if len(m := n.split("-")) == 7 and m[0] == ".ran"
                and all(v.isdigit() for v in m[3:])]
@@ -370,10 +195,11 @@ def _run_and_inspect(fn, images, pairs, flaky_kinds: tuple[str, ...]) -> dict:
         keys = {"extract": task_key("extract", images[len(images) // 2]),
                 "verify": task_key("verify", feats[0][0], feats[2][0])}
         stages = PipelineStages(flaky=tuple(keys[k] for k in flaky_kinds), scratch=scratch, paths=tuple(paths))
+        state = dict(vars(stages))      # self-study: what the learner's code could change
         with _open_no_link(out_path, "r") as reader:         # a reader of the previous version
             rows = fn(paths, list(pairs), stages, out_path, batch_size=JUDGE_BATCH)
             old_text = reader.read()
-        return {"rows": rows, "old_intact": old_text == json.dumps(STALE),
+        return {"rows": rows, "old_intact": old_text == json.dumps(STALE), "tampered": dict(vars(stages)) != state,
                 "replaced": os.stat(out_path).st_ino != inode if os.path.exists(out_path) else False,
                 **_after_run(folder, scratch, out_path, learner_of(fn) is not None)}
     finally:
@@ -384,29 +210,46 @@ def _run_and_inspect(fn, images, pairs, flaky_kinds: tuple[str, ...]) -> dict:
 def _crash_and_resume(fn, images, pairs) -> dict:
     """Run the learner's pipeline with stages whose every verification after the first M - 1 fails for good (the
     run must fail: the client 'crashes'); then the same call with healthy stages. Reports the second run's rows,
-    whether the first failed, and how many pairs the second verified (at most M - B + 1: it resumed)."""
+    whether the first failed, how many pairs the second verified (at most M - B + 1: it resumed), and how many
+    pairs no stage call ever verified (a pair the crash left unverified must be verified by the stages in the
+    second run: its row cannot come from an unmarked copy of them, nor from the learner's own code).
+
+    The second run is a fresh program (`restart_point`: graded mode, a new learner process; self-study, a copy of
+    the code with its module state as before the crash), so only what the first run wrote to disk can reach it:
+    rows kept in a module-level dict are no checkpoint (they scored full marks)."""
     folder, scratch = _folders_for(fn)
     try:
         paths = save_images(images, folder)
         out_path = os.path.join(folder, "matches.json")
-        m = len({(min(i, j), max(i, j)) for i, j in pairs if i != j})
-        crashing = PipelineStages(scratch=scratch, paths=tuple(paths), crash_after=m - 1)
+        unique = sorted({(min(i, j), max(i, j)) for i, j in pairs if i != j})
+        kp = [PipelineStages()._reliable().extract(img)[0] for img in images]
+        stages = [PipelineStages(scratch=scratch, paths=tuple(paths), crash_after=len(unique) - 1),
+                  PipelineStages(scratch=scratch, paths=tuple(paths))]
+        states, restart = [dict(vars(s)) for s in stages], restart_point(fn)
         try:
-            fn(paths, list(pairs), crashing, out_path, batch_size=JUDGE_BATCH)
+            fn(paths, list(pairs), stages[0], out_path, batch_size=JUDGE_BATCH)
             crashed = False
         except Exception:           # noqa: BLE001 — the run is meant to fail; how is the learner's business
             crashed = True
         before = _runs(scratch, "verify")
-        rows = fn(paths, list(pairs), PipelineStages(scratch=scratch, paths=tuple(paths)), out_path,
-                  batch_size=JUDGE_BATCH)
-        return {"rows": rows, "crashed": crashed, "pairs": m, "verified": _runs(scratch, "verify") - before,
+        rows = restart()(paths, list(pairs), stages[1], out_path, batch_size=JUDGE_BATCH)
+        unverified = {pair_key(kp[i], kp[j]) for i, j in unique} - {n[4:] for n in os.listdir(scratch)
+                                                                     if n.startswith(".ok-")}
+        return {"rows": rows, "crashed": crashed, "pairs": len(unique), "verified": _runs(scratch, "verify") - before,
+                "unverified": len(unverified), "tampered": [dict(vars(s)) for s in stages] != states,
                 **_after_run(folder, scratch, out_path, learner_of(fn) is not None)}
     finally:
         shutil.rmtree(folder, ignore_errors=True)
         shutil.rmtree(scratch, ignore_errors=True)
 
 
+TAMPERED = ("your code changed the stages it was given (an attribute or a method of `stages`): their failures are what "
+            "the check tests; handle them (retries, checkpoints), do not switch them off")
+
+
 def _convert_rows(out, case: Case) -> np.ndarray:
+    if isinstance(out, dict) and out.get("tampered"):   # self-study only: graded mode's stages stay in the judge
+        raise OutputError(TAMPERED)
     rows = out["rows"] if isinstance(out, dict) else out
     try:
         rows = np.asarray(rows)
@@ -464,13 +307,16 @@ def _redo_bar(out) -> int:
 def _resume_problems(out, expected: np.ndarray) -> float:
     """The second run's rows against the serial pipeline's, + 1 if it verified more pairs again than the batches
     left unfinished by the crash can hold (a checkpoint that keeps only the last batch redoes nearly all), + 1 if
-    the crashing run returned instead of failing."""
-    return _rows_differ(out["rows"], expected) + (out["verified"] > _redo_bar(out)) + (not out["crashed"])
+    the crashing run returned instead of failing, + 1 if a row's pair was never verified by the stages."""
+    return (_rows_differ(out["rows"], expected) + (out["verified"] > _redo_bar(out)) + (not out["crashed"])
+            + (out["unverified"] > 0))
 
 
 def _convert_resume(out, case: Case) -> dict:
     if not isinstance(out, dict) or "verified" not in out:
         raise OutputError("the pipeline returned nothing to inspect")
+    if out.get("tampered"):
+        raise OutputError(TAMPERED)
     return dict(out, rows=_convert_rows(out["rows"], case))
 
 
@@ -534,9 +380,12 @@ PIPELINE_HINTS = [
     Hint(lambda c, out: f"the run after the crash verified {out['verified']} of {out['pairs']} pairs again (at most "
          f"{_redo_bar(out)}: only the batches unfinished at the crash): what was done before the crash was lost. "
          "Write each batch's rows atomically the moment it completes (as_completed), each to its own file named by "
-         "the batch's content (not one file that the next batch replaces), and skip the batches already written "
-         "when the pipeline runs again.",
+         "the batch's content (not one file that the next batch replaces), and skip the batches already written when "
+         "the pipeline runs again (it runs as a new program, as after a real crash: rows kept in memory are gone).",
          lambda c, out: "resume" in c.tags and out["verified"] > _redo_bar(out)),
+    Hint(lambda c, out: f"the run after the crash returned rows for {out['unverified']} pair(s) that no call of its "
+         "stages ever verified (the crash left them unverified): rows come from the stages the run is given, not "
+         "from a copy of them or code of your own.", lambda c, out: "resume" in c.tags and out["unverified"] > 0),
     Hint("a verification kept failing after its retries and your run still returned: a run that cannot finish "
          "must raise (the batches already written stay for the next run), never return partial rows.",
          lambda c, out: "resume" in c.tags and not out["crashed"]),

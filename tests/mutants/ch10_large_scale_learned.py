@@ -5,8 +5,12 @@ writing DUSt3R's global alignment (one scale for every pair, confidences ignored
 flagged pairs, no spanning-tree start, a spanning tree over the wrong weights, camera-to-world poses returned);
 10.10's those of a first
 distributed pipeline (no retries, results in completion order, duplicated pairs, a result file written in
-place, no Dask, a cluster left open, no checkpoint per batch, images read on the client); the DEBUG ones the wrong fixes of 10.12-10.13. Building blocks that are not the point of a mutant
-come from the reference solution, so each mutant differs from a correct implementation in one mistake.
+place, no Dask, a cluster left open, no checkpoint per batch, images read on the client, finished batches kept in
+memory) and two that defeat the stages' failure injection in self-study (an unmarked copy after a crash, failing
+stages swapped for reliable ones); the DEBUG ones the wrong fixes of 10.12-10.13 (10.12: confidence thresholds,
+registration counts short of every view, an inlier bar far above a sound verification). Building blocks that are
+not the point of a mutant come from the reference solution, so each mutant differs from a correct implementation in
+one mistake.
 """
 from __future__ import annotations
 
@@ -124,9 +128,10 @@ from solutions.ch10_large_scale import distributed as ref_dist  # noqa: E402
 
 
 def _pipeline(paths, pairs, stages, out_path, *, retries=3, batch_size=64, dedupe=True, in_order=True,
-              atomic=True, close=True, checkpoint=True, load_on_client=False, dask=True):
+              atomic=True, close=True, checkpoint=True, load_on_client=False, dask=True, memory=None):
     """The pipeline with one switch per mistake (every default is right): batches of pairs, each task loading and
-    extracting the images it uses, checkpoints in out_path + ".parts" written as batches complete."""
+    extracting the images it uses, checkpoints in out_path + ".parts" written as batches complete (memory: a dict
+    that keeps each out_path's finished batches instead of the files)."""
     import json
     import logging
     import os
@@ -137,7 +142,10 @@ def _pipeline(paths, pairs, stages, out_path, *, retries=3, batch_size=64, dedup
     parts = out_path + ".parts"
     os.makedirs(parts, exist_ok=True)
     names = [ref_dist.batch_name(b, paths) for b in batches]
-    done = ref_dist.read_done(parts, names) if checkpoint else {}
+    if memory is not None:
+        done = memory.setdefault(out_path, {})
+    else:
+        done = ref_dist.read_done(parts, names) if checkpoint else {}
     images = [stages.load(p) for p in paths] if load_on_client else None
 
     def task(batch):
@@ -253,6 +261,47 @@ def pipeline_loads_on_client(image_paths, pairs, stages, out_path, address=None,
     return _pipeline(image_paths, pairs, stages, out_path, batch_size=batch_size, load_on_client=True)
 
 
+_FINISHED: dict = {}     # out_path -> {batch name: rows}: lives as long as the process
+
+
+def pipeline_checkpoints_in_memory(image_paths, pairs, stages, out_path, address=None, n_workers=2, retries=3,
+                                   batch_size=64):
+    """Finished batches kept in a module-level dict instead of files: a run after a crash in the same process skips
+    them, a client that really crashed (a new process) has lost them. Full marks while the judge ran the resume in
+    the process that had crashed."""
+    return _pipeline(image_paths, pairs, stages, out_path, batch_size=batch_size, checkpoint=False, memory=_FINISHED)
+
+
+def pipeline_reliable_stages_after_a_crash(image_paths, pairs, stages, out_path, address=None, n_workers=2, retries=3,
+                                           batch_size=64):
+    """No checkpoints: a failed run leaves a flag file, and the run after it swaps in the stages' unmarked copy
+    (`stages._reliable()`, read off the grader's source; self-study: graded mode refuses `_` names) and recomputes
+    everything, which the crash row does not count. Full marks in self-study before the row wanted the pairs the
+    crash left unverified verified by the given stages."""
+    import os
+    flag = out_path + ".crashed"
+    if os.path.exists(flag):
+        stages = stages._reliable()
+    try:
+        rows = _pipeline(image_paths, pairs, stages, out_path, batch_size=batch_size, checkpoint=False)
+    except Exception:
+        open(flag, "w").close()
+        raise
+    if os.path.exists(flag):
+        os.remove(flag)
+    return rows
+
+
+def pipeline_failing_stages_swapped(image_paths, pairs, stages, out_path, address=None, n_workers=2, retries=3,
+                                   batch_size=64):
+    """No retries; instead the stages that fail are replaced by those of their unmarked copy (`stages._reliable()`,
+    read off the grader's source; self-study: graded mode's stages stay in the judge and refuse `_` names). Full
+    marks in self-study before the judge compared the stages' attributes after the run."""
+    reliable = stages._reliable()
+    stages.extract, stages.verify = reliable.extract, reliable.verify
+    return _pipeline(image_paths, pairs, stages, out_path, retries=0, batch_size=batch_size)
+
+
 MUTANTS += [
     ("10.10", "a serial loop, no Dask", pipeline_serial_loop, "ran outside a Dask worker"),
     ("10.10", "LocalCluster left open", pipeline_cluster_left_open, "still running"),
@@ -263,6 +312,9 @@ MUTANTS += [
     ("10.10", "no checkpoint per batch", pipeline_no_checkpoint, "pairs again"),
     ("10.10", "only the last batch's checkpoint kept", pipeline_last_checkpoint_only, "pairs again"),
     ("10.10", "images read on the client", pipeline_loads_on_client, "read on the client"),
+    ("10.10", "finished batches kept in memory, not on disk", pipeline_checkpoints_in_memory, "pairs again"),
+    ("10.10", "the stages' unmarked copy after a crash", pipeline_reliable_stages_after_a_crash, "no call of its stages"),
+    ("10.10", "failing stages swapped for reliable ones, no retries", pipeline_failing_stages_swapped, "changed the stages"),
 ]
 
 
@@ -297,10 +349,47 @@ def choose_by_confidence(case):
 def choose_by_high_confidence(case):
     """A confidence threshold the other way: classical where the network's median confidence is above 0.9 of its
     indoor value and classical registered every view (full marks on 30 seeds in 60 before each draw held an
-    out-of-domain scene at 0.6-0.7 of indoor)."""
+    out-of-domain scene below every in-domain one)."""
     return ["classical" if np.isfinite(s["classical"]["Rs"]).all()
             and np.median(s["learned"]["confidence"]) > 0.9 * case["indoor_confidence"] else "learned"
             for s in case["scenes"]]
+
+
+def _registered(s) -> np.ndarray:
+    return np.isfinite(s["classical"]["Rs"]).all(axis=(1, 2))
+
+
+def choose_first_view_registered(case):
+    """The health check on the first view only (np.isfinite(Rs[0])): a textureless room that lost other views keeps
+    its NaN poses (full marks on 5 seeds in 60 before a batch's textureless scene could lose a middle view)."""
+    return ["classical" if _registered(s)[0] else "learned" for s in case["scenes"]]
+
+
+def choose_half_the_views_registered(case):
+    """Classical where it registered at least half the views (full marks on 1 seed in 60 before a batch's textureless
+    scene could lose a single view)."""
+    return ["classical" if _registered(s).sum() >= 4 else "learned" for s in case["scenes"]]
+
+
+def choose_all_but_one_registered(case):
+    """Classical where it registered all views but at most one: the view it lost keeps a NaN pose (full marks on
+    every seed while textureless scenes lost 3-5 views)."""
+    return ["classical" if _registered(s).sum() >= 7 else "learned" for s in case["scenes"]]
+
+
+def choose_below_high_confidence(case):
+    """Trust the network only where it is more confident than anywhere indoors (1.3 of its indoor median), else
+    classical where it registered every view (full marks on 52 seeds in 60 while no out-of-domain scene reached
+    1.3)."""
+    return ["learned" if not _registered(s).all()
+            or np.median(s["learned"]["confidence"]) >= 1.3 * case["indoor_confidence"] else "classical"
+            for s in case["scenes"]]
+
+
+def choose_by_many_inliers(case):
+    """Classical only where its median inliers per view exceed 1,000: a sound verification with a few hundred
+    inliers is thrown away (full marks on 10 seeds in 60 while every registered scene had 300-2,000)."""
+    return ["classical" if np.median(s["classical"]["median_inliers"]) > 1000 else "learned" for s in case["scenes"]]
 
 
 MUTANTS += [
@@ -309,6 +398,11 @@ MUTANTS += [
     ("10.12", "classical above 0.9 of indoor confidence", choose_by_high_confidence, "stays confident"),
     ("10.12", "always classical", choose_always_classical, "left views unregistered"),
     ("10.12", "any view registered", choose_any_view_registered, "left views unregistered"),   # caught on 60 of 60 seeds
+    ("10.12", "first view registered", choose_first_view_registered, "left views unregistered"),
+    ("10.12", "half the views registered", choose_half_the_views_registered, "left views unregistered"),
+    ("10.12", "all views but one registered", choose_all_but_one_registered, "left views unregistered"),
+    ("10.12", "learned above 1.3 of indoor confidence", choose_below_high_confidence, "stays confident"),
+    ("10.12", "classical above 1,000 inliers", choose_by_many_inliers, "stays confident"),
 ]
 
 
