@@ -15,7 +15,8 @@ MUTANTS: list[tuple] = []
 
 # ----------------------------------------------------------------- 11.5 health_monitor
 
-def _monitor(stream, table, k, *, k_raise=None, k_clear=None, clear_band="normal", all_high=False, total=False):
+def _monitor(stream, table, k, *, k_raise=None, k_clear=None, clear_band="normal", all_high=False, total=False,
+             warn_pauses_clear=False):
     x = np.asarray(stream, float)
     events = []
     for j, row in enumerate(table):
@@ -30,7 +31,7 @@ def _monitor(stream, table, k, *, k_raise=None, k_clear=None, clear_band="normal
         for t in range(len(v)):
             if (normal[t] if on else past[t]):
                 run += 1
-            elif not total:
+            elif not total and not (warn_pauses_clear and on and not past[t]):
                 run = 0
             if run >= ((k_clear or k) if on else (k_raise or k)):
                 on, run = not on, 0
@@ -68,6 +69,12 @@ def monitor_counts_total(stream, table, k=3):
     return _monitor(stream, table, k, total=True)
 
 
+def monitor_warning_pauses_clear(stream, table, k=3):
+    """While in alert, only a frame past the alert threshold restarts the clearing run; a warning-band frame merely
+    pauses it (the spec: warning frames break both runs)."""
+    return _monitor(stream, table, k, warn_pauses_clear=True)
+
+
 def monitor_forgets_actions(stream, table, k=3):
     """Right frames, but reports "alert" instead of the row's action."""
     return [(t, m, a if a == "clear" else "alert") for t, m, a in _monitor(stream, table, k)]
@@ -80,6 +87,7 @@ MUTANTS += [
     ("11.5", "warning band counts as recovered", monitor_ignores_warning_band, "no longer past the alert"),
     ("11.5", "lower-is-bad read upside down", monitor_higher_is_always_bad, "read as 'higher is bad'"),
     ("11.5", "bad frames counted in total", monitor_counts_total, "counted in total"),
+    ("11.5", "a warning frame pauses the clearing run", monitor_warning_pauses_clear, "breaks the clearing run"),
     ("11.5", "no actions", monitor_forgets_actions, "not the actions"),
 ]
 
