@@ -94,7 +94,8 @@ MUTANTS += [
 
 # ----------------------------------------------------------------- 11.6 degradation_modes
 
-def _modes(alerts, names, hold, *, needs=NEEDS, component=COMPONENT, recover=True, hold_used=None):
+def _modes(alerts, names, hold, *, needs=NEEDS, component=COMPONENT, recover=True, hold_used=None,
+           best_now_only=False, fall_below=False):
     alerts = np.asarray(alerts, bool)
     failed = [{component[n] for j, n in enumerate(names) if n in component and a[j]} for a in alerts]
     ok = [[not needs[m] & f for m in MODES] for f in failed]
@@ -103,9 +104,11 @@ def _modes(alerts, names, hold, *, needs=NEEDS, component=COMPONENT, recover=Tru
     for t, row in enumerate(ok):
         streak = np.where(row, streak + 1, 0)
         if cur is None or not row[cur]:
-            cur = row.index(True)
+            cur = row.index(True, cur + 1) if fall_below and cur is not None else row.index(True)
         elif recover:
             better = [m for m in range(cur) if streak[m] >= hold]
+            if best_now_only:                                  # only the best mode available now may be climbed to
+                better = [m for m in better if m == row.index(True)]
             cur = better[0] if better else cur
         out.append(MODES[cur])
     return out
@@ -132,6 +135,17 @@ def modes_symptoms_are_failures(alerts, names, hold=10):
     return _modes(alerts, names, hold, component=component)
 
 
+def modes_upgrade_to_best_now_only(alerts, names, hold=10):
+    """Climbs only to the best mode available now, once it has had its hold; a better-than-current mode that has had
+    its hold is ignored while a still better one is back for fewer than hold frames."""
+    return _modes(alerts, names, hold, best_now_only=True)
+
+
+def modes_fall_below_only(alerts, names, hold=10):
+    """On a failure, the best available mode below the failed one (one-way down), not the best available now."""
+    return _modes(alerts, names, hold, fall_below=True)
+
+
 def modes_by_failure_count(alerts, names, hold=10):
     """One rung down per failed component (0 -> stereo VIO, 1 -> direct VO, ...), no hold."""
     alerts = np.asarray(alerts, bool)
@@ -143,6 +157,8 @@ MUTANTS += [
     ("11.6", "upgrades at once", modes_upgrade_at_once, "upgrades as soon as"),
     ("11.6", "never recovers", modes_never_recover, "never comes back"),
     ("11.6", "direct VO without stereo", modes_direct_vo_without_stereo, "direct VO needs stereo"),
+    ("11.6", "climbs only to the best mode available now", modes_upgrade_to_best_now_only, "has had its hold"),
+    ("11.6", "falls only below the failed mode", modes_fall_below_only, "can be better than the one that failed"),
     ("11.6", "symptoms switch the mode", modes_symptoms_are_failures, "downstream symptoms"),
     ("11.6", "one rung per failure", modes_by_failure_count, None),
 ]
