@@ -473,6 +473,17 @@ def smudge_without_baseline(before, now, shape):
     return _smudge_fit(before, now, shape, baseline=False)
 
 
+def smudge_largest_empty_disc(before, now, shape):
+    """Today's keypoints alone: the largest disc with none inside (4-px grid of centres, kept inside the image)."""
+    from scipy.spatial import cKDTree
+    h, w = shape
+    cx, cy = np.meshgrid(np.arange(8, w - 8, 4.0), np.arange(8, h - 8, 4.0))
+    c = np.c_[cx.ravel(), cy.ravel()]
+    r = cKDTree(np.concatenate([np.asarray(k, float) for k in now])).query(c)[0]     # nearest keypoint
+    r = np.minimum(r, np.minimum.reduce([c[:, 0], c[:, 1], w - 1 - c[:, 0], h - 1 - c[:, 1]]))
+    return np.r_[c[np.argmax(r)], r.max()]
+
+
 def smudge_diameter(before, now, shape):
     """Reports the diameter in the radius slot."""
     cx, cy, r = _smudge_fit(before, now, shape)
@@ -487,6 +498,7 @@ def smudge_row_col(before, now, shape):
 
 MUTANTS += [
     ("11.11", "no baseline", smudge_without_baseline, "not where the features went"),
+    ("11.11", "largest empty disc today", smudge_largest_empty_disc, "not where the features went"),
     ("11.11", "diameter", smudge_diameter, "not the diameter"),
     ("11.11", "row, column", smudge_row_col, "x and y swapped"),
 ]
