@@ -176,6 +176,11 @@ def blame_largest_deviation(stages, observed, baseline, z_max=4.0):
     return max(stages, key=lambda s: _z(observed, baseline, s).max())
 
 
+def blame_stage_rms(stages, observed, baseline, z_max=4.0):
+    """A stage score: the RMS of its metrics' z against z_max (one metric far off is diluted by the others)."""
+    return next((s for s in stages if np.sqrt(np.mean(_z(observed, baseline, s) ** 2)) > z_max), None)
+
+
 def blame_last_stage(stages, observed, baseline, z_max=4.0):
     """Walks the pipeline and keeps the last stage out of its baseline."""
     out = None
@@ -222,6 +227,7 @@ MUTANTS += [
     ("11.7", "z_max ignored (4 written in)", blame_fixed_threshold, "use the threshold you are given"),
     ("11.7", "dict order, not the stages' order", blame_in_dict_order, "not in the pipeline order"),
     ("11.7", "largest deviation", blame_largest_deviation, "largest deviation"),
+    ("11.7", "RMS of the stage's z", blame_stage_rms, "any one of its metrics"),
     ("11.7", "last stage", blame_last_stage, "last stage out of its baseline"),
     ("11.7", "ignores the baseline spread", blame_relative_change, "relative change is not a deviation"),
     ("11.7", "first metric only", blame_first_metric_only, None),
