@@ -217,12 +217,16 @@ def _brown(x, dist):
     return np.c_[u * radial + 2 * p1 * u * w + p2 * (r2 + 2 * u * u), w * radial + p1 * (r2 + 2 * w * w) + 2 * p2 * u * w]
 
 
-def _rs_frames(rng: np.random.Generator, K, dist, line_delay, rates, n_points: int) -> dict:
+def _rs_frames(rng: np.random.Generator, K, dist, line_delay, rates, n_points: int, drive: float = 0.0) -> dict:
+    """Frames panning at `rates` (rad/s); `drive` (m/s): the last one is also taken driving sideways (along its
+    camera's x axis, the pan's image direction) at that speed, where a model without the velocity fails."""
     F = len(rates)
     axes = np.c_[rng.normal(0, 0.3, F), np.sign(rng.normal(size=F)), rng.normal(0, 0.3, F)]  # mostly pans (about y)
     omega = axes / np.linalg.norm(axes, axis=1, keepdims=True) * np.asarray(rates)[:, None]
     v = rng.normal(0, 1, (F, 3)) * 0.3 * (np.asarray(rates)[:, None] > 0)
     R0 = np.array([scene.random_rotation(rng, 30.0) for _ in range(F)])
+    if drive:
+        v[-1] = R0[-1].T @ [drive, 0.0, 0.0]
     t0 = rng.normal(0, 0.5, (F, 3))
     X = np.array([(_points_in_view(rng, K, n_points, depth=(2.0, 8.0)) - t) @ R for R, t in zip(R0, t0)])
     uv = np.array([rs_project(X[f], K, dist, R0[f], t0[f], omega[f], v[f], line_delay) for f in range(F)])
@@ -232,12 +236,14 @@ def _rs_frames(rng: np.random.Generator, K, dist, line_delay, rates, n_points: i
 def debug_rolling_shutter(rng: np.random.Generator, n_points: int = 40) -> tuple[dict, dict]:
     """7.22 — reprojection errors of 5-20 px while the camera pans fast, ~0.4 px when it is still; a colleague
     re-calibrated K and it did not help. The camera reads its rows out top to bottom, 20-60 µs apart. The case:
-    K, dist (right), six frames (two still, four panning at 1-3 rad/s) with each frame's pose at row 0, its gyro
-    rate omega (camera frame) and velocity v (world), the landmarks X (world) and their pixels."""
+    K, dist (right), six frames (two still, four panning at 1-3 rad/s, the last of them also driving sideways at
+    3-5 m/s, where a model without the velocity fails) with each frame's pose at row 0, its gyro rate omega (camera
+    frame) and velocity v (world), the landmarks X (world) and their pixels."""
     K = scene.random_intrinsics(rng, *SIZE, hfov_deg=(55.0, 75.0))
     dist = scene.random_distortion(rng, "mild")
     line_delay = rng.uniform(20e-6, 60e-6)
-    case = dict(_rs_frames(rng, K, dist, line_delay, [0.0, 0.0, *rng.uniform(1.0, 3.0, 4)], n_points),
+    drive = rng.choice([-1, 1]) * rng.uniform(3.0, 5.0)
+    case = dict(_rs_frames(rng, K, dist, line_delay, [0.0, 0.0, *rng.uniform(1.0, 3.0, 4)], n_points, drive),
                 K=K, dist=dist, rows=SIZE[1])
     held = _rs_frames(rng, K, dist, line_delay, rng.uniform(1.0, 3.0, 4), n_points)    # other pans, never shown
     truth = {"line_delay": line_delay, "K": K, "held": held, "dist": dist, "rows": SIZE[1]}
@@ -277,12 +283,22 @@ def gt_fix_rolling_shutter(case: dict) -> dict:
     return {"K": np.asarray(case["K"], float), "line_delay": float(res.x) * 1e-6}
 
 
+def _velocity_ignored(c, out) -> bool:
+    """The line delay a rolling-shutter fit without the camera's velocity (v = 0 on every frame) finds, within 2 %."""
+    case = c.args[0]
+    d = gt_fix_rolling_shutter(dict(case, v=np.zeros_like(np.asarray(case["v"], float))))["line_delay"]
+    return abs(out["line_delay"] - d) < 0.02 * abs(d)
+
+
 RS_HINTS = [
     Hint("a global-shutter model (line delay 0): re-calibrating K fits one pan's skew into the principal point and "
          "focal length, and the next pan goes another way. Model each row's exposure time and fit the line delay.",
          lambda c, out: abs(out["line_delay"]) < 1e-7),
     Hint("that is the readout time of the whole frame: the line delay is per row (divide by the number of rows).",
          lambda c, out: abs(out["line_delay"] / (c.expected["line_delay"] * c.expected["rows"]) - 1) < 0.05),
+    Hint("the camera's velocity is left out: by the time row y is exposed it has moved by v τ as well as turned "
+         "(C(τ) = C0 + v τ). In the frame taken driving at several m/s that motion skews the image too, and a "
+         "rotation-only model puts it into the line delay.", _velocity_ignored),
     Hint("a negative line delay: rows are read top to bottom, so a fit that wants time to run backwards is turning "
          "the camera the wrong way (R(tau) = Exp(omega tau)^T R0 for a gyro rate in the camera frame).",
          lambda c, out: out["line_delay"] < -1e-7),

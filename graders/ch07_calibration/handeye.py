@@ -29,11 +29,11 @@ def _random_rotation(rng: np.random.Generator, lo_deg, hi_deg):
 
 
 def hand_eye_motions(rng: np.random.Generator, n: int = 10, rot_noise_deg: float = 0.1, trans_noise: float = 5e-4,
-                     axes: str = "general") -> dict:
+                     axes: str = "general", reach: tuple[float, float] = (0.1, 0.3)) -> dict:
     """Robot motions A_i and camera motions B_i with A_i X = X B_i (X: camera-to-hand, 4 x 4).
 
-    A_i: hand motions of 20-60° about random axes, 10-30 cm; B_i = X⁻¹ A_i X; then noise on both: a
-    random rotation of `rot_noise_deg` (per axis, Gaussian) and `trans_noise` metres. axes="two": two
+    A_i: hand motions of 20-60° about random axes, `reach` metres (10-30 cm); B_i = X⁻¹ A_i X; then noise on
+    both: a random rotation of `rot_noise_deg` (per axis, Gaussian) and `trans_noise` metres. axes="two": two
     motions about axes at least 45° apart, noise-free."""
     X = _T(_random_rotation(rng, 10, 170), rng.uniform(-0.15, 0.15, 3))
     A = []
@@ -46,7 +46,7 @@ def hand_eye_motions(rng: np.random.Generator, n: int = 10, rot_noise_deg: float
             if abs(a0 @ a1) / np.linalg.norm(a0) / np.linalg.norm(a1) < np.cos(np.radians(45)):
                 break
         t = rng.normal(size=3)
-        A.append(_T(R, t / np.linalg.norm(t) * rng.uniform(0.1, 0.3)))
+        A.append(_T(R, t / np.linalg.norm(t) * rng.uniform(*reach)))
     A = np.array(A)
     B = np.array([np.linalg.inv(X) @ a @ X for a in A])
     def noisy(T):
@@ -111,6 +111,9 @@ def _convert_X(out, case):
     return X
 
 
+LONG_REACH = {"rot_noise_deg": 0.5, "trans_noise": 2e-4, "reach": (0.4, 0.8)}
+
+
 def _cases(rng: np.random.Generator):
     cases = []
     for i in range(2):
@@ -122,19 +125,26 @@ def _cases(rng: np.random.Generator):
         cases.append(Case(f"2 exact motions ({i + 1}): translation", (d["A"], d["B"]), d["X"],
                           lambda X, T: 1e3 * float(np.linalg.norm(X[:3, 3] - T[:3, 3])), 1e-6, "mm",
                           convert=_convert_X, key=f"exact-{i + 1}-t", info=d, tags=("exact",)))
-    for i in range(2):
-        d = hand_eye_motions(rng, n=12)
+    # Two kinds of noisy draws: the lab's (0.1°, 0.5 mm per motion, 10-30 cm moves), and a long reach (40-80 cm
+    # moves) with rotations measured 0.5° and translations 0.2 mm: there each translation equation
+    # R_A t_X + t_A = R_X t_B + t_X pins R_X to ~0.03° (0.2 mm over 0.6 m), better than the rotations do, and
+    # the joint refinement the spec asks for uses it; rotation first without that refinement is 0.1-0.5° off
+    # (fails a long-reach case on 96 % of draws, 200 measured; the reference reached 0.46 of the tolerance).
+    for i, (kind, noise) in enumerate([("noisy", {}), ("noisy", {}), ("long-reach", LONG_REACH),
+                                       ("long-reach", LONG_REACH)]):
+        d = hand_eye_motions(rng, n=12, **noise)
         Xo = _stand_in(d["A"], d["B"])
         eR, et = rotation_angle_deg(Xo[:3, :3], d["X"][:3, :3]), 1e3 * float(np.linalg.norm(Xo[:3, 3] - d["X"][:3, 3]))
         # Noisy (0.1°, 0.5 mm per motion, 12 motions): within 2x the stand-in's error on the same draw
         # + 0.05° / + 1 mm (a rotation-first method without refinement, or another weighting of the
         # joint cost, stays within that; the wrong composition orders are degrees / centimetres off).
-        cases.append(Case(f"12 noisy motions ({i + 1}): rotation vs the truth", (d["A"], d["B"]), d["X"],
+        label = "12 noisy motions" if kind == "noisy" else "12 long-reach motions (0.5°, 0.2 mm)"
+        cases.append(Case(f"{label} ({i % 2 + 1}): rotation vs the truth", (d["A"], d["B"]), d["X"],
                           lambda X, T: rotation_angle_deg(X[:3, :3], T[:3, :3]), 2 * eR + 0.05, "deg",
-                          convert=_convert_X, key=f"noisy-{i + 1}-R", info=d, tags=("noisy",)))
-        cases.append(Case(f"12 noisy motions ({i + 1}): translation vs the truth", (d["A"], d["B"]), d["X"],
+                          convert=_convert_X, key=f"{kind}-{i % 2 + 1}-R", info=d, tags=("noisy", kind)))
+        cases.append(Case(f"{label} ({i % 2 + 1}): translation vs the truth", (d["A"], d["B"]), d["X"],
                           lambda X, T: 1e3 * float(np.linalg.norm(X[:3, 3] - T[:3, 3])), 2 * et + 1.0, "mm",
-                          convert=_convert_X, key=f"noisy-{i + 1}-t", info=d, tags=("noisy",)))
+                          convert=_convert_X, key=f"{kind}-{i % 2 + 1}-t", info=d, tags=("noisy", kind)))
     return cases
 
 
@@ -150,6 +160,9 @@ HAND_EYE_HINTS = [
          lambda c, out: "exact" in c.tags and c.key.endswith("-R")),
     Hint("the rotation is right but the translation is not: (R_A − I) t_X = R_X t_B − t_A (t_B rotated by R_X).",
          lambda c, out: c.key.endswith("-t") and rotation_angle_deg(out[:3, :3], c.expected[:3, :3]) < 0.1),
+    Hint("right on the lab's motions, off on the long-reach ones: rotation first is only the start. Refine R_X and t_X "
+         "jointly on every motion's rotation and translation residuals: with long moves the translations measure R_X "
+         "better than the noisy rotations do.", lambda c, out: "long-reach" in c.tags),
 ]
 
 register(Exercise(

@@ -51,7 +51,8 @@ def _available(alerts, names, modes=MODES, component_of=COMPONENT_OF) -> np.ndar
                      for _, need in modes], 1)
 
 
-def _machine(avail: np.ndarray, hold: int, *, upgrade: bool = True, hold_frames: int | None = None) -> list[int]:
+def _machine(avail: np.ndarray, hold: int, *, upgrade: bool = True, hold_frames: int | None = None,
+             best_now_only: bool = False, fall_below: bool = False) -> list[int]:
     """Mode indices per frame from the availability table (the rule; keywords model known mistakes)."""
     hold = hold if hold_frames is None else hold_frames
     run = np.zeros(avail.shape[1], int)
@@ -60,9 +61,10 @@ def _machine(avail: np.ndarray, hold: int, *, upgrade: bool = True, hold_frames:
         run = np.where(avail[t], run + 1, 0)
         best = int(np.argmax(avail[t]))
         if t == 0 or not avail[t, modes[-1]]:
-            modes.append(best)
+            below = np.flatnonzero(avail[t, modes[-1] + 1:]) + modes[-1] + 1 if t else [best]
+            modes.append(int(below[0]) if fall_below else best)
             continue
-        ready = [m for m in range(modes[-1]) if run[m] >= hold]
+        ready = [m for m in range(modes[-1]) if run[m] >= hold and (m == best or not best_now_only)]
         modes.append(ready[0] if ready and upgrade else modes[-1])
     return modes
 
@@ -82,7 +84,9 @@ def _interval(rng: np.random.Generator, T: int, start: tuple[float, float], leng
 def fault_scenario(rng: np.random.Generator, kind: str, hold: int = 10, T: int = 240) -> dict:
     """A scenario's alert states: `alerts` (T, M) bool over `names` (the monitor's metrics, shuffled), with
     symptom alerts (VO error, loop closures, ...) sprinkled at random. kind: "dirty lens", "loose sync cable",
-    "IMU dropout in the dark", "everything fails"."""
+    "IMU dropout in the dark", "everything fails", "staggered recovery" (the rule's two clauses where a shortcut
+    differs: the upgrade goes to the best mode that has had its `hold`, not only to the best available now; a
+    failure goes to the best mode available now, which may be better than the one that failed)."""
     metrics = ("reprojection_px", "features", "inlier_ratio", "vo_error_deg", "loop_closures", "gaussians_high",
                "gaussians_low", "imu_gap_ms")
     names = [metrics[i] for i in rng.permutation(len(metrics))]
@@ -103,6 +107,19 @@ def fault_scenario(rng: np.random.Generator, kind: str, hold: int = 10, T: int =
     elif kind == "IMU dropout in the dark":           # features fail, then the IMU drops out in the middle
         a, b = fault("features", (0.1, 0.2), (90, 130))
         on["imu_gap_ms"][a + int(rng.integers(15, 30)):a + int(rng.integers(45, 80))] = True
+    elif kind == "staggered recovery":                # components return fewer than `hold` frames apart
+        # features and stereo fail; stereo returns 2 to hold - 1 frames before the features: direct VO has been
+        # available for `hold` frames before stereo VIO has, so the robot climbs to direct VO first
+        a, b = fault("features", (0.05, 0.1), (40, 60))
+        back = b - int(rng.integers(2, hold))
+        on["reprojection_px"][a + int(rng.integers(5, 15)):back] = True
+        # later stereo fails alone (mono + IMU), and the IMU drops out 1 to hold - 1 frames after stereo returned:
+        # the best mode available then is direct VO, better than the one that failed
+        c = b + 2 * hold + int(rng.integers(0, hold))
+        d = c + int(rng.integers(15, 30))
+        on["reprojection_px"][c:d] = True
+        g = d + int(rng.integers(1, hold))
+        on["imu_gap_ms"][g:g + int(rng.integers(15, 30))] = True
     else:                                             # everything: features, stereo and IMU, staggered
         a, b = fault("features", (0.05, 0.15), (100, 140))
         on["reprojection_px"][a + int(rng.integers(10, 25)):b - int(rng.integers(10, 25))] = True
@@ -133,12 +150,12 @@ def _wrong_frames(out: list[str], expected: list[str]) -> float:
     return float(sum(a != b for a, b in zip(out, expected)))
 
 
-KINDS = ("dirty lens", "loose sync cable", "IMU dropout in the dark", "everything fails")
+KINDS = ("dirty lens", "loose sync cable", "IMU dropout in the dark", "everything fails", "staggered recovery")
 
 
 def _cases(rng: np.random.Generator) -> list[Case]:
     cases = []
-    for kind, hold in zip(KINDS, (10, 8, 12, 10)):
+    for kind, hold in zip(KINDS, (10, 8, 12, 10, 9)):
         d = fault_scenario(rng, kind, hold)
         args = (d["alerts"], d["names"], hold)
         # Exact: a mode per frame, defined by the rule.
@@ -166,6 +183,11 @@ DEGRADATION_HINTS = [
     like(_model(direct_needs_nothing=True), "this ladder's direct VO needs stereo (its rung is stereo direct "
          "odometry, as Stereo DSO; monocular DSO would be a rung of its own, without scale): when stereo fails, fall to "
          "mono + IMU, not to direct VO."),
+    like(_model(best_now_only=True), "the machine waits for the best mode available now while a better-than-current "
+         "one has had its hold: move up to the best mode that has had its hold (stereo back, features back fewer than "
+         "`hold` frames later: direct VO first)."),
+    like(_model(fall_below=True), "on a failure, switch to the best mode available now, which can be better than "
+         "the one that failed (stereo came back while mono + IMU ran; the IMU then fails: direct VO, not mono VO)."),
     like(_model(symptoms_fail_features=True), "VO error, loop closures and Gaussian counts are downstream "
          "symptoms: they do not make a component unhealthy."),
 ]

@@ -24,23 +24,33 @@ W, H, CELL = 320, 240, 16
 
 
 @memo_draw()
-def smudge_problem(rng: np.random.Generator, n: int = 5, min_hidden: float = 0.05) -> dict:
+def smudge_problem(rng: np.random.Generator, n: int = 5, min_hidden: float = 0.05, occluder: bool = False) -> dict:
     """before / now: lists of n (N, 2) keypoint arrays (x, y) of the same frames, clean and smudged; truth
     (cx, cy, r) px; the smudge lies inside the image (r 40-80 px, 8 px from every border) and hides at least
     `min_hidden` of the baseline's keypoints (inside 0.9 r). A smudge over the blank ceiling costs no features:
     no symptom, and nothing to locate it by (fairness sweep: every failure of a correct fit, 5 in 220 seeds, hid
-    0.3-2.2 %), so it is drawn again."""
+    0.3-2.2 %), so it is drawn again.
+    occluder: part of the robot in view on both runs (corridor's "occluder": a plain disc 1.3-1.5x the smudge's
+    radius, which is then 40-50 px, apart from it): the largest featureless region of today's images is not the
+    smudge, only the comparison with the baseline finds it."""
     a = int(rng.integers(1, 16))
-    clean = corridor.rig_sequence(rng, a + n)
+    body = []
+    if occluder:
+        r_o = rng.uniform(52, 75)                  # at one side of the image, so that the smudge fits beside it
+        x_o = rng.uniform(r_o + 8, r_o + 24)
+        body = [{"kind": "occluder", "centre": (x_o if rng.random() < 0.5 else W - x_o, rng.uniform(r_o + 8, H - r_o - 8)),
+                 "radius": r_o}]
+    clean = corridor.rig_sequence(rng, a + n, body)
     before = [cv_fast(f["left"], 20, True) for f in clean["frames"][a:]]
     b = np.concatenate(before)
-    for _ in range(50):
-        r = rng.uniform(40, 80)
+    for _ in range(200):
+        r = rng.uniform(40, 50) if occluder else rng.uniform(40, 80)
         cx, cy = rng.uniform(r + 8, W - r - 8), rng.uniform(r + 8, H - r - 8)
-        if np.mean(np.hypot(b[:, 0] - cx, b[:, 1] - cy) < 0.9 * r) >= min_hidden:
+        apart = not body or np.hypot(cx - body[0]["centre"][0], cy - body[0]["centre"][1]) > r + body[0]["radius"] + 8
+        if apart and np.mean(np.hypot(b[:, 0] - cx, b[:, 1] - cy) < 0.9 * r) >= min_hidden:
             break
-    dirty = corridor.rig_sequence(rng, a + n, [{"kind": "dirty_lens", "start": 0, "stop": a + n, "centre": (cx, cy),
-                                             "radius": r}])
+    dirty = corridor.rig_sequence(rng, a + n, body + [{"kind": "dirty_lens", "start": 0, "stop": a + n,
+                                                       "centre": (cx, cy), "radius": r}])
     return {"before": before, "now": [cv_fast(f["left"], 20, True) for f in dirty["frames"][a:]],
             "shape": (H, W), "truth": np.array([cx, cy, r]), "image": dirty["frames"][a]["left"]}
 
@@ -85,7 +95,7 @@ def smudge_error(out, truth) -> float:
 def _cases(rng: np.random.Generator):
     cases = []
     for i in range(3):
-        p = smudge_problem(rng)
+        p = smudge_problem(rng, occluder=i == 2)   # the third: a featureless part of the robot in view, both runs
         # 0.25 of the radius, for the centre and for the radius: the features die inside 0.8-1.0 r (the soft rim),
         # so a fit that does not know the 0.9 is <= 20 % off; the stand-in is <= 11 % off on 70 draws (seeds
         # 0-29, 300-339) that hide >= 2 % of the features; the mistakes below are >= 50 % off.
@@ -96,8 +106,10 @@ def _cases(rng: np.random.Generator):
 
 
 def _diameter(case, out) -> bool:
+    """The right disc with twice its radius (the centre must be right too: another disc, e.g. the robot's part in
+    view, is not a diameter slip)."""
     o = np.asarray(out, float).ravel()
-    return abs(o[2] / 2 - case.expected[2]) <= 0.25 * case.expected[2]
+    return smudge_error([o[0], o[1], o[2] / 2], case.expected) <= 0.25
 
 
 def _swapped(case, out) -> bool:

@@ -10,8 +10,8 @@ is raised, "clear" when it is cleared.
 
 Cases are generated metric streams built from scripted episodes (a one-frame spike, a burst of k - 1
 frames, scattered bad frames, a warning-band plateau, faults that recover directly, through the warning
-band, or with one good frame in the middle) between stretches of normal frames; the expected events
-come from the rule above, applied frame by frame.
+band, with one good frame in the middle, or with one warning frame inside the recovery) between stretches of
+normal frames; the expected events come from the rule above, applied frame by frame.
 """
 from __future__ import annotations
 
@@ -48,9 +48,11 @@ def _bands(x: np.ndarray, row: dict, direction: bool = True) -> tuple[np.ndarray
 
 
 def _simulate(stream, table, k: int, *, raise_after: int | None = None, clear_after: int | None = None,
-              clear_on: str = "normal", direction: bool = True, consecutive: bool = True) -> list[tuple]:
+              clear_on: str = "normal", direction: bool = True, consecutive: bool = True,
+              warn_breaks_clear: bool = True) -> list[tuple]:
     """The monitor's events; the keyword arguments model known mistakes (defaults: the rule itself).
-    clear_on: "normal" (in the normal range) or "not_past" (anything but past the alert threshold)."""
+    clear_on: "normal" (in the normal range) or "not_past" (anything but past the alert threshold);
+    warn_breaks_clear=False: a warning-band frame pauses the clearing run instead of breaking it."""
     stream = np.asarray(stream, float)
     events = []
     for j, row in enumerate(table):
@@ -61,7 +63,7 @@ def _simulate(stream, table, k: int, *, raise_after: int | None = None, clear_af
         for t in range(len(stream)):
             if normal[t] if alert else past[t]:
                 run += 1
-            elif consecutive:                                  # the mistake: counting bad frames in total
+            elif consecutive and (warn_breaks_clear or not alert or past[t]):   # the mistakes: a run not broken
                 run = 0
             if run >= ((clear_after or k) if alert else (raise_after or k)):
                 alert, run = not alert, 0
@@ -97,8 +99,10 @@ def _episodes(k: int, warn: bool) -> list[list[tuple[str, int]]]:
            [(P, k + 3), (N, k + 2)], [(P, k + 2), (N, 1), (P, 1), (N, k + 2)],
            [(P, k + 2), (N, k - 1), (P, 1), (N, k + 1)]]
     if warn:
+        # the last: a warning frame inside the clearing run (k - 1 normal frames, one warning, k + 1 normal) must
+        # restart it; a monitor that only lets a frame past the alert threshold break it clears k frames early.
         eps += [[(W, k + 4)], [(P, k + 2), (W, k + 3), (N, k + 2)], [(P, k + 1), (W, 1), (P, k), (W, 2), (N, k + 1)],
-                [(P, 1), (W, 1), (P, 1), (W, 1), (P, 1)] * 2]
+                [(P, 1), (W, 1), (P, 1), (W, 1), (P, 1)] * 2, [(P, k + 1), (N, k - 1), (W, 1), (N, k + 1)]]
     return eps
 
 
@@ -172,6 +176,8 @@ MONITOR_HINTS = [
          "the normal range."),
     like(_model(clear_on="not_past"), "the alert clears as soon as the metric is no longer past the alert "
          "threshold: it must be back in the normal range (the warning band between them does not count)."),
+    like(_model(warn_breaks_clear=False), "the alert clears too early: a warning-band frame breaks the clearing run "
+         "too (k consecutive frames in the normal range), not only a frame past the alert threshold."),
     like(_model(direction=False), "every metric is read as 'higher is bad': features, inlier ratio, loop closures "
          "and the low Gaussian count alert when they fall below their threshold."),
     like(_model(consecutive=False), "bad frames are counted in total, not consecutively: reset the run when a "

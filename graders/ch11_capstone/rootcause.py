@@ -11,8 +11,9 @@ Generated runs: stages before the fault within 2.5 sigma of their baseline, the 
 off in one metric (not always its first), the stages after it mostly amplified (1.6-2.5x that),
 bounded where a metric cannot go below zero. The margins (2.5 and 6 against z_max = 4) keep the answer
 the same whether the spread is taken with ddof 0 or 1. Two runs take another z_max (3, with the fault only
-1.12-1.3 z_max off; 6, a healthy run with one metric 0.8-0.92 z_max off): an answer that writes 4 in
-instead of the z_max it is given fails them. The dicts are filled in a shuffled order, so the pipeline
+1.12-1.3 z_max off in a stage with several metrics; 6, a healthy run with one metric 0.8-0.92 z_max off): an answer
+that writes 4 in instead of the z_max it is given fails them, and a score per stage (the RMS of its metrics' z) misses
+the first. The dicts are filled in a shuffled order, so the pipeline
 order is the `stages` argument's, not the dicts'.
 """
 from __future__ import annotations
@@ -21,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from graders.core.engine import Case, Exercise, OutputError, like, register
+from graders.core.engine import Case, Exercise, Hint, OutputError, like, register
 
 # stage -> [(metric, baseline mean, relative spread, direction a fault pushes it: +1 up, -1 down)]
 STAGE_METRICS: dict[str, list[tuple[str, float, float, int]]] = {
@@ -101,14 +102,16 @@ DRAWS = [("healthy run", None, {}), ("camera shifted: calibration", "calibration
          ("dirty lens: features", "features", {"metric": 1}), ("VO fault behind noisy RANSAC", "vo",
                                                                {"noisy_upstream": True}),
          ("matching fault", "matching", {}), ("a random stage", "random", {}),
-         ("z_max 3: a fault just past it", "random", {"z_max": 3.0, "tight": True}),
+         ("z_max 3: a fault just past it", "random-multi", {"z_max": 3.0, "tight": True}),
          ("z_max 6: a healthy run, one metric 5 sigma off", None, {"z_max": 6.0, "near_miss": True})]
 
 
 def _cases(rng: np.random.Generator) -> list[Case]:
     cases = []
     for name, fault, kw in DRAWS:
-        fault = STAGES[int(rng.integers(len(STAGES)))] if fault == "random" else fault
+        if fault in ("random", "random-multi"):         # -multi: a stage with several metrics, one of them off
+            pool = [s for s in STAGES if fault == "random" or len(STAGE_METRICS[s]) > 1]
+            fault = pool[int(rng.integers(len(pool)))]
         d = fault_run(rng, fault, **kw)
         args = (d["stages"], d["observed"], d["baseline"], kw.get("z_max", 4.0))
         expected = gt_first_faulty_stage(*args)
@@ -140,6 +143,11 @@ def _relative(case, limit=0.25):
     return next((s for s in stages if np.max(np.abs(observed[s] / baseline[s].mean(0) - 1)) > limit), None)
 
 
+def _stage_rms(case):
+    z = _z(case)
+    return next((s for s in case.args[0] if np.sqrt(np.mean(z[s] ** 2)) > case.args[3]), None)
+
+
 def _fixed_threshold(case):
     stages, observed, baseline, _ = case.args
     return gt_first_faulty_stage(stages, observed, baseline, 4.0) if case.args[3] != 4.0 else "(z_max is 4)"
@@ -151,6 +159,10 @@ def _dict_order(case):
 
 
 ROOT_HINTS = [
+    Hint("a score per stage (the RMS of its metrics' z) dilutes one metric far off among normal ones: a stage has left "
+         "its baseline when any one of its metrics is more than z_max sigmas off.",
+         lambda c, out: out == _stage_rms(c)),       # `like` skips a model answer of None: compared here
+
     like(_fixed_threshold, lambda c, out: f"that is the answer at 4 sigma, but this case's z_max is {c.args[3]:g}: "
          "use the threshold you are given.", rel=0),
     like(_dict_order, "that is the first stage in the order of the `observed` dict, not in the pipeline order "

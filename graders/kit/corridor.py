@@ -79,6 +79,11 @@ def _apply_image_fault(img: np.ndarray, kind: str, p: dict) -> np.ndarray:
         cx, cy, r = p.get("centre", (0.3 * w, 0.55 * h)) + (p.get("radius", 0.25 * w),)
         m = np.clip((r - np.hypot(xx - cx, yy - cy)) / (0.2 * r), 0, 1).astype(np.float32)
         return (1 - m) * img + m * (0.3 * cv2.GaussianBlur(img, (0, 0), 8.0) + 0.35)
+    if kind == "occluder":                 # part of the robot in view (a sensor housing): a plain disc, fixed in
+        h, w = img.shape                   # the image, there on every run (no texture: no features inside, ever)
+        yy, xx = np.mgrid[:h, :w]
+        cx, cy, r = p["centre"] + (p["radius"],)
+        return np.where(np.hypot(xx - cx, yy - cy) <= r, p.get("grey", 0.45), img)
     if kind == "saturated_sky":            # outdoors: the top rows are bright sky, clipped
         top = int(p.get("rows", 0.4) * img.shape[0])
         return np.r_[0.2 * img[:top] + 1.0, img[top:]]
@@ -90,7 +95,8 @@ def rig_sequence(rng: np.random.Generator, n_frames: int = 24, faults: list[dict
     """A rectified stereo rig (K, baseline in m) driving down a textured corridor, with injected faults.
 
     faults: dicts {"kind": one of FAULT_KINDS, "start": frame, "stop": frame (exclusive), ...parameters}:
-    image faults (exposure_drop gain, motion_blur length_px, dirty_lens centre/radius, saturated_sky rows) hit
+    image faults (exposure_drop gain, motion_blur length_px, dirty_lens centre/radius, saturated_sky rows; occluder
+    centre/radius/grey: not a fault but part of the robot in view, fixed in the image, on a clean run too) hit
     the left and right images; calibration_drift pitches the right camera's mount by up to `deg` (growing
     linearly over the window) while the pipeline keeps the stored calibration; time_offset captures the right
     camera `ms` late (30 fps); dropped_frames delivers the previous frame's images again.

@@ -63,6 +63,17 @@ def test_fault_scenarios_visit_the_ladder(seed):
 
 
 @pytest.mark.parametrize("seed", range(5))
+def test_staggered_recovery_climbs_and_falls_past_a_shortcut(seed):
+    # The rule climbs from dead reckoning to direct VO while stereo VIO is back for fewer than `hold` frames, and
+    # falls from mono + IMU to direct VO (better than the mode that failed): the two shortcuts of 11.6's mutants.
+    d = ch11.fault_scenario(np.random.default_rng(seed), "staggered recovery", hold=9)
+    modes = ch11.gt_degradation_modes(d["alerts"], d["names"], d["hold"])
+    steps = {(a, b) for a, b in zip(modes, modes[1:]) if a != b}
+    assert {("dead reckoning", "direct VO"), ("mono + IMU", "direct VO")} <= steps, steps
+    assert modes[0] == modes[-1] == "stereo VIO"
+
+
+@pytest.mark.parametrize("seed", range(5))
 def test_fault_runs_amplify_downstream(seed):
     # A calibration fault: the largest deviation (in baseline sigmas) is downstream of it, the rule's answer is it.
     d = ch11.fault_run(np.random.default_rng(seed), "calibration")

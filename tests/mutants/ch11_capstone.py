@@ -15,7 +15,8 @@ MUTANTS: list[tuple] = []
 
 # ----------------------------------------------------------------- 11.5 health_monitor
 
-def _monitor(stream, table, k, *, k_raise=None, k_clear=None, clear_band="normal", all_high=False, total=False):
+def _monitor(stream, table, k, *, k_raise=None, k_clear=None, clear_band="normal", all_high=False, total=False,
+             warn_pauses_clear=False):
     x = np.asarray(stream, float)
     events = []
     for j, row in enumerate(table):
@@ -30,7 +31,7 @@ def _monitor(stream, table, k, *, k_raise=None, k_clear=None, clear_band="normal
         for t in range(len(v)):
             if (normal[t] if on else past[t]):
                 run += 1
-            elif not total:
+            elif not total and not (warn_pauses_clear and on and not past[t]):
                 run = 0
             if run >= ((k_clear or k) if on else (k_raise or k)):
                 on, run = not on, 0
@@ -68,6 +69,12 @@ def monitor_counts_total(stream, table, k=3):
     return _monitor(stream, table, k, total=True)
 
 
+def monitor_warning_pauses_clear(stream, table, k=3):
+    """While in alert, only a frame past the alert threshold restarts the clearing run; a warning-band frame merely
+    pauses it (the spec: warning frames break both runs)."""
+    return _monitor(stream, table, k, warn_pauses_clear=True)
+
+
 def monitor_forgets_actions(stream, table, k=3):
     """Right frames, but reports "alert" instead of the row's action."""
     return [(t, m, a if a == "clear" else "alert") for t, m, a in _monitor(stream, table, k)]
@@ -80,13 +87,15 @@ MUTANTS += [
     ("11.5", "warning band counts as recovered", monitor_ignores_warning_band, "no longer past the alert"),
     ("11.5", "lower-is-bad read upside down", monitor_higher_is_always_bad, "read as 'higher is bad'"),
     ("11.5", "bad frames counted in total", monitor_counts_total, "counted in total"),
+    ("11.5", "a warning frame pauses the clearing run", monitor_warning_pauses_clear, "breaks the clearing run"),
     ("11.5", "no actions", monitor_forgets_actions, "not the actions"),
 ]
 
 
 # ----------------------------------------------------------------- 11.6 degradation_modes
 
-def _modes(alerts, names, hold, *, needs=NEEDS, component=COMPONENT, recover=True, hold_used=None):
+def _modes(alerts, names, hold, *, needs=NEEDS, component=COMPONENT, recover=True, hold_used=None,
+           best_now_only=False, fall_below=False):
     alerts = np.asarray(alerts, bool)
     failed = [{component[n] for j, n in enumerate(names) if n in component and a[j]} for a in alerts]
     ok = [[not needs[m] & f for m in MODES] for f in failed]
@@ -95,9 +104,11 @@ def _modes(alerts, names, hold, *, needs=NEEDS, component=COMPONENT, recover=Tru
     for t, row in enumerate(ok):
         streak = np.where(row, streak + 1, 0)
         if cur is None or not row[cur]:
-            cur = row.index(True)
+            cur = row.index(True, cur + 1) if fall_below and cur is not None else row.index(True)
         elif recover:
             better = [m for m in range(cur) if streak[m] >= hold]
+            if best_now_only:                                  # only the best mode available now may be climbed to
+                better = [m for m in better if m == row.index(True)]
             cur = better[0] if better else cur
         out.append(MODES[cur])
     return out
@@ -124,6 +135,17 @@ def modes_symptoms_are_failures(alerts, names, hold=10):
     return _modes(alerts, names, hold, component=component)
 
 
+def modes_upgrade_to_best_now_only(alerts, names, hold=10):
+    """Climbs only to the best mode available now, once it has had its hold; a better-than-current mode that has had
+    its hold is ignored while a still better one is back for fewer than hold frames."""
+    return _modes(alerts, names, hold, best_now_only=True)
+
+
+def modes_fall_below_only(alerts, names, hold=10):
+    """On a failure, the best available mode below the failed one (one-way down), not the best available now."""
+    return _modes(alerts, names, hold, fall_below=True)
+
+
 def modes_by_failure_count(alerts, names, hold=10):
     """One rung down per failed component (0 -> stereo VIO, 1 -> direct VO, ...), no hold."""
     alerts = np.asarray(alerts, bool)
@@ -135,6 +157,8 @@ MUTANTS += [
     ("11.6", "upgrades at once", modes_upgrade_at_once, "upgrades as soon as"),
     ("11.6", "never recovers", modes_never_recover, "never comes back"),
     ("11.6", "direct VO without stereo", modes_direct_vo_without_stereo, "direct VO needs stereo"),
+    ("11.6", "climbs only to the best mode available now", modes_upgrade_to_best_now_only, "has had its hold"),
+    ("11.6", "falls only below the failed mode", modes_fall_below_only, "can be better than the one that failed"),
     ("11.6", "symptoms switch the mode", modes_symptoms_are_failures, "downstream symptoms"),
     ("11.6", "one rung per failure", modes_by_failure_count, None),
 ]
@@ -150,6 +174,11 @@ def _z(observed, baseline, stage):
 def blame_largest_deviation(stages, observed, baseline, z_max=4.0):
     """The stage that moved most (in sigmas): the loudest symptom, usually downstream."""
     return max(stages, key=lambda s: _z(observed, baseline, s).max())
+
+
+def blame_stage_rms(stages, observed, baseline, z_max=4.0):
+    """A stage score: the RMS of its metrics' z against z_max (one metric far off is diluted by the others)."""
+    return next((s for s in stages if np.sqrt(np.mean(_z(observed, baseline, s) ** 2)) > z_max), None)
 
 
 def blame_last_stage(stages, observed, baseline, z_max=4.0):
@@ -198,6 +227,7 @@ MUTANTS += [
     ("11.7", "z_max ignored (4 written in)", blame_fixed_threshold, "use the threshold you are given"),
     ("11.7", "dict order, not the stages' order", blame_in_dict_order, "not in the pipeline order"),
     ("11.7", "largest deviation", blame_largest_deviation, "largest deviation"),
+    ("11.7", "RMS of the stage's z", blame_stage_rms, "any one of its metrics"),
     ("11.7", "last stage", blame_last_stage, "last stage out of its baseline"),
     ("11.7", "ignores the baseline spread", blame_relative_change, "relative change is not a deviation"),
     ("11.7", "first metric only", blame_first_metric_only, None),
@@ -449,6 +479,17 @@ def smudge_without_baseline(before, now, shape):
     return _smudge_fit(before, now, shape, baseline=False)
 
 
+def smudge_largest_empty_disc(before, now, shape):
+    """Today's keypoints alone: the largest disc with none inside (4-px grid of centres, kept inside the image)."""
+    from scipy.spatial import cKDTree
+    h, w = shape
+    cx, cy = np.meshgrid(np.arange(8, w - 8, 4.0), np.arange(8, h - 8, 4.0))
+    c = np.c_[cx.ravel(), cy.ravel()]
+    r = cKDTree(np.concatenate([np.asarray(k, float) for k in now])).query(c)[0]     # nearest keypoint
+    r = np.minimum(r, np.minimum.reduce([c[:, 0], c[:, 1], w - 1 - c[:, 0], h - 1 - c[:, 1]]))
+    return np.r_[c[np.argmax(r)], r.max()]
+
+
 def smudge_diameter(before, now, shape):
     """Reports the diameter in the radius slot."""
     cx, cy, r = _smudge_fit(before, now, shape)
@@ -463,6 +504,7 @@ def smudge_row_col(before, now, shape):
 
 MUTANTS += [
     ("11.11", "no baseline", smudge_without_baseline, "not where the features went"),
+    ("11.11", "largest empty disc today", smudge_largest_empty_disc, "not where the features went"),
     ("11.11", "diameter", smudge_diameter, "not the diameter"),
     ("11.11", "row, column", smudge_row_col, "x and y swapped"),
 ]

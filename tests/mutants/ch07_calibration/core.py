@@ -378,6 +378,15 @@ def hand_eye_t_B_not_rotated(A, B):
     return X
 
 
+def hand_eye_no_refinement(A, B):
+    """Rotation first (Kabsch on the log pairs) and the translation by least squares, then stops: the joint
+    refinement the spec asks for is skipped."""
+    M = sum(np.outer(so3_log(a[:3, :3]), so3_log(b[:3, :3])) for a, b in zip(A, B))
+    U, _, Vt = np.linalg.svd(M)
+    Rx = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+    return _X(Rx, _translation(A, B, Rx))
+
+
 def hand_eye_inverted(A, B):
     return np.linalg.inv(ref_motion.hand_eye(A, B))
 
@@ -412,6 +421,7 @@ MUTANTS += [
     ("7.11", "seed's -R_X for a reflection", hand_eye_minus_R_reflection_fix, "flip the last singular vector"),
     ("7.11", "t_B not rotated by R_X", hand_eye_t_B_not_rotated, "t_B rotated by R_X"),
     ("7.11", "X inverted", hand_eye_inverted, "X⁻¹"),
+    ("7.11", "rotation first, no joint refinement", hand_eye_no_refinement, "long-reach"),
     ("7.12", "sign of the offset", offset_sign_flipped, "sign is flipped"),
     ("7.12", "whole gyro samples", offset_whole_gyro_samples, "sample grid"),
     ("7.12", "one axis of omega", offset_x_axis_only, "|ω|"),

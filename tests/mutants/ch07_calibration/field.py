@@ -74,11 +74,12 @@ MUTANTS += [
 
 # ----------------------------------------------------------------- 7.22 fix_rolling_shutter
 
-def _fit_delay(case, row_of=lambda uv: uv[:, 1], sign=1.0):
+def _fit_delay(case, row_of=lambda uv: uv[:, 1], sign=1.0, velocity=True):
     K, dist = np.asarray(case["K"], float), np.asarray(case["dist"], float)
 
     def pixels(f, delay):
         X, R0, t0, w, v = (np.asarray(case[k][f], float) for k in ("X", "R0", "t0", "omega", "v"))
+        v = v if velocity else np.zeros(3)
         C0 = -R0.T @ t0
         uv = _pixels(X, K, dist, R0, t0)
         for _ in range(10):
@@ -121,8 +122,14 @@ def rs_rotation_wrong_way(case):
     return {"K": np.asarray(case["K"], float), "line_delay": _fit_delay(case, sign=-1.0)}
 
 
+def rs_velocity_ignored(case):
+    """A rotation-only rolling shutter: the camera turns during the readout, but its velocity v is left out."""
+    return {"K": np.asarray(case["K"], float), "line_delay": _fit_delay(case, velocity=False)}
+
+
 MUTANTS += [
     ("7.22", "K re-calibrated, global shutter", rs_recalibrated_K, "global-shutter model"),
+    ("7.22", "velocity left out (rotation-only shutter)", rs_velocity_ignored, "velocity is left out"),
     ("7.22", "readout time of the whole frame", rs_frame_readout, "whole frame"),
     ("7.22", "exposure time by column", rs_time_by_column, None),
     ("7.22", "rotation applied the wrong way", rs_rotation_wrong_way, "negative line delay"),
