@@ -2,7 +2,8 @@
 
 Each is a standalone wrong repair (none uses the grader's renderer, which produces the expected images): the
 wrong diagnosis, a knob turned too little, too far, or just far enough for a scene whose floaters are all fainter
-than its surface (o < 0.5: here it deletes the semi-transparent pane too), or the classic "prune the large ones" rule.
+than its surface (o < 0.5: here it deletes the semi-transparent pane too), the classic "prune the large ones" rule,
+or a crop (around the held-out cameras, or a ball around the scene's centre) in place of the training views' support.
 """
 from __future__ import annotations
 
@@ -62,6 +63,25 @@ def floaters_crop_held_out(case):
     return _keep(case, (d > 3.2) & (g["opacity"] >= 0.005))
 
 
+def floaters_crop_near_held_out(case):
+    """Deletes every Gaussian within 1.75 m of a held-out camera and o < 0.005: small enough to keep the post, it
+    takes the nearest floaters and leaves the farthest, faintest ones, whose share of the squared error is small
+    (full marks on 5 of seeds 0-9 while the judge counted only the overall share)."""
+    g = case["gaussians"]
+    mu = np.asarray(g["mu"])
+    C = [-np.asarray(R).T @ np.asarray(t) for R, t in zip(case["held_out"]["Rs"], case["held_out"]["ts"])]
+    d = np.min([np.linalg.norm(mu - c, axis=1) for c in C], 0)
+    return _keep(case, (d > 1.75) & (g["opacity"] >= 0.005))
+
+
+def floaters_crop_ball(case):
+    """Keeps the Gaussians within 3.5 m of the scene's centre (where the cameras look) with o >= 0.005: ignores
+    the cameras altogether (full marks on 6 of seeds 0-9 before each floater was judged and a ball that takes them
+    all had to take the post)."""
+    g = case["gaussians"]
+    return _keep(case, (np.linalg.norm(np.asarray(g["mu"]), axis=1) < 3.5) & (g["opacity"] >= 0.005))
+
+
 def floaters_unchanged(case):
     """Right cause, the colleague's Gaussians handed back."""
     return {"cause": "floaters", "gaussians": case["gaussians"]}
@@ -74,5 +94,7 @@ MUTANTS: list[tuple] = [
     ("8.19", "prunes at 0.9", floaters_prune_high, "removed surface Gaussians"),
     ("8.19", "prunes at 0.5 (the knob)", floaters_prune_half, "removed surface Gaussians"),
     ("8.19", "crops 3.2 m around the held-out cameras", floaters_crop_held_out, "removed surface Gaussians"),
+    ("8.19", "crops 1.75 m around the held-out cameras", floaters_crop_near_held_out, "floaters remain"),
+    ("8.19", "crops to a 3.5 m ball around the scene's centre", floaters_crop_ball, "floaters remain"),
     ("8.19", "unchanged", floaters_unchanged, "floaters remain"),
 ]
