@@ -5,11 +5,12 @@ Each generator returns (the case shown to the learner, the hidden truth). The le
 absolute trajectory error against the true poses (ATE, m RMS after a rigid Umeyama alignment: gauge-free).
 The tolerance is tied to what GTSAM reaches on the same draw with the right graph (x1.5, at least 5 cm),
 and every draw is redrawn until the broken pipeline is at least 2.5x the tolerance off.
-6.18 and 6.19 also judge the whole poses against every constraint the right graph keeps: chi2 of the repaired
+6.18, 6.19 and 6.21 also judge the whole poses against every constraint the right graph keeps: chi2 of the repaired
 trajectory on that graph no larger than the true poses' own (the optimum of the right graph is below it by
 construction, by ~chi2 with as many degrees of freedom as the poses have: 447 in SE(2), 1194 in SE(3)). The ATE
 alone reads positions only: repaired positions with the odometry's rotations, or an optimum of half the loop
-closures, scored full marks (measured over 20 seeds: 20 and 9 in 6.18; 20 and 15 in 6.19).
+closures, scored full marks (measured over 20 seeds: 20 and 9 in 6.18; 20 and 15 in 6.19; 6.21's robust optimum's
+positions in the odometry's rotations: 63-570x the true poses' chi2, 12 draws).
 """
 from __future__ import annotations
 
@@ -310,8 +311,13 @@ INCONSISTENT_HINTS = [
          "like the good ones (many inliers, information in the same range, no duplicated pose pair), so only the "
          "back end can tell. Use a robust kernel (Cauchy, c ~ 3 in whitened "
          "units) and re-optimise.", lambda c, T: _near(c, T, "broken")),
+    Hint(ROTATIONS_KEPT.format("odometry chain"), lambda c, T: _rotations_kept(c, T, None)),
+    Hint(ROTATIONS_KEPT.format("plain least-squares map"), lambda c, T: _rotations_kept(c, T, "broken")),
     Hint("your trajectory drifts like the odometry alone: removing every loop closure throws the good ones away too.",
          lambda c, T: "fix" in c.tags and ate_rmse(T, c.expected["truth"]) >= 0.7 * c.expected.get("ate_odometry", 1e9)),
+    Hint(_fit_text("optimise every constraint under a robust kernel (Cauchy, c ~ 3), rotations and translations "
+                   "together, until the cost stops falling."),
+         lambda c, T: "fit" in c.tags and _metric_fit(T, c.expected) > 1.0),
 ]
 
 
@@ -381,6 +387,6 @@ register(
              fallback=gtsam_fix_jumps,
              timeout=60.0),
     Exercise(id="6.21", title="Map inconsistent after loop closure", name="fix_inconsistent_map", kind="debug",
-             points=2, cases=_cases(GENERATORS["6.21"], "inconsistent map"), hints=INCONSISTENT_HINTS,
+             points=2, cases=_cases(GENERATORS["6.21"], "inconsistent map", fit=True), hints=INCONSISTENT_HINTS,
              fallback=gtsam_fix_inconsistent, timeout=60.0),
 )

@@ -430,6 +430,13 @@ def inconsistent_drop_duplicate_pairs(case):
             _pg.optimize_pose_graph(case["T"], case["edges"][keep], case["Z"][keep], case["info"][keep]))
 
 
+def inconsistent_rotations_from_plain_l2(case):
+    """The robust optimum's positions copied into the plain least-squares map's poses."""
+    robust = _pg.robust_pose_graph(case["T"], case["edges"], case["Z"], case["info"], kernel="cauchy", c=3.0)
+    plain = _pg.optimize_pose_graph(case["T"], case["edges"], case["Z"], case["info"])
+    return "conflicting constraints, no robust kernel", _positions_onto(robust, plain)
+
+
 def inconsistent_unrepaired(case):
     return "conflicting constraints, no robust kernel", _np.array(case["T"], float)
 
@@ -450,6 +457,8 @@ MUTANTS += [
     ("6.21", "the most trusted loop closures dropped, no kernel", inconsistent_drop_most_trusted, "robust kernel"),
     ("6.21", "duplicated pose pairs dropped, no kernel", inconsistent_drop_duplicate_pairs, "robust kernel"),
     ("6.21", "right cause, the colleague's output returned", inconsistent_unrepaired, "odometry chain you were given"),
+    ("6.21", "positions repaired, rotations of the plain least-squares map", inconsistent_rotations_from_plain_l2,
+     "still the plain least-squares map's"),
 ]
 
 
