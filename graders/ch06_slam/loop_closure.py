@@ -8,8 +8,9 @@ the landmarks of its place and its neighbours (tf-idf, DBoW2's L1 score between 
 geometry: true shared landmarks survive, look-alike ones do not). Two kinds of perceptual aliasing are
 planted: a *corridor* — several consecutive places that look exactly like another stretch of the loop
 (temporally consistent, but their geometry fails) — and a *poster* — one place whose large, repeated
-poster also hangs at another place (its matches even pass a geometric check, but no neighbouring keyframe
-agrees; in the slow run the copy goes up after the first lap, so the best score alone picks the look-alike).
+poster also hangs at another place (its matches even pass a geometric check, with more inliers than the true
+place's, but no neighbouring keyframe agrees; in the slow run the copy goes up after the first lap, so the best
+score alone, or the most inliers alone, picks the look-alike).
 Judged by outcome: every accepted loop closure must be true (precision 1.0) and at least half of
 the revisiting keyframes must be detected (the rules of the reference detect 87-100 % over 1600 runs).
 """
@@ -70,7 +71,7 @@ def loop_keyframes(rng: np.random.Generator, n_places: int = 30, per_place: int 
     # filters nothing, and a poster keyframe whose true match failed RANSAC would fall to the look-alike.
     lap1 = np.arange(N) < P
     has_poster = np.isin(place, (c, d)) & lap1 if fast else (place == d) | ((place == c) & ~lap1)
-    seen_words, seen_landmarks = [], []
+    seen_words, seen_landmarks, seen_poster = [], [], np.zeros((N, len(poster)), int)
     for t in range(N):
         ids_w, ids_l = [], []
         for q in ((place[t] + np.arange(-1, 2)) % P):
@@ -80,22 +81,27 @@ def loop_keyframes(rng: np.random.Generator, n_places: int = 30, per_place: int 
             ids_w.append(look[q] * per_place + np.arange(per_place)[kept])
         words = np.concatenate(ids_w + [floor, floor])
         if has_poster[t]:
-            words = np.r_[words, poster[rng.random(80) < 0.9]]
+            seen_poster[t] = rng.random(80) < 0.9
+            words = np.r_[words, poster[seen_poster[t] > 0]]
         H_t = np.bincount(words, minlength=n_words)
         seen_words.append(H_t)
         seen_landmarks.append(np.concatenate(ids_l))
     S = _l1_scores(np.array(seen_words, float))
-    # Geometric verification: 85 % of the truly shared landmarks survive RANSAC, plus a few lucky outliers;
-    # the poster's matches are consistent with one plane, so they pass as 20-34 inliers.
+    # Geometric verification: 85 % of the truly shared landmarks survive RANSAC, plus a few lucky outliers. The
+    # poster is one plane of repeated texture: the features two keyframes both see on it match and fit one
+    # homography, so they survive RANSAC as true matches do. Two views of it share ~65 features against ~34
+    # landmarks at a true revisit, so the look-alike pair verifies with more inliers than the true place (600 runs:
+    # look-alike pairs 43 or more, median 56; a run's best true pair without the poster median 41, at most 50):
+    # the candidate with the most inliers is the look-alike, and only temporal consistency rejects it (the rule
+    # "most inliers, no consistency" had full marks on 153 of 200 seeds when the poster verified with 20-34).
     M = np.zeros((N, P * per_place), int)
     for t, lm in enumerate(seen_landmarks):
         M[t, lm] = 1
+    M = np.c_[M, seen_poster]
     shared = np.tril(M @ M.T, -1)
     inl = rng.binomial(shared, 0.85) + rng.integers(0, 8, (N, N))
     dp = np.abs(place[:, None] - place[None, :])
     dp = np.minimum(dp, P - dp)
-    pair = has_poster[:, None] & has_poster[None, :] & (dp > 1)
-    inl = np.where(pair, np.maximum(inl, rng.integers(20, 35, (N, N))), inl)
     inl = np.tril(inl, -1)
     inl = inl + inl.T
     # A true loop closure: the same place (+-2: the two views share landmarks, so RANSAC can verify them) seen

@@ -358,6 +358,45 @@ def jumps_drop_all_loops(case):
                                                                   case["info"][keep])
 
 
+def _positions_onto(T_positions, T_rotations):
+    """The poses of T_rotations moved to the positions of T_positions."""
+    out = _np.array(T_rotations, float)
+    d = out.shape[-1] - 1
+    out[:, :d, d] = _np.asarray(T_positions)[:, :d, d]
+    return out
+
+
+def _optimize_kept(case, keep):
+    return _pg.optimize_pose_graph(case["T"], case["edges"][keep], case["Z"][keep], case["info"][keep])
+
+
+def drift_rotations_from_odometry(case):
+    """The right graph optimised, but only its positions copied into the odometry chain's poses."""
+    optimum = _pg.optimize_pose_graph(case["T"], case["edges"], case["Z"], case["info"])
+    return "no loop closure", _positions_onto(optimum, case["T"])
+
+
+def drift_half_the_loops(case):
+    """Only the first half of the loop closures added to the graph (the rest 'for later')."""
+    loop = _np.asarray(case["is_loop"])
+    keep = ~loop
+    keep[_np.flatnonzero(loop)[: loop.sum() // 2]] = True
+    return "no loop closure", _optimize_kept(case, keep)
+
+
+def jumps_rotations_from_broken(case):
+    """Verified loops optimised, its positions copied into the all-candidates optimum's poses."""
+    verified = ~_np.asarray(case["is_loop"]) | (_np.asarray(case["inliers"]) >= 20)
+    broken = _pg.optimize_pose_graph(case["T"], case["edges"], case["Z"], case["info"])
+    return "false loop closure accepted", _positions_onto(_optimize_kept(case, verified), broken)
+
+
+def jumps_threshold_fifteen(case):
+    """Geometric verification with 15 inliers instead of 20."""
+    return "false loop closure accepted", _optimize_kept(case, ~_np.asarray(case["is_loop"]) |
+                                                         (_np.asarray(case["inliers"]) >= 15))
+
+
 def inconsistent_plain_l2(case):
     return ("conflicting constraints, no robust kernel",
             _pg.optimize_pose_graph(case["T"], case["edges"], case["Z"], case["info"]))
@@ -391,6 +430,13 @@ def inconsistent_drop_duplicate_pairs(case):
             _pg.optimize_pose_graph(case["T"], case["edges"][keep], case["Z"][keep], case["info"][keep]))
 
 
+def inconsistent_rotations_from_plain_l2(case):
+    """The robust optimum's positions copied into the plain least-squares map's poses."""
+    robust = _pg.robust_pose_graph(case["T"], case["edges"], case["Z"], case["info"], kernel="cauchy", c=3.0)
+    plain = _pg.optimize_pose_graph(case["T"], case["edges"], case["Z"], case["info"])
+    return "conflicting constraints, no robust kernel", _positions_onto(robust, plain)
+
+
 def inconsistent_unrepaired(case):
     return "conflicting constraints, no robust kernel", _np.array(case["T"], float)
 
@@ -399,12 +445,20 @@ MUTANTS += [
     ("6.18", "diagnosed, not repaired", drift_unchanged, "never used"),
     ("6.18", "blames biased odometry", drift_blames_bias, "zero-mean"),
     ("6.19", "every candidate accepted", jumps_accept_all, "fewer than 20 inliers"),
+    ("6.18", "positions repaired, rotations left from the odometry", drift_rotations_from_odometry,
+     "still the odometry chain's"),
+    ("6.18", "half the loop closures used", drift_half_the_loops, "worse than the true poses"),
     ("6.19", "every loop closure dropped", jumps_drop_all_loops, "drifts like the odometry"),
+    ("6.19", "positions repaired, rotations of the all-candidates optimum", jumps_rotations_from_broken,
+     "still the broken pipeline's"),
+    ("6.19", "verification at 15 inliers instead of 20", jumps_threshold_fifteen, "verification rejects it"),
     ("6.21", "plain least squares", inconsistent_plain_l2, "robust kernel"),
     ("6.21", "every loop closure dropped", inconsistent_drop_all_loops, "drifts like the odometry"),
     ("6.21", "the most trusted loop closures dropped, no kernel", inconsistent_drop_most_trusted, "robust kernel"),
     ("6.21", "duplicated pose pairs dropped, no kernel", inconsistent_drop_duplicate_pairs, "robust kernel"),
     ("6.21", "right cause, the colleague's output returned", inconsistent_unrepaired, "odometry chain you were given"),
+    ("6.21", "positions repaired, rotations of the plain least-squares map", inconsistent_rotations_from_plain_l2,
+     "still the plain least-squares map's"),
 ]
 
 

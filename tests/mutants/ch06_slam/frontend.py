@@ -369,6 +369,19 @@ def loops_argmax_verified_second_lap(S, count_inliers, recent=10, min_inliers=20
     return out
 
 
+def loops_most_inliers_second_lap(S, count_inliers, recent=10, min_inliers=20, *a, **k):
+    """Each second-lap keyframe closes on the first-lap keyframe with the most geometric inliers (>= 20): the
+    verification alone, no temporal consistency (full marks on 153 of 200 seeds before the poster verified with
+    more inliers than the true places)."""
+    out = []
+    for i in range(30, len(S)):
+        first_lap = range(min(30, i - recent))
+        counts = [count_inliers(i, j) for j in first_lap]
+        if counts and max(counts) >= min_inliers:
+            out.append((i, int(np.argmax(counts))))
+    return out
+
+
 MUTANTS += [  # front-end entries (6.15)
     ("6.15", "constant lag N // 2 (the laps assumed identical)", loops_constant_lag_half, "another speed"),
     ("6.15", "constant lag of one lap (30 places)", loops_constant_lag_places, "another speed"),
@@ -378,6 +391,7 @@ MUTANTS += [  # front-end entries (6.15)
     ("6.15", "no temporal consistency", loops_no_temporal_consistency, "poster"),
     ("6.15", "no geometric verification", loops_no_geometric_verification, "geometry fails"),
     ("6.15", "best score only, no consistency nor minimum score", loops_no_minimum_score, None),
+    ("6.15", "most inliers on the second lap, no consistency", loops_most_inliers_second_lap, "poster"),
 ]
 # /fe:mut615
 # fe:mut620
