@@ -108,11 +108,19 @@ BIAS_TOL = 0.05     # px: the reference's and OpenCV's mean error over >= 30 jud
                     # out): 9.10 <= 0.008 (40 seeds x 2 draws), 9.11 <= 0.01 (20 seeds x 2 draws)
 
 
-def _bias(out, truth):
-    """Length of the mean position error (px) over the clearly trackable points: a shift shared by every point
-    (a sampler or pixel-centre offset), which noise does not produce."""
+def mean_error_nearest(pts2: np.ndarray, truth: dict) -> float:
+    """Length of the mean position error (px) over the 90 % of the clearly trackable points nearest the truth (the
+    points the 90th-percentile row holds to its bar): a shift shared by every point (a sampler or pixel-centre
+    offset), which noise does not produce. The few points the percentile lets run off stay out: a coarse level can
+    send a correct tracker 110 px off on 2 of 30 points OpenCV tracks (9.11, seed 1606014777: a mean of 7.2 px)."""
     g = truth["good"]
-    return float(np.linalg.norm((out[0][g] - truth["exact"][g]).mean(0)))
+    err = pts2[g] - truth["exact"][g]
+    d = np.linalg.norm(err, axis=1)
+    return float(np.linalg.norm(err[d <= np.percentile(d, 90)].mean(0)))
+
+
+def _bias(out, truth):
+    return mean_error_nearest(out[0], truth)
 
 
 def _status_wrong(out, truth):
