@@ -259,7 +259,23 @@ def _convert_calibration(out, case):
         raise OutputError("non-finite values in the calibration")
     for i, R in enumerate(Rs):
         as_rotation(R, f"Rs[{i}]")
+    _check_camera_matrix(K)
     return K, dist, Rs, ts
+
+
+CAMERA_MATRIX_TOL = 1e-9    # the entries the spec fixes are exact numbers: the reference and OpenCV write them
+
+
+def _check_camera_matrix(K: np.ndarray) -> None:
+    """K as the spec defines it, [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]: the rows below read only fx, fy, cx, cy and
+    the skew, so a wrong third row would pass unseen, and a skew refined too (a 10th intrinsic the spec fixes at 0)
+    lowers the RMS below OpenCV's and stays within the K row's 0.5 px."""
+    fixed = {"K[1, 0]": (K[1, 0], 0.0), "K[2, 0]": (K[2, 0], 0.0), "K[2, 1]": (K[2, 1], 0.0), "K[2, 2]": (K[2, 2], 1.0)}
+    wrong = [f"{name} = {v:.6g}" for name, (v, want) in fixed.items() if abs(v - want) > CAMERA_MATRIX_TOL]
+    if wrong:
+        raise OutputError(f"K must be upper-triangular with third row (0, 0, 1), unscaled: {', '.join(wrong)}")
+    if abs(K[0, 1]) > CAMERA_MATRIX_TOL:
+        raise OutputError(f"K[0, 1] = {K[0, 1]:.6g}: the spec's K has zero skew (refine fx, fy, cx, cy only)")
 
 
 def _distortion_px(a, b, uv):
@@ -311,6 +327,12 @@ def _unchanged(c, out):
 
 
 CALIBRATION_HINTS = [
+    raised(r"third row \(0, 0, 1\)", "K is the camera matrix [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] itself, not a "
+           "multiple of it: build it from the four refined numbers (the projection u = fx x + cx, v = fy y + cy "
+           "never reads the third row, so nothing in the fit sets it)."),
+    raised(r"zero skew", "the skew is not one of the unknowns: LM refines fx, fy, cx, cy (9 intrinsics with the "
+           "lens), and K[0, 1] stays exactly 0, as in cv2.calibrateCamera (a free skew lowers the RMS by fitting "
+           "noise)."),
     Hint("you returned the start: nothing was refined (did every LM step get rejected? check the sign of the "
          "step, Δ = −(JᵀJ + λI)⁻¹ Jᵀr, and the perturbation side of the rotation columns).", _unchanged),
     Hint("the distortion is exactly the start's: refine (k1, k2, p1, p2, k3) with K and the poses.",

@@ -33,17 +33,22 @@ def gt_min_eig(I: np.ndarray, pts: np.ndarray, win: int) -> np.ndarray:
 
 
 MIN_JUDGED = 30      # a draw judges positions at >= 30 clearly trackable points, else it is drawn again
+DRAWS = 50           # the worst configuration's draw is well posed 4 times in 10 (9.11's 13-px window at
+                     # min_eig 1: 0.43 of 300 draws; 9.18's 0.49), so 50 all fall short about once in 1e12
 
 
 def _draw(rng: np.random.Generator, width, height, shift, warp, win, min_eig, max_level=0):
-    """A scene whose 90th-percentile error means something: redrawn until it has MIN_JUDGED clearly
+    """A scene whose 90th-percentile and mean errors mean something: redrawn until it has MIN_JUDGED clearly
     trackable points inside the judged region (a dark crop of a texture at λ_min ≥ 40 had none, and the
-    percentile of nothing failed the reference: 9.11, seeds 624751615 and 807694133)."""
-    for _ in range(50):
+    percentile of nothing failed the reference: 9.11, seeds 624751615 and 807694133). Never judged on fewer:
+    the loop used to fall through after its last draw (9.11 seed 4 judged 4 points), so it raises instead."""
+    for _ in range(DRAWS):
         args, truth = _draw_once(rng, width, height, shift, warp, win, min_eig, max_level)
         if truth["good"].sum() >= MIN_JUDGED:
-            break
-    return args, truth
+            return args, truth
+    raise RuntimeError(f"9.10/9.11: no draw in {DRAWS} had {MIN_JUDGED} clearly trackable points ({width}x{height}, "
+                       f"window {win}, min_eig {min_eig}): the grader's scene generator needs a look (please report "
+                       "the seed)")
 
 
 def _draw_once(rng: np.random.Generator, width, height, shift, warp, win, min_eig, max_level=0):
@@ -99,19 +104,23 @@ def _p90(out, truth):
     return float(np.percentile(np.linalg.norm(out[0][g] - truth["exact"][g], axis=1), 90))
 
 
-BIAS_TOL = 0.05     # px: the reference's mean error over >= 30 judged points is <= 0.01 (noise averages out)
+BIAS_TOL = 0.05     # px: the reference's and OpenCV's mean error over >= 30 judged points is <= 0.01 (noise averages
+                    # out): 9.10 <= 0.008 (40 seeds x 2 draws), 9.11 <= 0.01 (20 seeds x 2 draws)
+
+
+def mean_error_nearest(pts2: np.ndarray, truth: dict) -> float:
+    """Length of the mean position error (px) over the 90 % of the clearly trackable points nearest the truth (the
+    points the 90th-percentile row holds to its bar): a shift shared by every point (a sampler or pixel-centre
+    offset), which noise does not produce. The few points the percentile lets run off stay out: a coarse level can
+    send a correct tracker 110 px off on 2 of 30 points OpenCV tracks (9.11, seed 1606014777: a mean of 7.2 px)."""
+    g = truth["good"]
+    err = pts2[g] - truth["exact"][g]
+    d = np.linalg.norm(err, axis=1)
+    return float(np.linalg.norm(err[d <= np.percentile(d, 90)].mean(0)))
 
 
 def _bias(out, truth):
-    """Length of the mean position error (px) over the clearly trackable points: a shift shared by every point
-    (a sampler or pixel-centre offset), which noise does not produce."""
-    g = truth["good"]
-    return float(np.linalg.norm((out[0][g] - truth["exact"][g]).mean(0)))
-
-
-def _bias_tol(truth) -> float:
-    """BIAS_TOL, wider on a draw with fewer than MIN_JUDGED judged points (the mean of n errors varies as 1/√n)."""
-    return BIAS_TOL * max(1.0, float(np.sqrt(MIN_JUDGED / max(1, int(truth["good"].sum())))))
+    return mean_error_nearest(out[0], truth)
 
 
 def _status_wrong(out, truth):
@@ -134,12 +143,11 @@ def _cases(label, draws, arg_names):
             yield Case(f"{label} {i + 1}: positions (shift {kw['shift']:.1f} px)", args, truth, _p90, 0.2,
                        "px (90th pct)", kwargs=call_kw, call=run, convert=_convert, info=info,
                        key=f"{label}-{i + 1}-positions", tags=("positions",))
-            if kw.get("max_level"):
-                # A shift shared by every point (0.1-0.15 px) stays under the 90th percentile's 0.2 px: its mean
-                # over the judged points shows it, as a correct tracker's errors average out (<= 0.01 px).
-                yield Case(f"{label} {i + 1}: mean error (a shift shared by every point)", args, truth, _bias,
-                           _bias_tol(truth), "px", kwargs=call_kw, call=run, convert=_convert, info=info,
-                           key=f"{label}-{i + 1}-bias", tags=("bias",))
+            # A shift shared by every point (0.1-0.15 px) stays under the 90th percentile's 0.2 px: its mean
+            # over the judged points shows it, as a correct tracker's errors average out (<= 0.01 px).
+            yield Case(f"{label} {i + 1}: mean error (a shift shared by every point)", args, truth, _bias, BIAS_TOL,
+                       "px", kwargs=call_kw, call=run, convert=_convert, info=info, key=f"{label}-{i + 1}-bias",
+                       tags=("bias",))
             # Every clear point must be right: trackable texture has λ_min ≥ 20 × min_eig, flat and edge
             # windows ~0.06 (the noise), so a correct test has no borderline points here.
             yield Case(f"{label} {i + 1}: status flags", args, truth, _status_wrong, 0, "wrong flags", kwargs=call_kw,
@@ -157,8 +165,10 @@ def _pyr_draws(rng: np.random.Generator):
     # Motions beyond one level's reach (a win-px window captures ~win/2 px), and beyond what the finest
     # level can make up when the guess is not doubled (half the motion left for level 0): 20-30 px with
     # 13 px windows, 30-42 px with 21 px windows, three levels (a 30-42 px motion is 4-5 px at level 3).
+    # min_eig 0.5 or 1: these 320-px crops are smoother than 9.10's, and at 2 (λ_min ≥ 40 judged) only 3.7 % of
+    # draws (564) had 30 clearly trackable points, so 50 draws fell short on ~5 % of seeds.
     return [dict(width=320, height=240, shift=rng.uniform(20.0, 30.0), warp=0.003, win=13, max_level=3,
-                 min_eig=float(rng.choice([0.5, 1.0, 2.0]))),
+                 min_eig=float(rng.choice([0.5, 1.0]))),
             dict(width=400, height=300, shift=rng.uniform(30.0, 42.0), warp=0.003, win=21, max_level=3, min_eig=1.0)]
 
 
@@ -213,13 +223,13 @@ def _pos_hints(pyramidal: bool):
              "I[y, x], and I_x is the derivative along columns.",
              _near(lambda t: t["pts"] + (t["exact"] - t["pts"])[:, ::-1])),
         Hint(lambda c, out: _status_hint(c, out), lambda c, out: "status" in c.tags and bool(_status_hint(c, out))),
+        Hint(lambda c, out: "every point is off by about the same vector "
+             f"{np.round((out[0][c.expected['good']] - c.expected['exact'][c.expected['good']]).mean(0), 2)}"
+             " px: a sampler or pixel-centre offset (the centre of the top-left pixel is (0, 0); "
+             "I2 sampled at x + d exactly, not at a rounded or half-pixel-shifted position)?",
+             lambda c, out: "bias" in c.tags and _bias(out, c.expected) > c.tol),
     ]
     if pyramidal:
-        hints.append(Hint(lambda c, out: "every point is off by about the same vector "
-                          f"{np.round((out[0][c.expected['good']] - c.expected['exact'][c.expected['good']]).mean(0), 2)}"
-                          " px: a sampler or pixel-centre offset (the centre of the top-left pixel is (0, 0); "
-                          "I2 sampled at x + d exactly, not at a rounded or half-pixel-shifted position)?",
-                          lambda c, out: "bias" in c.tags and _bias(out, c.expected) > c.tol))
         hints.append(Hint(lambda c, out: f"{100 * _far(c, out):.0f} % of the well-textured points end > 1 px off on a "
                           f"{c.info['shift']:.0f} px motion: beyond one level's reach. Track pts / 2^L at level L and "
                           "pass the guess down doubled: g_(L-1) = 2 (g_L + d_L).",

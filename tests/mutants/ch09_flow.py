@@ -185,6 +185,13 @@ def pyr_shared_offset(I1, I2, pts, win=21, max_level=3, iters=30, eps=0.01, min_
     return p2 + np.array([0.12, 0.0]), ok
 
 
+def lk_shared_offset(I1, I2, pts, win=9, iters=20, eps=0.01, min_eig=1.0):
+    """Every position off by the same 0.1 px (I2 sampled a fraction of a pixel off): the 90th percentile (the
+    reference's 0.03-0.08 px + 0.1) stays under its 0.2 px."""
+    p2, ok = ref_lk.lucas_kanade(I1, I2, pts, win, iters, eps, min_eig)
+    return p2 + np.array([0.0, 0.1]), ok
+
+
 def lk_swapped(I1, I2, pts, win=9, iters=20, eps=0.01, min_eig=1.0):
     """The displacement stacked as (dy, dx)."""
     p2, ok = ref_lk.lucas_kanade(I1, I2, pts, win, iters, eps, min_eig)
@@ -197,6 +204,7 @@ MUTANTS += [
     ("9.10", "(dy, dx) stacked", lk_swapped, "swapped"),
     ("9.10", "no eigenvalue test", _lk_with(test="none"), "no eigenvalue test"),
     ("9.10", "determinant test (the seed's)", _lk_with(test="det", gradients=_np_gradient), "determinant"),
+    ("9.10", "a 0.1 px offset shared by every point", lk_shared_offset, "same vector"),
     ("9.11", "guess not doubled going down", pyr_no_doubling, "guess down doubled"),
     ("9.11", "no pyramid", pyr_single_level, "guess down doubled"),
     # Not in the catalogue: pyr_points_not_scaled (coarse levels track the wrong place). On these scenes'

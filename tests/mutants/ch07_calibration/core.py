@@ -194,6 +194,23 @@ def refine_three_iterations(X, uv, K0, dist0, Rs0, ts0):
     return ref_zhang.refine_calibration(X, uv, K0, dist0, Rs0, ts0, max_iter=3)
 
 
+def refine_third_row_two(X, uv, K0, dist0, Rs0, ts0):
+    """The last step added as a 3x3 matrix built on np.eye(3): its third row's 1 went into K too, K[2, 2] = 2."""
+    K, dist, Rs, ts = ref_zhang.refine_calibration(X, uv, K0, dist0, Rs0, ts0)
+    return K + np.diag([0.0, 0.0, 1.0]), dist, Rs, ts
+
+
+def refine_with_skew(X, uv, K0, dist0, Rs0, ts0):
+    """The skew refined too, as a 10th intrinsic (the spec fixes it at 0): one Gauss-Newton step on it after the
+    other nine, u = fx x_d + s y_d + cx with y_d = (v - cy) / fy; the RMS drops below OpenCV's."""
+    K, dist, Rs, ts = ref_zhang.refine_calibration(X, uv, K0, dist0, Rs0, ts0)
+    p = ref_zhang._project(X, [K[0, 0], K[1, 1], K[0, 2], K[1, 2]], dist, Rs, ts, jac=False)     # (V, N, 2)
+    y_d = (p[..., 1] - K[1, 2]) / K[1, 1]
+    K = K.copy()
+    K[0, 1] = np.sum(y_d * (np.asarray(uv)[..., 0] - p[..., 0])) / np.sum(y_d ** 2)
+    return K, dist, Rs, ts
+
+
 MUTANTS = [
     ("7.5", "four corners only", homography_four_corners, "fit every corner"),
     ("7.5", "largest singular vector", homography_first_singular_vector, None),
@@ -212,6 +229,8 @@ MUTANTS = [
     ("7.8", "k3 never estimated", refine_no_k3, "k3 is exactly 0"),
     ("7.8", "poses held fixed", refine_poses_fixed, "poses are exactly the start"),
     ("7.8", "three iterations", refine_three_iterations, None),
+    ("7.8", "K[2, 2] = 2", refine_third_row_two, "third row (0, 0, 1)"),
+    ("7.8", "skew refined too", refine_with_skew, "zero skew"),
 ]
 
 
