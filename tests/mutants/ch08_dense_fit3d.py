@@ -55,10 +55,13 @@ def fit3d_no_densify_padded(views, init, steps=100, max_gaussians=72):
     return {k: np.concatenate([g[k], extra[k]]) for k in g}
 
 
-# Not caught (a known gap): no densification, then one Gaussian split into two that together draw what it drew (two
-# copies at the same place, each of opacity 1 - sqrt(1 - o)), trained long enough to reach the PSNR and depth bars:
-# the output's count cannot tell a post-hoc split from densification; only a quality bar a non-densified fit cannot
-# reach however long it trains would catch it.
+# Not caught (a known gap): no densification, trained 300 steps, then its most opaque Gaussian split into two copies at
+# the same place, each of opacity 1 - sqrt(1 - o), that together draw what it drew: 3/3 on 5 of seeds 0-5. The
+# output's count cannot tell a post-hoc split from densification; only a quality bar a non-densified fit cannot reach
+# however long it trains would catch it. Measured held-out PSNR on seeds 0-5: the reference (100 steps) 30.5-33.9 dB,
+# without densification 26.3-29.2 dB at 300 steps and 26.2-29.5 dB at 1000 (3.96-4.83 dB below the reference on the
+# same draw), so "within ~2 dB of the grader's own densified fit from the same start" (as 8.16 asks) would separate
+# them, but a learner's correct fit is not the reference's and no sweep of that bar has been run.
 MUTANTS: list[tuple] = [
     ("8.25", "no densification", fit3d_no_densify, "no more than the"),
     ("8.25", "no pruning", fit3d_no_prune, "prune them"),
