@@ -12,8 +12,9 @@ The learner fits every parameter with Adam through their own `project_gaussians`
 held-out cameras, whose images never reach the learner. Judged: (1) the held-out views' PSNR against a bar
 that the initialisation misses by ~10 dB, (2) the held-out views' depth (gsplat's expected depth
 Σ w_i z_i / Σ w_i, rasterization(render_mode="ED")): the Gaussians must have moved onto the surfaces, which a fit
-with frozen means misses although its images can pass (1) at 24 px; (3) densification (more Gaussians than the
-start), (4) the budget, (5) pruning; (3)-(5) count only with (1) met.
+with frozen means misses although its images can pass (1) at 24 px; (3) densification (more Gaussians that draw in
+the training views than the start: near-transparent or hidden padding does not count), (4) the budget, (5) pruning;
+(3)-(5) count only with (1) met.
 """
 from __future__ import annotations
 
@@ -56,6 +57,12 @@ PSNR_BAR = 26.0
 # whose one failure, 6.1 cm, passes at 8; a looser bar passes every seed a tighter one did).
 DEPTH_BAR = 0.08
 OPAQUE = 0.5           # a held-out pixel counts where the truth's accumulated alpha exceeds this
+# The densified row counts only Gaussians that draw something: opacity ≥ O_PRUNE and a blending weight T_i α_i of at
+# least DRAWS in some training pixel (1% of its colour). A fit without densification, trained 200-300 steps instead of
+# 100, passes the PSNR and depth bars on most scenes; appending one near-transparent Gaussian (o = 0.006) made it
+# pass a row that counted every Gaussian. Measured on seeds 0-5: every one of the reference's 72 Gaussians weighs
+# ≥ 0.088 somewhere; that padding at most 0.003.
+DRAWS = 0.01
 
 
 def _camera(az_deg: float, el_deg: float, dist: float = 4.0):
@@ -158,6 +165,24 @@ def _held_depth_error(o, info) -> float:
     return float(np.median(np.concatenate(errs)))
 
 
+def _max_weights(g: dict, cams) -> np.ndarray:
+    """Each Gaussian's largest blending weight T_i α_i over the pixels of cameras cams (N,); 0 where never visible."""
+    m = np.zeros(len(g["mu"]))
+    for K, R, t in cams:
+        p = gt_project(g["mu"], g["q"], g["s"], R, t, K, W, H)
+        v = p["visible"]
+        if v.any():
+            w, _ = brute_force_weights(p["means2d"][v], p["conic"][v], g["opacity"][v], p["depth"][v],
+                                       p["radius"][v], W, H)
+            m[v] = np.maximum(m[v], w.max(0))
+    return m
+
+
+def n_drawing(o, info) -> int:
+    """How many Gaussians draw something in the training views: opacity ≥ O_PRUNE and a weight ≥ DRAWS somewhere."""
+    return int(np.sum((o["opacity"] >= O_PRUNE) & (_max_weights(o, info["train"]) >= DRAWS)))
+
+
 def _train_share(o, info) -> float:
     return _mse(o, info["train"], info["train_images"]) / info["mse_train_init"]
 
@@ -189,8 +214,10 @@ def _fit3d_cases(rng: np.random.Generator):
                f"initialisation's: {100 * _held_depth_error(init_kept, info):.0f} cm)", args, DEPTH_BAR,
                lambda o, e: max(0.0, _held_depth_error(o, info) - e), 0.0, "m over", convert=_convert, call=run,
                info=info, key="depth")
-    yield Case(f"densified: more Gaussians than the {info['n_init']} SfM points, with the held-out views fitted", args,
-               info["n_init"], lambda o, e: float(max(0, e + 1 - len(o["mu"]))) if held(o, e) <= 0.0 else 99.0, 0,
+    # Counted are the Gaussians that draw (n_drawing): padding the output with invisible ones adds nothing.
+    yield Case(f"densified: more Gaussians that draw (weight ≥ {DRAWS:g} in some training pixel) than the "
+               f"{info['n_init']} SfM points, with the held-out views fitted", args, info["n_init"],
+               lambda o, e: float(max(0, e + 1 - n_drawing(o, info))) if held(o, e) <= 0.0 else 99.0, 0,
                "missing (99: held-out not fitted)", convert=_convert, call=run, info=info, key="densified")
     yield Case(f"at most {BUDGET} Gaussians, with the held-out views fitted", args, BUDGET,
                lambda o, e: float(len(o["mu"]) - e) if held(o, e) <= 0.0 else 99.0, 0, "(99: held-out not fitted)",
@@ -206,10 +233,11 @@ FIT3D_HINTS = [
          "project_gaussians and rasterize. Is your 8.15 rasteriser differentiable in means2d, conic and opacity too (its "
          "check only tested the colours)? Are the positions and scales optimised at all?",
          lambda c, o: c.key == "held-out" and _train_share(o, c.info) > 0.3),
-    Hint(lambda c, o: f"the fit ended with {len(o['mu'])} Gaussians, no more than the {c.info['n_init']} SfM points it "
-         "started from: densify — every few dozen steps split (large) or clone (small) the Gaussians with the largest "
-         "accumulated screen-space position gradient, within the budget.",
-         lambda c, o: c.key in ("held-out", "densified") and len(o["mu"]) <= c.info["n_init"]),
+    Hint(lambda c, o: f"the fit ended with {n_drawing(o, c.info)} Gaussians that draw anything in the training views "
+         f"(of {len(o['mu'])} returned), no more than the {c.info['n_init']} SfM points it started from: densify — "
+         "every few dozen steps split (large) or clone (small) the Gaussians with the largest accumulated screen-space "
+         "position gradient, within the budget.",
+         lambda c, o: c.key in ("held-out", "densified") and n_drawing(o, c.info) <= c.info["n_init"]),
     Hint("the training views are fitted but the held-out ones are not: the Gaussians explain each view from the wrong "
          "place. Let the positions move (their learning rate in metres per step, a scene is ~2 m across), fit every "
          "training view, and densify where the 2D position gradient is large.",

@@ -43,9 +43,25 @@ def fit3d_untrained(views, init, steps=100, max_gaussians=72):
     return {k: np.asarray(v)[keep] for k, v in init.items()}
 
 
-# Not caught (a known gap): no densification, then one Gaussian copied at the end so the count row passes. Its
-# held-out PSNR reached the 26 dB bar on 1 of seeds 0-7 (seed 1: 27.8 dB), where its depth (7.9 cm) is under the
-# 8 cm bar: full marks on seed 1. Only a quality bar the reference's tail allows can catch it (see DEPTH_BAR).
+def fit3d_no_densify_padded(views, init, steps=100, max_gaussians=72):
+    """No densification, trained 200 steps instead of the 100 asked (its held-out views then reach the PSNR and depth
+    bars on most scenes), plus one near-transparent copy (o = 0.006, above the pruning threshold) appended so the
+    output holds more Gaussians than the start. Full marks on 5 of seeds 0-5 while the densified row counted every
+    Gaussian; caught since it counts only those that draw (DRAWS in graders/ch08_dense/fit3d.py)."""
+    g = _fit(views, init, 200, max_gaussians, densify_until=-1)
+    g = {k: np.asarray(v.detach() if hasattr(v, "detach") else v, float) for k, v in g.items()}
+    extra = {k: v[:1].copy() for k, v in g.items()}
+    extra["opacity"] = np.array([0.006])
+    return {k: np.concatenate([g[k], extra[k]]) for k in g}
+
+
+# Not caught (a known gap): no densification, trained 300 steps, then its most opaque Gaussian split into two copies at
+# the same place, each of opacity 1 - sqrt(1 - o), that together draw what it drew: 3/3 on 5 of seeds 0-5. The
+# output's count cannot tell a post-hoc split from densification; only a quality bar a non-densified fit cannot reach
+# however long it trains would catch it. Measured held-out PSNR on seeds 0-5: the reference (100 steps) 30.5-33.9 dB,
+# without densification 26.3-29.2 dB at 300 steps and 26.2-29.5 dB at 1000 (3.96-4.83 dB below the reference on the
+# same draw), so "within ~2 dB of the grader's own densified fit from the same start" (as 8.16 asks) would separate
+# them, but a learner's correct fit is not the reference's and no sweep of that bar has been run.
 MUTANTS: list[tuple] = [
     ("8.25", "no densification", fit3d_no_densify, "no more than the"),
     ("8.25", "no pruning", fit3d_no_prune, "prune them"),
@@ -53,4 +69,6 @@ MUTANTS: list[tuple] = [
     ("8.25", "colours only, frozen positions", fit3d_colours_only, "not fitted either"),
     ("8.25", "frozen means", fit3d_frozen_means, "depth is off"),
     ("8.25", "untrained", fit3d_untrained, "not fitted either"),
+    ("8.25", "no densification, trained longer, one transparent Gaussian appended", fit3d_no_densify_padded,
+     "no more than the"),
 ]
