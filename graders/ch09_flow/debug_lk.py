@@ -225,15 +225,10 @@ def _p90(pts2, truth):
     return float(np.percentile(np.linalg.norm(pts2[g] - truth["exact"][g], axis=1), 90))
 
 
-def _mean_off(pts2, truth) -> float:
-    """A shift every point shares: 9.11's bias row (the mean error over the 90 % of judged points nearest the truth)."""
-    return mean_error_nearest(pts2, truth)
-
-
 def _positions_over(o, t) -> float:
     """How far the positions are over their bars: the 90th percentile's, and the mean error's (a 0.1-0.15 px
     offset added to a right answer stays under the percentile's bar, and correct tracks average out to <= 0.01)."""
-    return max(0.0, _p90(o["pts2"], t) - t["bar"], _mean_off(o["pts2"], t) - t["bias_bar"])
+    return max(0.0, _p90(o["pts2"], t) - t["bar"], mean_error_nearest(o["pts2"], t) - t["bias_bar"])
 
 
 def debug_large_motion(rng: np.random.Generator) -> tuple[dict, dict]:
@@ -318,7 +313,7 @@ MOTION_HINTS = [
          lambda c, o: c.key != "cause" and _one_motion(c, o)),
     Hint("every tracked point is off by about the same vector (the mean error is over its bar): a sampler or "
          "pixel-centre offset? The centre of the top-left pixel is (0, 0); sample I2 at x + d exactly.",
-         lambda c, o: c.key != "cause" and _mean_off(o["pts2"], c.expected) > c.expected["bias_bar"]
+         lambda c, o: c.key != "cause" and mean_error_nearest(o["pts2"], c.expected) > c.expected["bias_bar"]
          and _p90(o["pts2"], c.expected) <= 2 * c.expected["bar"]),
     Hint(lambda c, o: f"{100 * _far(c, o):.0f} % of the trackable points still end > 1 px off on a "
          f"{c.expected['shift']:.0f} px motion: more iterations or a larger window leave a single level "
