@@ -39,6 +39,9 @@ SHARED = ("__init__.py", "__main__.py", "cli.py", "datasets.py", "layers.py")   
 PACKAGES = ("core", "kit", "grading", "study", "oracles")   # every row of graders.layers but the chapters
 HOME_NOTEBOOK = "notebooks/00_start_here.ipynb"
 RELEASED = "released.json"     # beside chapters.py in a release: the chapters it holds
+# What a learner reads in docs/: the conventions the notebooks and checks use, and how a check judges (graded mode,
+# isolation). The contributor's template and the instructor's test-time log stay in the course repository.
+STUDENT_DOCS = ("CONVENTIONS.md", "ENGINE.md")
 
 
 def _ignore(_dir, names):
@@ -120,7 +123,9 @@ def student_release(out: str | Path, numbers: list[int] | None = None) -> Path:
         shutil.copy2(ROOT / name, out / name)
     (out / "README.md").write_text(student_readme(numbers), encoding="utf-8")
     shutil.copytree(ROOT / "data", out / "data", ignore=_ignore)
-    shutil.copytree(ROOT / "docs", out / "docs", ignore=_ignore)
+    (out / "docs").mkdir()
+    for name in STUDENT_DOCS:
+        shutil.copy2(ROOT / "docs" / name, out / "docs" / name)
     (out / "pyproject.toml").write_text(_pyproject())
     swap_twins(out)                   # stand-ins that are a solution -> their library twin (graders.grading.standins)
     seal_questions(out, numbers)      # last: it reads which names the release's other files and notebooks use

@@ -443,3 +443,4 @@ def test_release_readme_lists_only_what_the_release_holds(tmp_path):
     assert not missing, missing                      # no link to a chapter (or file) this edition lacks
     assert "notebooks/02_epipolar.ipynb" not in text
     assert "answers are sealed in this edition" in text      # what a check of a question does here
+    assert sorted(p.name for p in (rel / "docs").iterdir()) == ["CONVENTIONS.md", "ENGINE.md"]   # no instructor log
