@@ -79,23 +79,32 @@ def orb_descriptors(img: np.ndarray, kps: np.ndarray, pattern: np.ndarray) -> np
     kps = np.asarray(kps, float)[:, :2]
     theta = orientation_centroid(I, kps)
     c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]  # (N, 1)
-    px, py = np.asarray(pattern, float).reshape(-1, 2).T  # (2 n,): a_0, b_0, a_1, b_1, ...
-    # rotate the pattern points by theta, round, read the smoothed image (all 2 n points at once):
-    # x = rint(k_x + c p_x - s p_y), y = rint(k_y + s p_x + c p_y), each (N, 2 n) array updated in
-    # place (+=, -=, out=): every fresh (N, 2 n) array would cost page faults
+    # the 2 n test points a_0, b_0, a_1, b_1, ... repeat (a learned pattern of 256 pairs in a radius-13
+    # disc has ~340 distinct points of 512): each distinct point is turned and read once, `which` says
+    # which distinct point each test point is
+    # (np.unique of the points as complex numbers p_x + i p_y: a 1-D sort, 30x faster than with axis=0)
+    p = np.asarray(pattern, float).reshape(-1, 2)
+    points, which = np.unique(p[:, 0] + 1j * p[:, 1], return_inverse=True)
+    px, py = points.real, points.imag  # (U,)
+    # rotate the points by theta, round, read the smoothed image (all points at once):
+    # x = rint(k_x + c p_x - s p_y), y = rint(k_y + s p_x + c p_y), each (N, U) array updated in
+    # place (+=, -=, out=): every fresh (N, U) array would cost page faults
     x, y = c * px, s * px
     x += kps[:, 0:1]
     y += kps[:, 1:2]
     x -= s * py
     y += c * py
     x = np.rint(x, out=x).astype(np.intp)  # intp, numpy's index type: other integer indices are
-    y = np.rint(y, out=y).astype(np.intp)  # converted to it first (a whole extra (N, 2 n) pass)
-    np.clip(x, 0, I.shape[1] - 1, out=x)
-    np.clip(y, 0, I.shape[0] - 1, out=y)
+    y = np.rint(y, out=y).astype(np.intp)  # converted to it first (a whole extra (N, U) pass)
+    reach = np.hypot(px, py).max(initial=0) + 1  # no turned point is further than this from its keypoint
+    if len(kps) and (kps.min() < reach or np.any(kps.max(0) + reach > np.array(I.shape[::-1]) - 1)):
+        np.clip(x, 0, I.shape[1] - 1, out=x)  # some point may fall off the image: the nearest edge pixel
+        np.clip(y, 0, I.shape[0] - 1, out=y)
     y *= I.shape[1]
     y += x  # flat indices y W + x
-    v = np.take(S, y).reshape(len(kps), len(pattern), 2)  # (N, n, 2): (I_s(p + R a_i), I_s(p + R b_i))
-    bits = v[..., 0] < v[..., 1]  # (N, n)
+    v = np.take(S, y)  # (N, U): the smoothed image at every turned point
+    a, b = which.reshape(-1, 2).T  # (n,) each: test i compares points a[i] and b[i]
+    bits = v[:, a] < v[:, b]  # (N, n): I_s(p + R a_i) < I_s(p + R b_i)
     return np.packbits(bits, axis=1)
 
 

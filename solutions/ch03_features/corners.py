@@ -138,9 +138,8 @@ def fast_detect(img: np.ndarray, threshold: int = 20, nms: bool = True) -> np.nd
     score = np.zeros(len(q), np.int16)
     for i in range(0, len(q), FAST_BLOCK):
         qb, block = q[i:i + FAST_BLOCK], slice(i, i + FAST_BLOCK)
-        d = np.stack([r[qb] for r in ring]).astype(np.int16)  # (16, block)
-        d -= c[qb]
-        score[block] = _candidate_scores(d, bright[block], dark[block])
+        v = np.stack([r[qb] for r in ring])  # (16, block) uint8: the circles
+        score[block] = _candidate_scores(v, c[qb], bright[block], dark[block])
     corner = score > threshold
     p, score = a + q[corner], score[corner]
     x = p % W
@@ -160,18 +159,27 @@ FAST_BLOCK = 16384  # candidates scored at once by fast_detect
 PRETEST_BLOCK = 1 << 18  # pixels pre-tested at once
 
 
-def _candidate_scores(d: np.ndarray, bright: np.ndarray, dark: np.ndarray) -> np.ndarray:
-    """FAST scores of pre-tested candidates, d (16, n) their circle-minus-centre differences, bright /
-    dark (n,) which pre-test each passed: the same as _arc_score(d) wherever that is above the
-    threshold, for half the work. A candidate that failed the darker pre-test has no darker arc
-    above the threshold, so its score is above the threshold iff its brighter arc's is, and is then
-    that one: only the brighter arc is scored (and only the darker, on -d, if it failed the
-    brighter pre-test). The rare candidates that passed both get both."""
-    d *= np.where(bright, d.dtype.type(1), d.dtype.type(-1))  # dark-only columns negated: their darker arc
-    score = _brighter_arc(d)
+def _candidate_scores(v: np.ndarray, c: np.ndarray, bright: np.ndarray, dark: np.ndarray) -> np.ndarray:
+    """FAST scores of pre-tested candidates, v (16, n) uint8 their circles, c (n,) their centres, bright /
+    dark (n,) which pre-test each passed: the same as _arc_score(v - c) wherever that is above the
+    threshold, for a quarter of the work. (n,) int16.
+
+    1. Subtracting c commutes with min and max: the brighter arc's score max_arcs min_arc (v_i - c) is
+       _brighter_arc(v) - c, so the circles are scored as they are, in uint8 (half the bytes of int16).
+       The darker arc's, max_arcs min_arc (c - v_i), is the brighter arc's of the negative 255 - v
+       (exact in uint8: 255 - v = v XOR 255) with centre 255 - c.
+    2. A candidate that failed the darker pre-test has no darker arc above the threshold, so its
+       score is above the threshold iff its brighter arc's is, and is then that one: only the brighter
+       arc is scored (only the darker, on the negative, if it failed the brighter pre-test). The rare
+       candidates that passed both get both."""
+    flip = np.where(bright, np.uint8(0), np.uint8(255))  # dark-only candidates: negatives (XOR 255)
+    v ^= flip
+    score = _brighter_arc(v).astype(np.int16)
+    score -= c ^ flip
     both = bright & dark
     if both.any():
-        score[both] = np.maximum(score[both], _brighter_arc(-d[:, both]))
+        darker = _brighter_arc(v[:, both] ^ np.uint8(255)).astype(np.int16) - (c[both] ^ np.uint8(255))
+        score[both] = np.maximum(score[both], darker)
     return score
 
 

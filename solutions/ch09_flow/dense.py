@@ -35,25 +35,71 @@ def horn_schunck(I1: np.ndarray, I2: np.ndarray, alpha: float = 10.0, iters: int
     return np.stack([u, v], -1)
 
 
+def _merge_exchange(n: int) -> list[tuple[int, int]]:
+    """Batcher's odd-even merge sort as a list of compare-exchanges (i, j), i < j: after each, position i holds
+    the smaller value and j the larger; after all of them, any n values are sorted (Knuth, TAOCP vol. 3,
+    5.2.2, Algorithm M: 138 compare-exchanges for n = 25). The same steps for every input: a sorting network."""
+    t = max(1, (n - 1).bit_length())
+    pairs, p = [], 1 << (t - 1)
+    while p > 0:
+        q, r, d = 1 << (t - 1), 0, p
+        while True:
+            pairs += [(i, i + d) for i in range(n - d) if i & p == r]
+            if q == p:
+                break
+            d, q, r = q - p, q // 2, p
+        p //= 2
+    return pairs
+
+
+def _median_network(n: int) -> list[tuple[int, int]]:
+    """The compare-exchanges of `_merge_exchange(n)` that can change what ends up in the middle position n // 2
+    (walking back from the end: a step matters if it writes a position that a later kept step reads):
+    113 of 138 for n = 25."""
+    needed, kept = {n // 2}, []
+    for i, j in reversed(_merge_exchange(n)):
+        if i in needed or j in needed:
+            kept.append((i, j))
+            needed |= {i, j}
+    return kept[::-1]
+
+
+MEDIAN25 = _median_network(25)
+
+
 def median5(a: np.ndarray, where: np.ndarray | None = None) -> np.ndarray:
-    """5 x 5 median filter, borders replicated (scipy.ndimage.median_filter(a, 5, mode="nearest")): each
-    pixel's 25 neighbours side by side (a sliding-window view, copied once by the reshape) and the 13th
-    smallest of them by an in-place partition, ~3x faster than ndimage's on a noisy flow. In float32: a median
-    only selects, so the result is the float64 one rounded to 7 digits (1e-5 px on an 80 px flow).
-    where: (H, W) bool, if given: the median only there, `a` (in float32) elsewhere."""
+    """5 x 5 median filter over the last two axes, borders replicated (scipy.ndimage.median_filter(a, 5,
+    mode="nearest") on each (H, W) image of a (..., H, W) array), in float32 (a median only selects: the float64
+    result rounded to 7 digits, 1e-5 px on an 80 px flow).
+
+    A sorting network (MEDIAN25) run on whole images at once: the 25 shifted copies of the image, one per
+    window offset, hold each pixel's 25 neighbours at the same index; a compare-exchange is np.minimum and
+    np.maximum of two of them; after the network the middle copy holds every pixel's median. 113 whole-array
+    min / max pairs, ~3x faster than sorting each pixel's 25 values (np.partition, one call per pixel inside
+    numpy), in bands of ~16,000 pixels so the 25 copies stay in the CPU cache.
+    where: (H, W) bool, if given: the median only there (bands without one are skipped), `a` elsewhere."""
     a = np.asarray(a, np.float32)
-    w = sliding_window_view(np.pad(a, 2, mode="edge"), (5, 5))          # (H, W, 5, 5), a view
-    w = w.reshape(a.shape[0], a.shape[1], 25) if where is None else w[where].reshape(-1, 25)
-    w.partition(12, axis=-1)
-    if where is None:
-        return w[..., 12]
+    H, W = a.shape[-2:]
+    P = np.pad(a, [(0, 0)] * (a.ndim - 2) + [(2, 2), (2, 2)], mode="edge")
     out = a.copy()
-    out[where] = w[:, 12]
+    rows = max(1, 16384 // W)
+    for y in range(0, H, rows):
+        h = min(rows, H - y)
+        if where is not None and not where[y:y + h].any():
+            continue
+        v = [P[..., y + dy:y + dy + h, dx:dx + W].copy() for dy in range(5) for dx in range(5)]  # 25 neighbours
+        low = np.empty_like(v[0])
+        for i, j in MEDIAN25:                    # compare-exchange: v[i] <- min, v[j] <- max (no fresh arrays)
+            np.minimum(v[i], v[j], out=low)
+            np.maximum(v[i], v[j], out=v[j])
+            v[i], low = low, v[i]
+        out[..., y:y + h, :] = v[12] if where is None else np.where(where[y:y + h], v[12], a[..., y:y + h, :])
     return out
 
 
 def _median_flow(f: np.ndarray, where: np.ndarray | None = None) -> np.ndarray:
-    return np.stack([median5(f[..., 0], where), median5(f[..., 1], where)], -1)
+    """median5 of each flow component (H, W, 2) -> (H, W, 2) float32."""
+    return np.stack(list(median5(np.moveaxis(f, -1, 0), where)), -1)
 
 
 def _neighbour_sum(u: np.ndarray, wx: np.ndarray, wy: np.ndarray) -> np.ndarray:
@@ -121,7 +167,7 @@ def _robust_warp_step(I1, I2, f, alpha, rho, eps, tau, sigma, sweeps, omega=1.0)
             un, vn = M11 * r1 + M12 * r2, M12 * r1 + M22 * r2                # the 2 x 2 solve, every pixel
             u = np.where(m, u + omega * (un - u), u)                        # over-relaxed by omega
             v = np.where(m, v + omega * (vn - v), v)
-    return np.stack([median5(u), median5(v)], -1)
+    return _median_flow(np.stack([u, v], -1))
 
 
 def affine_motion(f: np.ndarray, step: int = 4, iters: int = 3) -> np.ndarray:
