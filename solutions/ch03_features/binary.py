@@ -164,9 +164,9 @@ def orb_detect(img: np.ndarray, n_features: int = 1000, n_levels: int = 8, scale
 
     Returns a list over levels of (level image uint8, (n_l, 2) keypoints in that level's pixels,
     (sx, sy) = level-0 pixels per level pixel)."""
-    I = np.asarray(img, np.float32)
-    if np.asarray(img).dtype != np.uint8:
-        I = np.clip(I, 0, 255)  # every level then stays in [0, 255]: it is rounded to uint8 below
+    I = np.asarray(img)
+    if I.dtype != np.uint8:  # (a uint8 image is level 0 as it is, and resize_bilinear reads it as float32)
+        I = np.clip(np.asarray(I, np.float32), 0, 255)  # every level then stays in [0, 255]: rounded to uint8 below
     f = 1.0 / scale
     share = n_features * (1 - f) / (1 - f ** n_levels) * f ** np.arange(n_levels)
     crop = border - 4  # FAST needs a corner's circle (3 px) and its NMS neighbours' (1 px more)
@@ -176,7 +176,8 @@ def orb_detect(img: np.ndarray, n_features: int = 1000, n_levels: int = 8, scale
         if min(shape) < 2 * border + 8:
             break
         L = I if lv == 0 else resize_bilinear(L, shape)  # each level from the previous one, as OpenCV does
-        L8 = np.rint(L, out=np.empty(shape, np.uint8), casting="unsafe")  # convex weights: within [0, 255]
+        # rounded to uint8 (bilinear weights are convex: within [0, 255]); a uint8 level 0 is already
+        L8 = L if L.dtype == np.uint8 else np.rint(L, out=np.empty(shape, np.uint8), casting="unsafe")
         h, w = shape
         k = fast_detect(L8[crop:h - crop, crop:w - crop], threshold, True) + crop  # the inside only
         k = k[(k[:, 0] >= border) & (k[:, 0] < w - border) & (k[:, 1] >= border) & (k[:, 1] < h - border)]
