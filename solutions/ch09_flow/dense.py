@@ -72,29 +72,43 @@ def median5(a: np.ndarray, where: np.ndarray | None = None) -> np.ndarray:
     mode="nearest") on each (H, W) image of a (..., H, W) array), in float32 (a median only selects: the float64
     result rounded to 7 digits, 1e-5 px on an 80 px flow).
 
-    A sorting network (MEDIAN25) run on whole images at once: the 25 shifted copies of the image, one per
-    window offset, hold each pixel's 25 neighbours at the same index; a compare-exchange is np.minimum and
-    np.maximum of two of them; after the network the middle copy holds every pixel's median. 113 whole-array
-    min / max pairs, ~3x faster than sorting each pixel's 25 values (np.partition, one call per pixel inside
-    numpy), in bands of ~16,000 pixels so the 25 copies stay in the CPU cache.
-    where: (H, W) bool, if given: the median only there (bands without one are skipped), `a` elsewhere."""
+    A sorting network (MEDIAN25) run on whole images at once: 25 arrays, one per window offset, hold each
+    pixel's 25 neighbours at the same index; a compare-exchange is np.minimum and np.maximum of two of them;
+    after the network the middle array holds every pixel's median. 113 whole-array min / max pairs, ~3x faster
+    than sorting each pixel's 25 values (np.partition, one call per pixel inside numpy), in bands of ~16,000
+    values (rows x width x images) so the 25 arrays stay in the CPU's L2 cache.
+    where: (H, W) bool, if given: the median only there (the 25 neighbours of those pixels only), `a` elsewhere."""
     a = np.asarray(a, np.float32)
     H, W = a.shape[-2:]
     P = np.pad(a, [(0, 0)] * (a.ndim - 2) + [(2, 2), (2, 2)], mode="edge")
+    if where is None:
+        out = np.empty_like(a)
+        rows = max(1, 16384 // (a.size // H))
+        for y in range(0, H, rows):
+            h = min(rows, H - y)
+            out[..., y:y + h, :] = _median25([P[..., y + dy:y + dy + h, dx:dx + W] for dy in range(5) for dx in range(5)])
+        return out
+    ys, xs = np.nonzero(where)                      # pixel (y, x)'s window starts at (y, x) in P
+    P = P.reshape(P.shape[:-2] + (-1,))
+    start = ys * (W + 4) + xs
     out = a.copy()
-    rows = max(1, 16384 // W)
-    for y in range(0, H, rows):
-        h = min(rows, H - y)
-        if where is not None and not where[y:y + h].any():
-            continue
-        v = [P[..., y + dy:y + dy + h, dx:dx + W].copy() for dy in range(5) for dx in range(5)]  # 25 neighbours
-        low = np.empty_like(v[0])
-        for i, j in MEDIAN25:                    # compare-exchange: v[i] <- min, v[j] <- max (no fresh arrays)
-            np.minimum(v[i], v[j], out=low)
-            np.maximum(v[i], v[j], out=v[j])
-            v[i], low = low, v[i]
-        out[..., y:y + h, :] = v[12] if where is None else np.where(where[y:y + h], v[12], a[..., y:y + h, :])
+    n = max(1, 16384 // (a.size // (H * W)))
+    for i in range(0, len(start), n):
+        s = start[i:i + n]
+        med = _median25([np.take(P, s + dy * (W + 4) + dx, axis=-1) for dy in range(5) for dx in range(5)])
+        out[..., ys[i:i + n], xs[i:i + n]] = med
     return out
+
+
+def _median25(v: list[np.ndarray]) -> np.ndarray:
+    """The element-wise median of 25 equal-shaped arrays by the network MEDIAN25 (v is not modified)."""
+    v = [x.copy() for x in v]
+    low = np.empty_like(v[0])
+    for i, j in MEDIAN25:                    # compare-exchange: v[i] <- min, v[j] <- max (no fresh arrays)
+        np.minimum(v[i], v[j], out=low)
+        np.maximum(v[i], v[j], out=v[j])
+        v[i], low = low, v[i]
+    return v[12]
 
 
 def _median_flow(f: np.ndarray, where: np.ndarray | None = None) -> np.ndarray:
@@ -222,7 +236,8 @@ def _resize_flow(f: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     i0, i1, t = _linear_weights(h, H)
     f = f[i0] + t[:, None, None] * (f[i1] - f[i0])                           # (H, w, 2)
     j0, j1, t = _linear_weights(w, W)
-    return f[:, j0] + t[None, :, None] * (f[:, j1] - f[:, j0])               # (H, W, 2)
+    left = np.take(f, j0, axis=1)                   # np.take: columns gathered 2x faster than f[:, j0]
+    return left + t[None, :, None] * (np.take(f, j1, axis=1) - left)         # (H, W, 2)
 
 
 def gaussian_pyramids(I1, I2, min_size: int = 16) -> tuple[list, list]:
