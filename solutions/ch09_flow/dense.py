@@ -156,7 +156,7 @@ def _robust_warp_step(I1, I2, f, alpha, rho, eps, tau, sigma, sweeps, omega=1.0)
     EPE than the 20 Jacobi sweeps (the neighbours' w all from the previous sweep) it replaced, in ~2/3 of the
     time (FlyingChairs pairs, benchmarks/ch09_flow.py). Then Sun, Roth & Black's 5 x 5 median filter of the flow."""
     H, W = I1.shape
-    ys, xs = np.mgrid[0:H, 0:W].astype(np.float32)
+    xs, ys = np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32)[:, None]   # pixel coordinates
     I2w = bilinear(I2, xs + f[..., 0], ys + f[..., 1], np.float32)           # 9.9's backward warp
     (gy1, gx1), (gy2, gx2) = np.gradient(I1), np.gradient(I2w)
     Ix, Iy, It = 0.5 * (gx1 + gx2), 0.5 * (gy1 + gy2), I2w - I1
@@ -172,15 +172,19 @@ def _robust_warp_step(I1, I2, f, alpha, rho, eps, tau, sigma, sweeps, omega=1.0)
     M11, M12, M22 = A22 / det, -J12 / det, A11 / det                        # each pixel's inverse, once
     b1 = J11 * f[..., 0] + J12 * f[..., 1] - j1
     b2 = J12 * f[..., 0] + J22 * f[..., 1] - j2
-    u, v = f[..., 0], f[..., 1]
-    H, W = u.shape
+    u, v = f[..., 0].copy(), f[..., 1].copy()                               # updated in place below
     red = np.add.outer(np.arange(H), np.arange(W)) % 2 == 0                # a checkerboard
+    halves = [np.where(m, np.float32(omega), np.float32(0)) for m in (red, ~red)]   # omega on one half, 0 on the other
     for _ in range(sweeps):
-        for m in (red, ~red):      # red pixels' neighbours are all black: each half updates from the other's new w
+        for step in halves:        # red pixels' neighbours are all black: each half updates from the other's new w
             r1, r2 = b1 + _neighbour_sum(u, wx, wy), b2 + _neighbour_sum(v, wx, wy)
             un, vn = M11 * r1 + M12 * r2, M12 * r1 + M22 * r2                # the 2 x 2 solve, every pixel
-            u = np.where(m, u + omega * (un - u), u)                        # over-relaxed by omega
-            v = np.where(m, v + omega * (vn - v), v)
+            un -= u
+            un *= step
+            u += un                                 # u + omega (un - u) on this half (over-relaxed), u on the other
+            vn -= v
+            vn *= step
+            v += vn
     return _median_flow(np.stack([u, v], -1))
 
 
@@ -207,7 +211,8 @@ def _keep(I1, I2, f, T, k) -> np.ndarray:
     """Where f explains the images better than the candidate T: its local warp error |I2(x + f) − I1|,
     Gaussian-averaged over σ = 2, below k times T's. -> (H, W) bool."""
     H, W = I1.shape
-    ys, xs = np.mgrid[0:H, 0:W].astype(np.float32)
+    xs, ys = np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32)[:, None]
+    I2 = np.asarray(I2, np.float32)                 # once (bilinear would convert it for each call)
     err = lambda g: gaussian_filter(np.abs(bilinear(I2, xs + g[..., 0], ys + g[..., 1], np.float32) - I1),  # noqa
                                     2.0)
     return err(f) < k * err(T)
