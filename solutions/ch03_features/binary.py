@@ -86,9 +86,25 @@ def orb_descriptors(img: np.ndarray, kps: np.ndarray, pattern: np.ndarray) -> np
     p = np.asarray(pattern, float).reshape(-1, 2)
     points, which = np.unique(p[:, 0] + 1j * p[:, 1], return_inverse=True)
     px, py = points.real, points.imag  # (U,)
-    # rotate the points by theta, round, read the smoothed image (all points at once):
-    # x = rint(k_x + c p_x - s p_y), y = rint(k_y + s p_x + c p_y), each (N, U) array updated in
-    # place (+=, -=, out=): every fresh (N, U) array would cost page faults
+    a, b = which.reshape(-1, 2).T  # (n,) each: test i compares distinct points a[i] and b[i]
+    bits = np.empty((len(kps), len(a)), bool)
+    for i in range(0, len(kps), BRIEF_BLOCK):  # blocks of keypoints: the (block, U) arrays stay in the CPU cache
+        block = slice(i, i + BRIEF_BLOCK)
+        v = _turned_reads(S, I.shape, kps[block], c[block], s[block], px, py)  # (block, U)
+        bits[block] = v[:, a] < v[:, b]  # I_s(p + R a_i) < I_s(p + R b_i)
+    return np.packbits(bits, axis=1)
+
+
+BRIEF_BLOCK = 64  # keypoints described at once by orb_descriptors (graf1 + graf3: 30 % faster than all at once)
+
+
+def _turned_reads(S: np.ndarray, shape: tuple[int, int], kps: np.ndarray, c: np.ndarray, s: np.ndarray,
+                  px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """The smoothed image S (flattened (H, W) = shape) at the points (px, py) (U,) turned by each
+    keypoint's angle (cosines c, sines s: (N, 1)) around it, rounded to the nearest pixel: (N, U).
+
+    x = rint(k_x + c p_x - s p_y), y = rint(k_y + s p_x + c p_y), each (N, U) array updated in place
+    (+=, -=, out=): every fresh array costs page faults."""
     x, y = c * px, s * px
     x += kps[:, 0:1]
     y += kps[:, 1:2]
@@ -97,15 +113,12 @@ def orb_descriptors(img: np.ndarray, kps: np.ndarray, pattern: np.ndarray) -> np
     x = np.rint(x, out=x).astype(np.intp)  # intp, numpy's index type: other integer indices are
     y = np.rint(y, out=y).astype(np.intp)  # converted to it first (a whole extra (N, U) pass)
     reach = np.hypot(px, py).max(initial=0) + 1  # no turned point is further than this from its keypoint
-    if len(kps) and (kps.min() < reach or np.any(kps.max(0) + reach > np.array(I.shape[::-1]) - 1)):
-        np.clip(x, 0, I.shape[1] - 1, out=x)  # some point may fall off the image: the nearest edge pixel
-        np.clip(y, 0, I.shape[0] - 1, out=y)
-    y *= I.shape[1]
+    if len(kps) and (kps.min() < reach or np.any(kps.max(0) + reach > np.array(shape[::-1]) - 1)):
+        np.clip(x, 0, shape[1] - 1, out=x)  # some point may fall off the image: the nearest edge pixel
+        np.clip(y, 0, shape[0] - 1, out=y)
+    y *= shape[1]
     y += x  # flat indices y W + x
-    v = np.take(S, y)  # (N, U): the smoothed image at every turned point
-    a, b = which.reshape(-1, 2).T  # (n,) each: test i compares points a[i] and b[i]
-    bits = v[:, a] < v[:, b]  # (N, n): I_s(p + R a_i) < I_s(p + R b_i)
-    return np.packbits(bits, axis=1)
+    return np.take(S, y)
 
 
 def hamming_distances(D1: np.ndarray, D2: np.ndarray, block: int = 512) -> np.ndarray:
