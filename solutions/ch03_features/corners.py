@@ -214,7 +214,7 @@ def harris_at(img: np.ndarray, pts: np.ndarray, radius: int = 3, k: float = 0.04
     image, no copy), flattened: in a row of w^2 values pixel j's right neighbour is j + 1 and the
     one below j + w, so both gradients are differences of two shifted slices of the whole row (long
     contiguous runs; on the (N, w, w) windows they would run 7 values at a time). Pixels of the
-    first and last column get wrapped-around "neighbours": a mask zeroes them. A uint8 image's
+    first and last column get wrapped-around "neighbours": they are set to zero. A uint8 image's
     differences, their products and sums are integers below 2^24 (at most (2 radius + 1)^2 255^2
     = 3.2e6 at radius 3), exact in float32, summed by einsum ("ni,ni->n": products and sum in one
     pass) and scaled to gray()'s [0, 1] units at the end."""
@@ -227,10 +227,9 @@ def harris_at(img: np.ndarray, pts: np.ndarray, radius: int = 3, k: float = 0.04
     # the centres j = w, ..., w^2 - w - 1 (rows 1 to w - 2), then only columns 1 to w - 2 kept
     gx = P[:, w + 1:w * w - w + 1] - P[:, w - 1:w * w - w - 1]  # (N, w (w - 2)): 2 dI/dx
     gy = P[:, 2 * w:] - P[:, :w * w - 2 * w]  # 2 dI/dy
-    column = np.arange(w, w * w - w) % w
-    inside = ((column >= 1) & (column <= w - 2)).astype(P.dtype)
-    gx *= inside
-    gy *= inside
+    for g in (gx, gy):  # zero the first and last column of each row (every w-th entry from 0 and from w - 1)
+        g[:, ::w] = 0
+        g[:, w - 1::w] = 0
     unit = (0.5 / 255) ** 2 if exact32 else 0.25  # (1/2 of the difference)^2, in gray() units
     Sxx, Sxy, Syy = [unit * np.einsum("ni,ni->n", u, v).astype(np.float64) for u, v in ((gx, gx), (gx, gy), (gy, gy))]
     return Sxx * Syy - Sxy ** 2 - k * (Sxx + Syy) ** 2
