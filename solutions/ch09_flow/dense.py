@@ -86,7 +86,8 @@ def median5(a: np.ndarray, where: np.ndarray | None = None) -> np.ndarray:
         rows = max(1, 16384 // (a.size // H))
         for y in range(0, H, rows):
             h = min(rows, H - y)
-            out[..., y:y + h, :] = _median25([P[..., y + dy:y + dy + h, dx:dx + W] for dy in range(5) for dx in range(5)])
+            band = [P[..., y + dy:y + dy + h, dx:dx + W] for dy in range(5) for dx in range(5)]   # 25 shifted views
+            out[..., y:y + h, :] = _median25(band)
         return out
     ys, xs = np.nonzero(where)                      # pixel (y, x)'s window starts at (y, x) in P
     P = P.reshape(P.shape[:-2] + (-1,))
