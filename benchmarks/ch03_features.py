@@ -30,17 +30,35 @@ ORB's 30-bin steering for orb_like (8 % faster, graf MMA@3px 0.706 -> 0.660), a 
 pre-test (more candidates to score: 68-140 ms vs 60 over the 16 levels), adding "quad" tests (implied
 by the pair test: no fewer candidates), one einsum (N, 4) x (4, 4n) for the turned pattern with a padded
 image (slower), ndimage.zoom for the pyramid (2x slower, not bit-identical).
+Third round (2026-12-06; same keypoints and descriptor bits on all 12 images, fast_detect's corners identical on
+348 calls: the 96 pyramid levels of the 12 images and 20 random 60 x 70 images at thresholds 5, 20 and 40, Harris
+identical on the 96 levels): each distinct point of the pattern turned and read once (the learned pattern's 512
+test points are 337 distinct ones), the reads in blocks of 64 keypoints (their temporaries stay in the cache),
+no clipping when no turned point can leave the image; FAST scored on the uint8 circles (subtracting the centre
+commutes with min and max; the darker arc is the brighter arc of 255 - v), ~2.7x faster per block than on int16
+differences; a uint8 image is level 0 as it is (no float32 copy, no rounding back); Harris's wrapped-around
+columns zeroed by two strided assignments instead of a mask product. Old (c32bbc2) / new / OpenCV ORB on graf1 +
+graf3 interleaved (40 rounds, order alternating, process CPU) at load 23-27: min 88.2 -> 78.1 vs 18.2 ms (4.85x
+-> 4.30x), medians 94.6 -> 83.3 vs 18.9 ms (5.0x -> 4.4x); a second run min 93.2 -> 84.4 vs 18.7 ms (4.99x ->
+4.52x): 10-12 % less CPU. The ratio grows with the load (old: 3.9-4.0x at load 6-8, 4.9-5.0x at load 23-27;
+numpy's memory-bound whole-array passes lose more to shared caches than OpenCV's SIMD loops), so the 4x goal is
+met only at a moderate load; this benchmark's taking-turns row (added this round) read 4.90x at load 26.
+Rejected this round: the orientation inside the 64-keypoint blocks (per-call set-up ate the gain), deciding
+corners by a 16-bit code before scoring (the uint8 scoring made it pointless), reusing scratch buffers in
+FAST's pre-test (no gain), gathering Harris windows as runs of a flattened image (slower than
+sliding_window_view's fancy index for 9-byte runs).
 ORB-like's MMA depends on its learned pattern: from one learning seed to the next, graf's MMA@3px
 moves by +-0.04 (learn_brief_pattern's docstring).
 """
 from __future__ import annotations
 
+import os
 import time
 
 import cv2
 import numpy as np
 
-from benchmarks.timing import median_time, table
+from benchmarks.timing import median_time, table, taking_turns
 from graders import ch03_features as ch3
 from graders.kit import datasets, scene
 from solutions import ch03_features as ref
@@ -122,6 +140,21 @@ def _pairs():
         yield tex, a, b, H
 
 
+def _orb_taking_turns(rounds: int = 15) -> None:
+    """Issue 32's goal measured as the goals are: ORB-like and OpenCV ORB on graf1 + graf3 taking turns
+    (`rounds` rounds after a warm-up, benchmarks.timing.taking_turns), median process CPU and wall time,
+    the load average printed before and after (a load spike then falls on both alike)."""
+    g1, g3, _ = datasets.load_homography_pair()
+    print(f"\nload average before: {' '.join(f'{x:.1f}' for x in os.getloadavg())} ({os.cpu_count()} CPUs)")
+    _, t = taking_turns({"ORB-like": lambda: (orb_like(g1), orb_like(g3)),
+                         "OpenCV ORB": lambda: (cv_orb(g1), cv_orb(g3))}, repeat=rounds)
+    print(f"load average after: {' '.join(f'{x:.1f}' for x in os.getloadavg())}")
+    (w1, c1), (w2, c2) = t["ORB-like"], t["OpenCV ORB"]
+    print(f"ORB-like / OpenCV ORB on graf1 + graf3, taking turns ({rounds} rounds, medians): CPU {1e3 * c1:.0f} / "
+          f"{1e3 * c2:.0f} ms = {c1 / c2:.2f}x, wall {1e3 * w1:.0f} / {1e3 * w2:.0f} ms = {w1 / w2:.2f}x "
+          "(goal CPU <= 4x)")
+
+
 def run() -> list[dict]:
     start = time.perf_counter()
     orb_like(np.zeros((64, 64), np.uint8))  # learns the pattern
@@ -143,6 +176,7 @@ def run() -> list[dict]:
     print(table(rows, ["pair", "method", "keypoints", "repeatability", "MMA@1/3/5px", "matches", "ms (2 images)",
                        "CPU ms"]))
     if graf:
+        _orb_taking_turns()
         ratio = graf["SIFT-lite"][0] / max(graf["OpenCV SIFT"][0], 1e-9)
         print(f"\nSIFT-lite / OpenCV SIFT MMA@3px on graf: {ratio:.0%} (goal >= 80 %)")
         for ours, lib, goal in (("SIFT-lite", "OpenCV SIFT", "time <= 2x"),

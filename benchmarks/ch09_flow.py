@@ -43,6 +43,21 @@ Sparse LK vs cv2.calcOpticalFlowPyrLK: median |ours − OpenCV's| 0.005-0.007 px
 CPU 10.4-11.4x, wall 9.8-12.0x; before issue 32, load 13-16: CPU 38-53x, wall 42-60x):
 each window is one gather of (win + 1)^2 pixels interpolated with the point's own bilinear weights, in
 float32, with the points on the last axis, the converged points dropped.
+Issue 32, second round (2026-12-06). Dense: the same flows, bit for bit, on all 19 pairs (5 FlyingChairs, 8
+chairs-like, 6 planes): the 5 x 5 median by a sorting network (Batcher's merge exchange for 25 inputs pruned to
+the 113 compare-exchanges that reach the middle, whole-array np.minimum / np.maximum in L2-sized bands) instead
+of np.partition per pixel, the final median only at the pixels that need it, np.take for the flow upsampling's
+and bilinear's gathers, the SOR over-relaxation in place. Old (c32bbc2) / new / Farneback interleaved (3 rounds)
+at load 23-25: CPU 4.13 / 4.14 / 3.97 / 4.07 / 4.80x -> 3.28 / 3.31 / 3.18 / 3.37 / 3.74x per pair; this
+benchmark at load 22.7-24.5: 3.6 / 3.5 / 3.3 / 3.3 / 3.8x (3.5x over the five; chairs-like 3.3x, planes 4.3x),
+EPE and Fl unchanged. Sparse LK: each window gathered as win + 1 runs of consecutive pixels (a sliding-window view
+of the flattened image) and transposed, instead of one index per pixel; converged points dropped once they are a
+quarter; b = sum_w (T - J) g from the window interpolated along x only (sum T g once per level, the y weight
+applied to two sums). Points move by <= 2e-4 px (float32 sums), statuses identical, the agreement and error
+columns unchanged to 3 decimals. Old / new / OpenCV taking turns (7 rounds) at load 23-25: 13.3 -> 11.3x,
+12.6 -> 10.8x, 12.8 -> 11.1x; this benchmark at load 24: 10.9 / 10.6 / 10.8x (before: 11.8-12.5x at load 26):
+NOT MET at this load (it was 7.6-8.6x at load ~19 and 10.4-11.4x at 11-13 in earlier runs; the machine is
+shared, and the ratio moves by 10-30 % between runs).
 """
 from __future__ import annotations
 

@@ -83,7 +83,7 @@ def _orb_keypoints(img1, img2, H, n=200):
     resp = {tuple(np.round(p.pt, 1)): p.response for p in score.detect(img1)}
     k = k[np.argsort([-resp.get(tuple(np.round(p, 1)), 0) for p in k], kind="stable")]
     k = k[common(k, img1, img2, H, margin=20)][:n]
-    return k, transfer(H, k)
+    return k, (transfer(H, k) if len(k) else np.zeros((0, 2)))
 
 
 def _packed(out, case):
@@ -105,20 +105,31 @@ def _orb_acc_metric(out, exp):
     return max(0.0, exp["acc"] - nn_index_accuracy(out[0], out[1], cv_hamming))
 
 
+def _orb_draw(rng: np.random.Generator, textures: list[str], **warp):
+    """(texture, img1, img2, H, k1, k2): a textured pair and its _orb_keypoints, redrawn while the views share
+    no FAST corner (2 seeds in 1,829 drew such a pair, e.g. 808787896, and the grader failed while drawing).
+    Every other seed draws exactly what it drew before."""
+    for _ in range(50):
+        tex = str(rng.choice(textures))
+        img1, img2, H = homography_pair(rng, tex, **warp)
+        k1, k2 = _orb_keypoints(img1, img2, H)
+        if len(k1):
+            break
+    return tex, img1, img2, H, k1, k2
+
+
 def cases_orb(rng: np.random.Generator) -> list[Case]:
     out = []
-    tex = str(rng.choice(["astronaut", "coffee", "chelsea"]))
-    img1, img2, H = homography_pair(rng, tex, max_angle_deg=30, scale_range=(0.9, 1.1))
-    k1, _ = _orb_keypoints(img1, img2, H)
+    tex, img1, img2, H, k1, _ = _orb_draw(rng, ["astronaut", "coffee", "chelsea"], max_angle_deg=30,
+                                          scale_range=(0.9, 1.1))
     # 0.03: rounding a rotated sample position at exactly .5, or an angle computed in float32, flips
     # a few bits; steering by a wrong angle or not at all flips 20-40 %.
     out.append(Case(f"{tex}: bits agree with the specified oriented BRIEF", (img1, k1, BRIEF_PATTERN),
                     gt_orb_descriptors(img1, k1, BRIEF_PATTERN), _bit_error, 0.03, "bits differ", convert=_packed,
                     key="bits", tags=("spec-bits",)))
     for rot in (float(rng.uniform(60, 120)), float(rng.uniform(-180, -150))):
-        tex = str(rng.choice(["astronaut", "grass", "text", "coffee"]))
-        img1, img2, H = homography_pair(rng, tex, rotate_deg=rot, max_angle_deg=30, scale_range=(0.9, 1.1))
-        k1, k2 = _orb_keypoints(img1, img2, H)
+        tex, img1, img2, H, k1, k2 = _orb_draw(rng, ["astronaut", "grass", "text", "coffee"], rotate_deg=rot,
+                                               max_angle_deg=30, scale_range=(0.9, 1.1))
         acc = nn_index_accuracy(gt_orb_descriptors(img1, k1, BRIEF_PATTERN),
                                 gt_orb_descriptors(img2, k2, BRIEF_PATTERN), cv_hamming)
         # 0.15: the specified descriptor's own nearest-neighbour accuracy on these keypoints minus a margin

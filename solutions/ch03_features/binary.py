@@ -79,24 +79,46 @@ def orb_descriptors(img: np.ndarray, kps: np.ndarray, pattern: np.ndarray) -> np
     kps = np.asarray(kps, float)[:, :2]
     theta = orientation_centroid(I, kps)
     c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]  # (N, 1)
-    px, py = np.asarray(pattern, float).reshape(-1, 2).T  # (2 n,): a_0, b_0, a_1, b_1, ...
-    # rotate the pattern points by theta, round, read the smoothed image (all 2 n points at once):
-    # x = rint(k_x + c p_x - s p_y), y = rint(k_y + s p_x + c p_y), each (N, 2 n) array updated in
-    # place (+=, -=, out=): every fresh (N, 2 n) array would cost page faults
+    # the 2 n test points a_0, b_0, a_1, b_1, ... repeat (a learned pattern of 256 pairs in a radius-13
+    # disc has ~340 distinct points of 512): each distinct point is turned and read once, `which` says
+    # which distinct point each test point is
+    # (np.unique of the points as complex numbers p_x + i p_y: a 1-D sort, 30x faster than with axis=0)
+    p = np.asarray(pattern, float).reshape(-1, 2)
+    points, which = np.unique(p[:, 0] + 1j * p[:, 1], return_inverse=True)
+    px, py = points.real, points.imag  # (U,)
+    a, b = which.reshape(-1, 2).T  # (n,) each: test i compares distinct points a[i] and b[i]
+    bits = np.empty((len(kps), len(a)), bool)
+    for i in range(0, len(kps), BRIEF_BLOCK):  # blocks of keypoints: the (block, U) arrays stay in the CPU cache
+        block = slice(i, i + BRIEF_BLOCK)
+        v = _turned_reads(S, I.shape, kps[block], c[block], s[block], px, py)  # (block, U)
+        bits[block] = v[:, a] < v[:, b]  # I_s(p + R a_i) < I_s(p + R b_i)
+    return np.packbits(bits, axis=1)
+
+
+BRIEF_BLOCK = 64  # keypoints described at once by orb_descriptors (graf1 + graf3: 30 % faster than all at once)
+
+
+def _turned_reads(S: np.ndarray, shape: tuple[int, int], kps: np.ndarray, c: np.ndarray, s: np.ndarray,
+                  px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """The smoothed image S (flattened (H, W) = shape) at the points (px, py) (U,) turned by each
+    keypoint's angle (cosines c, sines s: (N, 1)) around it, rounded to the nearest pixel: (N, U).
+
+    x = rint(k_x + c p_x - s p_y), y = rint(k_y + s p_x + c p_y), each (N, U) array updated in place
+    (+=, -=, out=): every fresh array costs page faults."""
     x, y = c * px, s * px
     x += kps[:, 0:1]
     y += kps[:, 1:2]
     x -= s * py
     y += c * py
     x = np.rint(x, out=x).astype(np.intp)  # intp, numpy's index type: other integer indices are
-    y = np.rint(y, out=y).astype(np.intp)  # converted to it first (a whole extra (N, 2 n) pass)
-    np.clip(x, 0, I.shape[1] - 1, out=x)
-    np.clip(y, 0, I.shape[0] - 1, out=y)
-    y *= I.shape[1]
+    y = np.rint(y, out=y).astype(np.intp)  # converted to it first (a whole extra (N, U) pass)
+    reach = np.hypot(px, py).max(initial=0) + 1  # no turned point is further than this from its keypoint
+    if len(kps) and (kps.min() < reach or np.any(kps.max(0) + reach > np.array(shape[::-1]) - 1)):
+        np.clip(x, 0, shape[1] - 1, out=x)  # some point may fall off the image: the nearest edge pixel
+        np.clip(y, 0, shape[0] - 1, out=y)
+    y *= shape[1]
     y += x  # flat indices y W + x
-    v = np.take(S, y).reshape(len(kps), len(pattern), 2)  # (N, n, 2): (I_s(p + R a_i), I_s(p + R b_i))
-    bits = v[..., 0] < v[..., 1]  # (N, n)
-    return np.packbits(bits, axis=1)
+    return np.take(S, y)
 
 
 def hamming_distances(D1: np.ndarray, D2: np.ndarray, block: int = 512) -> np.ndarray:
@@ -155,9 +177,9 @@ def orb_detect(img: np.ndarray, n_features: int = 1000, n_levels: int = 8, scale
 
     Returns a list over levels of (level image uint8, (n_l, 2) keypoints in that level's pixels,
     (sx, sy) = level-0 pixels per level pixel)."""
-    I = np.asarray(img, np.float32)
-    if np.asarray(img).dtype != np.uint8:
-        I = np.clip(I, 0, 255)  # every level then stays in [0, 255]: it is rounded to uint8 below
+    I = np.asarray(img)
+    if I.dtype != np.uint8:  # (a uint8 image is level 0 as it is, and resize_bilinear reads it as float32)
+        I = np.clip(np.asarray(I, np.float32), 0, 255)  # every level then stays in [0, 255]: rounded to uint8 below
     f = 1.0 / scale
     share = n_features * (1 - f) / (1 - f ** n_levels) * f ** np.arange(n_levels)
     crop = border - 4  # FAST needs a corner's circle (3 px) and its NMS neighbours' (1 px more)
@@ -167,7 +189,8 @@ def orb_detect(img: np.ndarray, n_features: int = 1000, n_levels: int = 8, scale
         if min(shape) < 2 * border + 8:
             break
         L = I if lv == 0 else resize_bilinear(L, shape)  # each level from the previous one, as OpenCV does
-        L8 = np.rint(L, out=np.empty(shape, np.uint8), casting="unsafe")  # convex weights: within [0, 255]
+        # rounded to uint8 (bilinear weights are convex: within [0, 255]); a uint8 level 0 is already
+        L8 = L if L.dtype == np.uint8 else np.rint(L, out=np.empty(shape, np.uint8), casting="unsafe")
         h, w = shape
         k = fast_detect(L8[crop:h - crop, crop:w - crop], threshold, True) + crop  # the inside only
         k = k[(k[:, 0] >= border) & (k[:, 0] < w - border) & (k[:, 1] >= border) & (k[:, 1] < h - border)]

@@ -138,9 +138,8 @@ def fast_detect(img: np.ndarray, threshold: int = 20, nms: bool = True) -> np.nd
     score = np.zeros(len(q), np.int16)
     for i in range(0, len(q), FAST_BLOCK):
         qb, block = q[i:i + FAST_BLOCK], slice(i, i + FAST_BLOCK)
-        d = np.stack([r[qb] for r in ring]).astype(np.int16)  # (16, block)
-        d -= c[qb]
-        score[block] = _candidate_scores(d, bright[block], dark[block])
+        v = np.stack([r[qb] for r in ring])  # (16, block) uint8: the circles
+        score[block] = _candidate_scores(v, c[qb], bright[block], dark[block])
     corner = score > threshold
     p, score = a + q[corner], score[corner]
     x = p % W
@@ -160,18 +159,27 @@ FAST_BLOCK = 16384  # candidates scored at once by fast_detect
 PRETEST_BLOCK = 1 << 18  # pixels pre-tested at once
 
 
-def _candidate_scores(d: np.ndarray, bright: np.ndarray, dark: np.ndarray) -> np.ndarray:
-    """FAST scores of pre-tested candidates, d (16, n) their circle-minus-centre differences, bright /
-    dark (n,) which pre-test each passed: the same as _arc_score(d) wherever that is above the
-    threshold, for half the work. A candidate that failed the darker pre-test has no darker arc
-    above the threshold, so its score is above the threshold iff its brighter arc's is, and is then
-    that one: only the brighter arc is scored (and only the darker, on -d, if it failed the
-    brighter pre-test). The rare candidates that passed both get both."""
-    d *= np.where(bright, d.dtype.type(1), d.dtype.type(-1))  # dark-only columns negated: their darker arc
-    score = _brighter_arc(d)
+def _candidate_scores(v: np.ndarray, c: np.ndarray, bright: np.ndarray, dark: np.ndarray) -> np.ndarray:
+    """FAST scores of pre-tested candidates, v (16, n) uint8 their circles, c (n,) their centres, bright /
+    dark (n,) which pre-test each passed: the same as _arc_score(v - c) wherever that is above the
+    threshold, for a quarter of the work. (n,) int16.
+
+    1. Subtracting c commutes with min and max: the brighter arc's score max_arcs min_arc (v_i - c) is
+       _brighter_arc(v) - c, so the circles are scored as they are, in uint8 (half the bytes of int16).
+       The darker arc's, max_arcs min_arc (c - v_i), is the brighter arc's of the negative 255 - v
+       (exact in uint8: 255 - v = v XOR 255) with centre 255 - c.
+    2. A candidate that failed the darker pre-test has no darker arc above the threshold, so its
+       score is above the threshold iff its brighter arc's is, and is then that one: only the brighter
+       arc is scored (only the darker, on the negative, if it failed the brighter pre-test). The rare
+       candidates that passed both get both."""
+    flip = np.where(bright, np.uint8(0), np.uint8(255))  # dark-only candidates: negatives (XOR 255)
+    v ^= flip
+    score = _brighter_arc(v).astype(np.int16)
+    score -= c ^ flip
     both = bright & dark
     if both.any():
-        score[both] = np.maximum(score[both], _brighter_arc(-d[:, both]))
+        darker = _brighter_arc(v[:, both] ^ np.uint8(255)).astype(np.int16) - (c[both] ^ np.uint8(255))
+        score[both] = np.maximum(score[both], darker)
     return score
 
 
@@ -206,7 +214,7 @@ def harris_at(img: np.ndarray, pts: np.ndarray, radius: int = 3, k: float = 0.04
     image, no copy), flattened: in a row of w^2 values pixel j's right neighbour is j + 1 and the
     one below j + w, so both gradients are differences of two shifted slices of the whole row (long
     contiguous runs; on the (N, w, w) windows they would run 7 values at a time). Pixels of the
-    first and last column get wrapped-around "neighbours": a mask zeroes them. A uint8 image's
+    first and last column get wrapped-around "neighbours": they are set to zero. A uint8 image's
     differences, their products and sums are integers below 2^24 (at most (2 radius + 1)^2 255^2
     = 3.2e6 at radius 3), exact in float32, summed by einsum ("ni,ni->n": products and sum in one
     pass) and scaled to gray()'s [0, 1] units at the end."""
@@ -219,10 +227,9 @@ def harris_at(img: np.ndarray, pts: np.ndarray, radius: int = 3, k: float = 0.04
     # the centres j = w, ..., w^2 - w - 1 (rows 1 to w - 2), then only columns 1 to w - 2 kept
     gx = P[:, w + 1:w * w - w + 1] - P[:, w - 1:w * w - w - 1]  # (N, w (w - 2)): 2 dI/dx
     gy = P[:, 2 * w:] - P[:, :w * w - 2 * w]  # 2 dI/dy
-    column = np.arange(w, w * w - w) % w
-    inside = ((column >= 1) & (column <= w - 2)).astype(P.dtype)
-    gx *= inside
-    gy *= inside
+    for g in (gx, gy):  # zero the first and last column of each row (every w-th entry from 0 and from w - 1)
+        g[:, ::w] = 0
+        g[:, w - 1::w] = 0
     unit = (0.5 / 255) ** 2 if exact32 else 0.25  # (1/2 of the difference)^2, in gray() units
     Sxx, Sxy, Syy = [unit * np.einsum("ni,ni->n", u, v).astype(np.float64) for u, v in ((gx, gx), (gx, gy), (gy, gy))]
     return Sxx * Syy - Sxy ** 2 - k * (Sxx + Syy) ** 2

@@ -35,10 +35,12 @@ def bilinear(I: np.ndarray, x: np.ndarray, y: np.ndarray, dtype=float) -> np.nda
     y = np.clip(np.asarray(y, dtype), 0, H - 1)
     x0 = np.minimum(x.astype(np.intp), W - 2)          # x >= 0 here: truncation is floor
     y0 = np.minimum(y.astype(np.intp), H - 2)
-    fx, fy = (x - x0).astype(dtype), (y - y0).astype(dtype)
+    fx, fy = x - x0.astype(dtype), y - y0.astype(dtype)  # in dtype (x - x0 with an integer x0 is exact)
     f = np.ascontiguousarray(I, dtype).ravel()           # flat gathers: ~4x faster than I[y0, x0]
     i = y0 * W + x0
-    a, b, c, d = f[i], f[i + 1], f[i + W], f[i + W + 1]
+    a, b = np.take(f, i), np.take(f, i + 1)
+    i += W                                               # the row below
+    c, d = np.take(f, i), np.take(f, i + 1)
     top = a + fx * (b - a)
     return top + fy * (c + fx * (d - c) - top)
 
