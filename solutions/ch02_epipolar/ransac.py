@@ -11,7 +11,6 @@ from typing import Callable
 import numpy as np
 
 from ..geometry import rodrigues, skew, to_h
-from .basics import sampson_h
 from .eight_point import eight_point, epipolar_rows, normalise_points, rank2, unit
 from .homography import denormalise_homography, dlt_rows, transfer_h
 from .minimal import _five_point_rows, _seven_point_rows
@@ -293,6 +292,27 @@ def weighted_null_vector(blocks: np.ndarray, w: np.ndarray, inhomogeneous: bool 
     return np.linalg.eigh(AtWA)[1][..., :, 0]
 
 
+def sampson_terms(x1h: np.ndarray, x2h: np.ndarray) -> np.ndarray:
+    """The five quantities of each match's Sampson distance (HZ 11.4.3), as linear functions of
+    f = F.ravel(): x2hᵀ F x1h (the match's epipolar row, as in the 8-point), (F x1h)_1, (F x1h)_2,
+    (Fᵀ x2h)_1 and (Fᵀ x2h)_2. x1h, x2h: (N, 3) -> terms: (9, 5, N), f @ terms[:, k] = quantity k."""
+    L = np.zeros((3, 3, 5, len(x1h)))                # indexed by F's entry (i, j)
+    L[:, :, 0] = x2h.T[:, None] * x1h.T[None]        # x2_i x1_j
+    L[0, :, 1] = L[1, :, 2] = x1h.T                  # (F x1)_1 = F[0] . x1, (F x1)_2 = F[1] . x1
+    L[:, 0, 3] = L[:, 1, 4] = x2h.T                  # (Fᵀ x2)_1 = F[:, 0] . x2, (Fᵀ x2)_2 = F[:, 1] . x2
+    return L.reshape(9, 5, len(x1h))
+
+
+def sampson_from_terms(F: np.ndarray, terms: np.ndarray) -> np.ndarray:
+    """`sampson_h` of M models at once through `sampson_terms`: one (M, 9) @ (9, 5N) product gives
+    all five quantities of every model and match (about 2x faster than `sampson_h`, which builds
+    F x1h and Fᵀ x2h for each call). F: (..., 3, 3); terms: (9, 5, N) -> (..., N) pixels."""
+    n = terms.shape[-1]
+    v = (F.reshape(-1, 9) @ terms.reshape(9, -1)).reshape(-1, 5, n)
+    v *= v                                           # squared: d² = num² / (sum of the other four)
+    return np.sqrt(v[:, 0] / np.maximum(v[:, 1:].sum(1), 1e-300)).reshape(F.shape[:-2] + (n,))
+
+
 def ransac_fundamental(x1: np.ndarray, x2: np.ndarray, threshold: float = 1.0, confidence: float = 0.99,
                        max_iters: int = 10_000, rng=None, minimal: str = "7pt", **options):
     """F by LO-RANSAC: 7-point (or 8-point) minimal samples, MSAC on the Sampson distance (px),
@@ -304,7 +324,7 @@ def ransac_fundamental(x1: np.ndarray, x2: np.ndarray, threshold: float = 1.0, c
     n2, T2 = normalise_points(x2)
     rows = epipolar_rows(n1, n2)                                   # (n, 9): A f = 0, one row a match
     blocks = normal_blocks(rows[:, None])                           # (n, 45)
-    x1h, x2h = to_h(x1), to_h(x2)
+    terms = sampson_terms(to_h(x1), to_h(x2))                       # (9, 5, n)
 
     def to_pixels(Fn):                                              # undo the normalisation
         return unit(np.swapaxes(T2, -1, -2) @ Fn @ T1)
@@ -319,7 +339,7 @@ def ransac_fundamental(x1: np.ndarray, x2: np.ndarray, threshold: float = 1.0, c
         return to_pixels(rank2(weighted_null_vector(blocks, inliers).reshape(np.shape(inliers)[:-1] + (3, 3))))
 
     def residuals(F, idx=slice(None)):
-        return sampson_h(F, x1h[idx], x2h[idx])
+        return sampson_from_terms(F, terms[:, :, idx])
 
     return ransac(len(x1), s, solve, residuals, threshold, refit=refit, confidence=confidence,
                   max_iters=max_iters, rng=rng, **{**FAST, **FAST_F, **options})
@@ -412,14 +432,14 @@ def ransac_essential(x1: np.ndarray, x2: np.ndarray, K1: np.ndarray, K2: np.ndar
     n1, n2 = to_normalised(x1, K1), to_normalised(x2, K2)
     K1i, K2it = np.linalg.inv(K1), np.linalg.inv(K2).T
     rows = epipolar_rows(n1, n2)                    # (n, 9): A e = 0, one row a match
-    x1h, x2h = to_h(x1), to_h(x2)
+    terms = sampson_terms(to_h(x1), to_h(x2))       # (9, 5, n): the Sampson distance in pixels
 
     def solve(idx):
         E, ok = _five_point_rows(rows[idx])
         return E[ok]
 
     def residuals(E, idx=slice(None)):
-        return sampson_h(K2it @ E @ K1i, x1h[idx], x2h[idx])
+        return sampson_from_terms(K2it @ E @ K1i, terms[:, :, idx])
 
     h1, T1 = normalise_points(n1)
     h2, T2 = normalise_points(n2)
