@@ -224,10 +224,13 @@ def ransac(n: int, sample_size: int, solve: Callable, residuals: Callable, thres
 # inner RANSAC and preemptive scoring on 64 points halve F's and E's CPU time at the same accuracy;
 # a chain that reaches the best model's inliers stops (most later chains on F do). E needs ~25-35
 # samples and keeps batches of 32: its 5-point solves are the expensive part.
-# F (~70-110 samples at the benchmark's inlier ratio) takes batches of 64, 2 passes of the loop
-# instead of 3-4, and keeps the chain and the polish but no inner RANSAC: on the F scenes (one
-# structure) it never moves the model out of its basin. 300 scenes: held-out Sampson RMS 0.0872 px
-# without it, 0.0869 with it (p95 0.132 vs 0.133), inlier F1 0.976 both; 29 % less CPU time.
+# F (~70-110 samples at the benchmark's inlier ratio) takes batches of 96, mostly one pass of the
+# loop (a second pass usually finds a new best minimal model and runs the local optimisation
+# again; 150 scenes: 15 % less CPU time than batches of 64, held-out Sampson RMS 0.0873 vs 0.0876
+# px, inlier F1 0.976 both), and keeps the chain and the polish but no inner RANSAC: on the F
+# scenes (one structure) it never moves the model out of its basin. 300 scenes: held-out Sampson
+# RMS 0.0872 px without it, 0.0869 with it (p95 0.132 vs 0.133), inlier F1 0.976 both; 29 % less
+# CPU time.
 # For H the inner RANSAC draws 32 subsets of 6 inliers instead of 5 of 12, after a shorter chain
 # (2, 1 x threshold): on the Graffiti pair 12 matches rarely avoid the 83 of a competing structure
 # (~2 % of subsets), 6 do ~17 % of the time. The inner RANSAC is what leaves that structure. Its
@@ -241,7 +244,7 @@ def ransac(n: int, sample_size: int, solve: Callable, residuals: Callable, thres
 # px / 0.81x). (The polish after the chain stays: without it fewer chains reach the inner
 # RANSAC, 43 of 1000.)
 FAST = dict(batched_refit=True, preview=64, lo_stop_known=True)
-FAST_F = dict(batch=64, lo_inner=0)
+FAST_F = dict(batch=96, lo_inner=0)
 FAST_H = dict(batch=128, lo_subset=6, lo_inner=32, lo_scales=(2.0, 1.0), lo_band=3.0, lo_polish_inner=3)
 
 
@@ -256,9 +259,14 @@ def normal_blocks(rows: np.ndarray) -> np.ndarray:
     match gives -> (n, 45)."""
     # Entry (i, j) of match m's share is sum_k rows[m, k, i] * rows[m, k, j]: computed on the
     # transposed rows (r, 9, n), where each entry is a product of two contiguous length-n vectors
-    # (~2x faster than n tiny (9, r) @ (r, 9) matrix products for the graf pair's 675 matches).
-    rt = np.ascontiguousarray(np.moveaxis(rows, 0, -1))                  # (r, 9, n)
-    return np.ascontiguousarray((rt[:, _UPPER[0]] * rt[:, _UPPER[1]]).sum(0).T)   # (n, 45)
+    # (~2x faster than n tiny (9, r) @ (r, 9) matrix products for the graf pair's 675 matches), in
+    # chunks of 256 matches: (r, 45, 256) temporaries stay under ~200 kB (see `model_blocks`; for
+    # the 675 matches of the graf pair ~2.5x faster than all at once).
+    out = np.empty((len(rows), 45))
+    for i in range(0, len(rows), 256):
+        rt = np.ascontiguousarray(np.moveaxis(rows[i:i + 256], 0, -1))  # (r, 9, chunk)
+        out[i:i + 256] = (rt[:, _UPPER[0]] * rt[:, _UPPER[1]]).sum(0).T
+    return out                                                          # (n, 45)
 
 
 def weighted_null_vector(blocks: np.ndarray, w: np.ndarray, inhomogeneous: bool = False) -> np.ndarray:
