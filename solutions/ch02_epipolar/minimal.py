@@ -11,8 +11,9 @@ from .eight_point import epipolar_rows, normalise_points, unit
 
 
 def _real_cubic_roots(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Real roots of c0 a^3 + c1 a^2 + c2 a + c3 = 0 for a batch, in closed form (Cardano's formula
-    and its trigonometric form, e.g. Press et al., Numerical Recipes, 3rd ed., 5.6).
+    """Real roots of c0 a^3 + c1 a^2 + c2 a + c3 = 0 for a batch, in closed form: Cardano's formula
+    for one real root, its trigonometric (Viète) form for three; ~2x cheaper than the eigenvalues of
+    a batch of 3 x 3 companion matrices.
     c: (B, 4) -> (roots (B, 3), valid (B, 3)): 3 real roots, or 1 (the first) and two invalid."""
     small = np.abs(c[:, 0]) < 1e-12 * np.abs(c).max(1)       # not a cubic: no roots kept
     b, cc, d = (c[:, 1:] / np.where(small, 1.0, c[:, 0])[:, None]).T   # monic: a^3 + b a^2 + cc a + d

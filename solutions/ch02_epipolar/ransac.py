@@ -259,14 +259,9 @@ def normal_blocks(rows: np.ndarray) -> np.ndarray:
     match gives -> (n, 45)."""
     # Entry (i, j) of match m's share is sum_k rows[m, k, i] * rows[m, k, j]: computed on the
     # transposed rows (r, 9, n), where each entry is a product of two contiguous length-n vectors
-    # (~2x faster than n tiny (9, r) @ (r, 9) matrix products for the graf pair's 675 matches), in
-    # chunks of 256 matches: (r, 45, 256) temporaries stay under ~200 kB (see `model_blocks`; for
-    # the 675 matches of the graf pair ~2.5x faster than all at once).
-    out = np.empty((len(rows), 45))
-    for i in range(0, len(rows), 256):
-        rt = np.ascontiguousarray(np.moveaxis(rows[i:i + 256], 0, -1))  # (r, 9, chunk)
-        out[i:i + 256] = (rt[:, _UPPER[0]] * rt[:, _UPPER[1]]).sum(0).T
-    return out                                                          # (n, 45)
+    # (~2x faster than n tiny (9, r) @ (r, 9) matrix products for the graf pair's 675 matches).
+    rt = np.ascontiguousarray(np.moveaxis(rows, 0, -1))                  # (r, 9, n)
+    return np.ascontiguousarray((rt[:, _UPPER[0]] * rt[:, _UPPER[1]]).sum(0).T)   # (n, 45)
 
 
 def weighted_null_vector(blocks: np.ndarray, w: np.ndarray, inhomogeneous: bool = False) -> np.ndarray:
@@ -482,13 +477,15 @@ _TRIANGLES = np.array([[0, 1, 2], [0, 1, 3], [2, 3, 0], [2, 3, 1]])   # of a 4-p
 
 
 def orientation_consistent(p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
-    """Which 4-point samples a homography can explain by their orientation alone: the homography of
+    """Which 4-point samples a homography can explain by their orientation alone. The homography of
     a plane seen by two cameras keeps points 3 and 4 on the same side of the line through points 1
-    and 2 in both images, and points 1 and 2 of the line through 3 and 4 (OpenCV's USAC tests the
-    same before solving: usac/degeneracy.cpp, HomographyDegeneracy::isSampleGood). Here the four
-    triangles' orientations must agree in both images, or all be reversed. Random matches pass ~1
-    time in 8: most samples with an outlier are rejected before they are solved and scored.
-    p1, p2: (B, 4, 2) -> (B,) bool."""
+    and 2 in both images, and points 1 and 2 on the same side of the line through 3 and 4 (OpenCV's
+    USAC tests this before solving a sample: usac/degeneracy.cpp, HomographyDegeneracy::
+    isSampleGood). Here the four triangles' orientations must agree between the images, or all be
+    reversed (a plane seen from its two sides). Four random matches pass 18 % of the time; on the graf
+    pair, whose wrong matches often lie near the right place, a sample with a wrong match passes
+    46 % of the time (clean samples 99 %): about half the samples are dropped before they are
+    solved and scored. p1, p2: (B, 4, 2) -> (B,) bool."""
     def orientation(p):                   # (b - a) x (c - a) of each triangle (a, b, c): (B, 4)
         a, b, c = (p[:, _TRIANGLES[:, k]] for k in range(3))
         ab, ac = b - a, c - a
