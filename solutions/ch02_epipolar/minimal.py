@@ -11,17 +11,32 @@ from .eight_point import epipolar_rows, normalise_points, unit
 
 
 def _real_cubic_roots(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Real roots of c0 a^3 + c1 a^2 + c2 a + c3 = 0 for a batch. c: (B, 4) -> (roots (B, 3), valid (B, 3))."""
-    lead = c[:, :1]
-    small = np.abs(lead[:, 0]) < 1e-12 * np.abs(c).max(1)
-    lead = np.where(np.abs(lead) < 1e-300, 1e-300, lead)
-    comp = np.zeros((len(c), 3, 3))                       # companion matrix of the monic cubic
-    comp[:, 0, :] = -c[:, 1:] / lead
-    comp[:, 1, 0] = comp[:, 2, 1] = 1.0
-    roots = np.linalg.eigvals(comp)
-    valid = np.abs(roots.imag) <= 1e-8 * np.maximum(1.0, np.abs(roots.real))
-    valid &= ~small[:, None]
-    return roots.real, valid
+    """Real roots of c0 a^3 + c1 a^2 + c2 a + c3 = 0 for a batch, in closed form: Cardano's formula
+    for one real root, its trigonometric (Viète) form for three; ~2x cheaper than the eigenvalues of
+    a batch of 3 x 3 companion matrices.
+    c: (B, 4) -> (roots (B, 3), valid (B, 3)): 3 real roots, or 1 (the first) and two invalid."""
+    small = np.abs(c[:, 0]) < 1e-12 * np.abs(c).max(1)       # not a cubic: no roots kept
+    b, cc, d = (c[:, 1:] / np.where(small, 1.0, c[:, 0])[:, None]).T   # monic: a^3 + b a^2 + cc a + d
+    # a = t - b / 3 removes the square term: t^3 + p t + q = 0 (a "depressed" cubic)
+    p = cc - b * b / 3
+    q = (2 / 27) * b ** 3 - b * cc / 3 + d
+    disc = (q / 2) ** 2 + (p / 3) ** 3                         # > 0: one real root; <= 0: three
+    three = disc <= 0
+    # Three real roots (then p <= 0): t_k = m cos(acos(3q / (p m)) / 3 - 2 pi k / 3), m = 2 sqrt(-p/3)
+    m = 2 * np.sqrt(np.maximum(-p / 3, 0.0))
+    cos3 = np.clip(3 * q / np.minimum(p * m, -1e-300), -1.0, 1.0)
+    t = m[:, None] * np.cos(np.arccos(cos3)[:, None] / 3 - (2 * np.pi / 3) * np.arange(3))   # (B, 3)
+    # One real root: t = u - p / (3u), u = cbrt(-q/2 - sign(q) sqrt(disc)) (the sign avoids cancellation;
+    # u = 0 only if p = q = 0, a triple root: three real roots then)
+    u = np.cbrt(-q / 2 - np.copysign(np.sqrt(np.maximum(disc, 0.0)), q))
+    t[:, 0] = np.where(three, t[:, 0], u - p / (3 * np.where(three, 1.0, u)))
+    a = t - b[:, None] / 3
+    # One Newton step on the monic cubic takes the roots to machine precision (the arccos loses
+    # digits next to a double root: residuals up to ~1e-8 without it).
+    f, df = ((a + b[:, None]) * a + cc[:, None]) * a + d[:, None], (3 * a + 2 * b[:, None]) * a + cc[:, None]
+    a -= f / np.where(df == 0, np.inf, df)
+    valid = three[:, None] | (np.arange(3) == 0)
+    return a, valid & ~small[:, None]
 
 
 def null_space(A: np.ndarray, dim: int) -> np.ndarray:
