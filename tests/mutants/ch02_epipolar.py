@@ -296,6 +296,20 @@ def recover_negated_t(E, x1, x2):
     return R, -t
 
 
+def recover_first_point(E, x1, x2):
+    # Cheirality decided by one triangulated point (the first match), as many tutorials do.
+    for R, t in _candidates(E):
+        z1, z2 = _depths(R, t, x1[:1], x2[:1])
+        if z1[0] > 0 and z2[0] > 0:
+            return R, t
+    return _candidates(E)[0]
+
+
+def recover_sum_of_depths(E, x1, x2):
+    # "Most in front" scored by the sum of the smaller depth of each match, not by a count: one far match rules it.
+    return max(_candidates(E), key=lambda p: np.sum(np.minimum(*_depths(*p, x1, x2))))
+
+
 # ----------------------------------------------------------------- 2.15 homography_dlt
 
 def _dlt(x1, x2, normalise=True, undo=True):
@@ -331,7 +345,7 @@ def dlt_not_denormalised(x1, x2):
 # ----------------------------------------------------------------- 2.16 ransac
 
 def _loop_ransac(n, s, solve, residuals, threshold, refit=None, confidence=0.99, max_iters=10_000, rng=None,
-                 msac=True, adaptive=True, fixed=None, lo=True, refit_once=False):
+                 msac=True, adaptive=True, fixed=None, lo=True, refit_once=False, k_exponent=None):
     rng = np.random.default_rng(rng)
     best, best_score, best_inl, k, i = None, np.inf, np.zeros(n, bool), max_iters, 0
     limit = fixed if fixed is not None else max_iters
@@ -355,7 +369,8 @@ def _loop_ransac(n, s, solve, residuals, threshold, refit=None, confidence=0.99,
                     if sm <= best_score:
                         best, best_score, best_inl = np.asarray(m), sm, rm < threshold
             w = best_inl.mean()
-            k = np.log(1 - confidence) / np.log(1 - w ** s) if 0 < w < 1 else (1 if w >= 1 else max_iters)
+            e = s if k_exponent is None else k_exponent
+            k = np.log(1 - confidence) / np.log(1 - w ** e) if 0 < w < 1 else (1 if w >= 1 else max_iters)
     return best, best_inl
 
 
@@ -386,6 +401,18 @@ def _fixed(count):
 def ransac_no_local_optimisation(n, s, solve, residuals, threshold, refit=None, confidence=0.99, max_iters=10_000,
                                  rng=None):
     return _loop_ransac(n, s, solve, residuals, threshold, None, confidence, max_iters, rng, lo=False)
+
+
+def ransac_k_from_w_squared(n, s, solve, residuals, threshold, refit=None, confidence=0.99, max_iters=10_000,
+                            rng=None):
+    # k = log(1 - p) / log(1 - w²), copied from a line-fitting example: right for 2-point samples only.
+    return _loop_ransac(n, s, solve, residuals, threshold, refit, confidence, max_iters, rng, k_exponent=2)
+
+
+def ransac_confidence_ignored(n, s, solve, residuals, threshold, refit=None, confidence=0.99, max_iters=10_000,
+                              rng=None):
+    # Takes `confidence` but always stops at the p = 0.99 count.
+    return _loop_ransac(n, s, solve, residuals, threshold, refit, 0.99, max_iters, rng)
 
 
 # ----------------------------------------------------------------- DEBUG 2.17-2.20
@@ -514,6 +541,8 @@ MUTANTS = [
     ("2.14", "depth in camera 1 only", recover_camera1_only, "twisted pair"),
     ("2.14", "all points must be in front", recover_all_positive, "in front of"),
     ("2.14", "t negated", recover_negated_t, "wrong sign"),
+    ("2.14", "cheirality of the first match only", recover_first_point, "most points in front of both"),
+    ("2.14", "sum of depths instead of a count", recover_sum_of_depths, "most points in front of both"),
     ("2.15", "no Hartley normalisation", dlt_unnormalised, "normalisation"),
     ("2.15", "x1 and x2 swapped (inverse)", dlt_swapped, "inverse"),
     ("2.15", "transposed", dlt_transposed, "transposed"),
@@ -525,6 +554,8 @@ MUTANTS = [
     ("2.16", "fixed 128 iterations", _fixed(128), "fixed number of iterations"),
     ("2.16", "fixed 1,000 iterations", _fixed(1000), "fixed number of iterations"),
     ("2.16", "no local optimisation", ransac_no_local_optimisation, "refit"),
+    ("2.16", "k from w² whatever the sample size", ransac_k_from_w_squared, "`sample_size` (7 here"),
+    ("2.16", "confidence ignored (always 0.99)", ransac_confidence_ignored, "not a fixed 0.99"),
     ("2.17", "left unchanged", fix_F_unchanged, "unnormalised"),
     ("2.17", "scaled, not centred", fix_F_scaled_not_centred, "not centred"),
     ("2.17", "no rank 2", fix_F_no_rank2, "rank 2"),
