@@ -345,7 +345,7 @@ def dlt_not_denormalised(x1, x2):
 # ----------------------------------------------------------------- 2.16 ransac
 
 def _loop_ransac(n, s, solve, residuals, threshold, refit=None, confidence=0.99, max_iters=10_000, rng=None,
-                 msac=True, adaptive=True, fixed=None, lo=True, refit_once=False, k_exponent=None):
+                 msac=True, adaptive=True, fixed=None, lo=True, refit_once=False):
     rng = np.random.default_rng(rng)
     best, best_score, best_inl, k, i = None, np.inf, np.zeros(n, bool), max_iters, 0
     limit = fixed if fixed is not None else max_iters
@@ -369,8 +369,7 @@ def _loop_ransac(n, s, solve, residuals, threshold, refit=None, confidence=0.99,
                     if sm <= best_score:
                         best, best_score, best_inl = np.asarray(m), sm, rm < threshold
             w = best_inl.mean()
-            e = s if k_exponent is None else k_exponent
-            k = np.log(1 - confidence) / np.log(1 - w ** e) if 0 < w < 1 else (1 if w >= 1 else max_iters)
+            k = np.log(1 - confidence) / np.log(1 - w ** s) if 0 < w < 1 else (1 if w >= 1 else max_iters)
     return best, best_inl
 
 
@@ -403,16 +402,50 @@ def ransac_no_local_optimisation(n, s, solve, residuals, threshold, refit=None, 
     return _loop_ransac(n, s, solve, residuals, threshold, None, confidence, max_iters, rng, lo=False)
 
 
+def _batched_ransac(n, s, solve, residuals, threshold, refit=None, confidence=0.99, max_iters=10_000, rng=None,
+                    k_exponent=None, fixed_confidence=None, batch=32):
+    # Batches of 32 samples, MSAC, refits while the cost drops by > 0.1 %: strong enough for the F, E and H rows.
+    rng = np.random.default_rng(rng)
+    tau2 = threshold ** 2
+    p = confidence if fixed_confidence is None else fixed_confidence
+    best, best_cost, best_inl, k, drawn = None, np.inf, np.zeros(n, bool), max_iters, 0
+    while drawn < min(k, max_iters):
+        idx = np.array([rng.choice(n, s, replace=False) for _ in range(batch)])
+        drawn += batch
+        models = np.asarray(solve(idx))
+        if models.size == 0:
+            continue
+        r = residuals(models)
+        cost = np.minimum(r ** 2, tau2).sum(1)
+        j = int(np.argmin(cost))
+        if cost[j] >= best_cost:
+            continue
+        best, best_cost, best_inl = models[j], cost[j], r[j] < threshold
+        for _ in range(10 if refit is not None else 0):
+            m = refit(best_inl)
+            if m is None:
+                break
+            rm = residuals(np.asarray(m)[None])[0]
+            cm = np.minimum(rm ** 2, tau2).sum()
+            if not cm < 0.999 * best_cost:
+                break
+            best, best_cost, best_inl = np.asarray(m), cm, rm < threshold
+        w = best_inl.mean()
+        e = s if k_exponent is None else k_exponent
+        k = np.log(1 - p) / np.log(1 - w ** e) if 0 < w < 1 else (1 if w >= 1 else max_iters)
+    return best, best_inl
+
+
 def ransac_k_from_w_squared(n, s, solve, residuals, threshold, refit=None, confidence=0.99, max_iters=10_000,
                             rng=None):
     # k = log(1 - p) / log(1 - w²), copied from a line-fitting example: right for 2-point samples only.
-    return _loop_ransac(n, s, solve, residuals, threshold, refit, confidence, max_iters, rng, k_exponent=2)
+    return _batched_ransac(n, s, solve, residuals, threshold, refit, confidence, max_iters, rng, k_exponent=2)
 
 
 def ransac_confidence_ignored(n, s, solve, residuals, threshold, refit=None, confidence=0.99, max_iters=10_000,
                               rng=None):
     # Takes `confidence` but always stops at the p = 0.99 count.
-    return _loop_ransac(n, s, solve, residuals, threshold, refit, 0.99, max_iters, rng)
+    return _batched_ransac(n, s, solve, residuals, threshold, refit, confidence, max_iters, rng, fixed_confidence=0.99)
 
 
 # ----------------------------------------------------------------- DEBUG 2.17-2.20
