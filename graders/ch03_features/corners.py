@@ -90,6 +90,11 @@ def _at_corners(out, corners):
     return 1.0 - float(np.mean(np.linalg.norm(k[:, None] - corners[None], axis=2).min(1) <= 3.5))
 
 
+def _at_corners_or_none(out, corners):
+    """`_at_corners`, but too few detections count as all off (1.0), so that the hints see the output."""
+    return 1.0 if len(out) < 0.75 * len(corners) else _at_corners(out, corners)
+
+
 def _corner_oracles(n, method):
     """Two correct detectors that differ (a box window and the spec's Gaussian one): a learner is held to the
     weaker. Measured: the Gaussian one alone trails goodFeaturesToTrack by up to 0.28 on strongly foreshortened
@@ -123,6 +128,15 @@ def cases_corners(rng: np.random.Generator) -> list[Case]:
                         (img, len(corners), method), corners, _at_corners, 0.1, "fraction off",
                         convert=lambda o, c: _points(o, c), info={"method": method},
                         key=f"corners-and-edges-{method}", tags=("corners-and-edges",)))
+    # Shi-Tomasi called with Harris' constant k = 0.25, where Harris' R = det M − (tr M)²/4 = −(λ1 − λ2)²/4 is
+    # nowhere positive: λ_min does not read k, so its corners are those of the row above, while code that answers
+    # every method with Harris' R finds at most a stray rounding-level peak (measured 0-1 of 24 on seeds 0-9).
+    img, corners = corners_and_edges(rng)
+    out.append(Case("24 corners among long straight edges, shi-tomasi called with k = 0.25 (Harris' constant: "
+                    "Shi-Tomasi does not use it)", (img, len(corners), "shi-tomasi"), corners, _at_corners_or_none,
+                    0.1, "fraction off", convert=lambda o, c: _points(o, c),
+                    call=lambda fn, img=img, n=len(corners): fn(img, n, "shi-tomasi", k=0.25),
+                    info={"method": "shi-tomasi"}, key="shi-tomasi-ignores-k", tags=("corners-and-edges",)))
     return out
 
 
@@ -142,6 +156,10 @@ CORNER_HINTS = [
     Hint("Harris: your strongest responses lie on the long straight edges, not at the corners. On an edge one "
          "eigenvalue is large and det M ≈ 0, so R = det M − k·tr(M)² must come out negative: subtract k·tr(M)² "
          "(k > 0), don't add it; tr(M) alone (gradient energy) is an edge detector.", _on_edges("harris")),
+    Hint("method='shi-tomasi' with k = 0.25 found (almost) no corners: that is Harris' R, which k = 0.25 makes "
+         "−(λ1 − λ2)²/4 ≤ 0 everywhere. Shi-Tomasi's response is λ_min = tr/2 − sqrt((Sxx − Syy)²/4 + Sxy²), whatever k "
+         "is: branch on `method`.",
+         lambda c, out: c.key == "shi-tomasi-ignores-k" and c.metric(out, c.expected) > 0.5),
     Hint("Shi-Tomasi: your strongest responses lie on the long straight edges, not at the corners: the response "
          "is the smaller eigenvalue, tr/2 − sqrt((Sxx − Syy)²/4 + Sxy²); the larger one is large on every edge.",
          _on_edges("shi-tomasi")),
