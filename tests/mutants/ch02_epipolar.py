@@ -511,6 +511,14 @@ def fix_cheirality_strict(case):
     return recover_all_positive(case["E"], case["x1"], case["x2"])
 
 
+def fix_cheirality_first_point(case):
+    return recover_first_point(case["E"], case["x1"], case["x2"])
+
+
+def fix_cheirality_sum_of_depths(case):
+    return recover_sum_of_depths(case["E"], case["x1"], case["x2"])
+
+
 # ----------------------------------------------------------------- FRONTIER 2.25
 
 def weighted_ignored(x1, x2, w):
@@ -600,6 +608,8 @@ MUTANTS = [
     ("2.20", "colleague's pose", fix_cheirality_unchanged, "colleague"),
     ("2.20", "camera 1 only", fix_cheirality_camera1, "cameras"),
     ("2.20", "all points in front", fix_cheirality_strict, "in front of"),
+    ("2.20", "cheirality of the first match only", fix_cheirality_first_point, "most points in front of both"),
+    ("2.20", "sum of depths instead of a count", fix_cheirality_sum_of_depths, "most points in front of both"),
     ("2.25", "weights ignored", weighted_ignored, "ignored"),
     ("2.25", "coordinates scaled by w", weighted_points_scaled, "scaled the coordinates"),
     ("2.25", "threshold at 0.5, unnormalised", weighted_threshold_unnormalised, "without Hartley normalisation"),
