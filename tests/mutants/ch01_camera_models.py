@@ -166,6 +166,22 @@ def fisheye_unproject_not_unit(uv, K, D):
     return 2.0 * np.c_[np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)]
 
 
+def fisheye_project_divide_by_r(X_c, K, D):
+    r = np.linalg.norm(X_c[:, :2], axis=1)
+    theta = np.arctan2(r, X_c[:, 2])
+    return _to_pixels(X_c[:, :2] * (_kb(theta, D) / r)[:, None], K)  # 0 / 0 on the optical axis
+
+
+def fisheye_unproject_divide_by_theta_d(uv, K, D):
+    a = _normalise(uv, K)
+    theta_d = np.linalg.norm(a, axis=1)
+    theta = theta_d.copy()
+    for _ in range(50):
+        theta = theta - (_kb(theta, D) - theta_d) / (1 + 3 * D[0] * theta ** 2 + 5 * D[1] * theta ** 4
+                                                    + 7 * D[2] * theta ** 6 + 9 * D[3] * theta ** 8)
+    return np.c_[a * (np.sin(theta) / theta_d)[:, None], np.cos(theta)]  # 0 / 0 at the principal point
+
+
 # ----------------------------------------------------------------- 1.9 frame_change
 
 _AXES = {  # forward, right, up as the learner might type them
@@ -318,7 +334,9 @@ MUTANTS = [
     ("1.7", "polynomial in tan θ", fisheye_project_pinhole, "distorts the angle itself"),
     ("1.8", "ray from tan θ", fisheye_unproject_tan, "past 90°"),
     ("1.8", "θ_d taken for θ", fisheye_unproject_no_inversion, "not inverted"),
+    ("1.7", "θ_d / r on the optical axis", fisheye_project_divide_by_r, "optical axis (r = 0)"),
     ("1.8", "rays not unit length", fisheye_unproject_not_unit, "divide it by its norm"),
+    ("1.8", "sin θ / θ_d at the principal point", fisheye_unproject_divide_by_theta_d, "the principal point (θ_d = 0)"),
     ("1.9", "transposed", frame_change_transposed, "transposed"),
     ("1.9", "Unreal made right-handed", frame_change_unreal_right_handed, "left-handed"),
     ("1.9", "B_dst^T B_src", frame_change_inverse_order, "wrong way round"),
