@@ -336,18 +336,21 @@ def _cases_adaptive_inputs(rng: np.random.Generator) -> list[Case]:
                         f"confidence {p} (k = {k7:.0f})", pF, lambda o, e: e["k"] / max(float(o[2]), 1.0), 2.0, "",
                         {"k": k7, "k_099": k_samples(w, 7), "w": w, "p": p}, key="adaptive-seven",
                         tags=("adaptive",))]
-    # The 10 % line again, asked for p = 1 − 10⁻⁶: k = log(10⁻⁶) / log(1 − 0.1²) = 1,375, three times the count
-    # at p = 0.99; a count that ignores `confidence` stops at ~460 (error ~3-4), an honest one at 1.05-1.35.
+    # The 10 % line again, asked for p = 1 − 10⁻⁶, with k at the true line's inlier ratio w (its 40 points and the
+    # ~2 uniform ones within the 2 px threshold): k = log(10⁻⁶) / log(1 − w²) ≈ 1,250, three times the count at
+    # p = 0.99; a count that ignores `confidence` stops at ~1 / 3 of it (error ~3-3.6), an honest one at ~1-1.2.
     # (The F row above catches that count too: its k is also three times the p = 0.99 count.)
     d = rng.normal(size=2)
     d /= np.linalg.norm(d)
     pts = rng.uniform([0, 0], [600, 400], (400, 2))
-    pts[:40] = (rng.uniform([250, 150], [350, 250]) + rng.uniform(-150, 150, (40, 1)) * d
-                + rng.normal(0, 0.3, (40, 1)) * [-d[1], d[0]])
-    k_p = k_samples(0.1, 2, p)
-    out.append(_ransac_case(f"adaptive stop: k / samples drawn at 10 % inliers, confidence {p} (k = {k_p:.0f})",
-                            dict(line_problem(pts), confidence=p), lambda o, e: e["k"] / max(float(o[2]), 1.0),
-                            2.0, "", {"k": k_p, "w": 0.1, "p": p}, key="adaptive-confidence", tags=("adaptive",)))
+    base = rng.uniform([250, 150], [350, 250])
+    pts[:40] = base + rng.uniform(-150, 150, (40, 1)) * d + rng.normal(0, 0.3, (40, 1)) * [-d[1], d[0]]
+    problem = dict(line_problem(pts), confidence=p)
+    w_line = float(np.mean(np.abs((pts - base) @ [-d[1], d[0]]) < problem["threshold"]))
+    k_p = k_samples(w_line, 2, p)
+    out.append(_ransac_case(f"adaptive stop: k / samples drawn at {100 * w_line:.1f} % inliers, confidence {p} "
+                            f"(k = {k_p:.0f})", problem, lambda o, e: e["k"] / max(float(o[2]), 1.0),
+                            2.0, "", {"k": k_p, "w": w_line, "p": p}, key="adaptive-confidence", tags=("adaptive",)))
     return out
 
 
