@@ -157,8 +157,8 @@ CORNER_HINTS = [
          "eigenvalue is large and det M ≈ 0, so R = det M − k·tr(M)² must come out negative: subtract k·tr(M)² "
          "(k > 0), don't add it; tr(M) alone (gradient energy) is an edge detector.", _on_edges("harris")),
     Hint("method='shi-tomasi' with k = 0.25 found (almost) no corners: that is Harris' R, which k = 0.25 makes "
-         "−(λ1 − λ2)²/4 ≤ 0 everywhere. Shi-Tomasi's response is λ_min = tr/2 − sqrt((Sxx − Syy)²/4 + Sxy²), whatever k "
-         "is: branch on `method`.",
+         "−(λ1 − λ2)²/4 ≤ 0 everywhere. Shi-Tomasi's response is λ_min = tr/2 − sqrt((Sxx − Syy)²/4 + Sxy²), "
+         "whatever k is: branch on `method`.",
          lambda c, out: c.key == "shi-tomasi-ignores-k" and c.metric(out, c.expected) > 0.5),
     Hint("Shi-Tomasi: your strongest responses lie on the long straight edges, not at the corners: the response "
          "is the smaller eigenvalue, tr/2 − sqrt((Sxx − Syy)²/4 + Sxy²); the larger one is large on every edge.",
