@@ -100,6 +100,29 @@ def undistort_five_steps(uv, K, dist):
     return x
 
 
+def undistort_twenty_steps(uv, K, dist):
+    # The same fixed point, 20 steps (the common "enough" count): fine where it contracts fast, not at a wide
+    # strong lens's corners.
+    xd = _normalise(uv, K)
+    x = xd.copy()
+    for _ in range(20):
+        x = x + (xd - _distort(x, dist))
+    return x
+
+
+def undistort_opencv_iteration_twenty(uv, K, dist):
+    # OpenCV's iteration x <- (x_d - tangential(x)) / radial(x), 20 steps instead of its default 5.
+    xd = _normalise(uv, K)
+    x = xd.copy()
+    k1, k2, p1, p2, k3 = dist
+    for _ in range(20):
+        r2 = np.sum(x * x, axis=1)
+        radial = 1 + k1 * r2 + k2 * r2 ** 2 + k3 * r2 ** 3
+        tangential = _distort(x, dist) - x * radial[:, None]
+        x = (xd - tangential) / radial[:, None]
+    return x
+
+
 def undistort_returns_pixels(uv, K, dist):
     xd = _normalise(uv, K)
     x = xd.copy()
@@ -327,6 +350,8 @@ MUTANTS = [
     ("1.5", "dist order (k1, k2, k3, p1, p2)", project_k3_order, "OpenCV's order"),
     ("1.6", "seed sketch: radial-only fixed point", undistort_seed_fixed_point, "tangential terms are ignored"),
     ("1.6", "five fixed-point steps", undistort_five_steps, "not converged"),
+    ("1.6", "twenty fixed-point steps", undistort_twenty_steps, "not converged"),
+    ("1.6", "OpenCV's iteration, twenty steps", undistort_opencv_iteration_twenty, "not converged"),
     ("1.6", "returns pixels", undistort_returns_pixels, "returned pixels"),
     ("1.6", "principal point not subtracted", undistort_no_principal_point, "(cx, cy) was not subtracted"),
     ("1.7", "atan instead of atan2", fisheye_project_atan, "atan2"),
