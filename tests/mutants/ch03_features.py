@@ -63,6 +63,8 @@ shi_tomasi_larger = _corners_with(lambda Sxx, Sxy, Syy, k, m: _harris(Sxx, Sxy, 
 
 # `method` never read: Harris' R for both (Shi-Tomasi corners on ordinary images are nearly the same set)
 corners_method_ignored = _corners_with(lambda Sxx, Sxy, Syy, k, m: _harris(Sxx, Sxy, Syy, k))
+# `method` never read the other way: λ_min for both
+corners_always_shi_tomasi = _corners_with(lambda Sxx, Sxy, Syy, k, m: _lambda_min(Sxx, Sxy, Syy))
 
 
 # ----------------------------------------------------------------- 3.6 fast_detect
@@ -419,6 +421,7 @@ MUTANTS = [
     ("3.5", "Harris with +k tr(M)²", corners_k_flipped, "subtract k·tr(M)²"),
     ("3.5", "Shi-Tomasi with the larger eigenvalue", shi_tomasi_larger, "the larger one is large on every edge"),
     ("3.5", "method ignored: Harris for both", corners_method_ignored, "branch on `method`"),
+    ("3.5", "method ignored: Shi-Tomasi for both", corners_always_shi_tomasi, "ranks the crossings"),
     ("3.6", "no NMS", fast_no_nms, "before non-maximum suppression"),
     ("3.6", "FAST-12", fast_12, "12 contiguous pixels"),
     ("3.6", "arc does not wrap", fast_no_wrap, "wraps around"),
