@@ -67,7 +67,39 @@ def cases_undistort(rng: np.random.Generator) -> list[Case]:
         # steps do not.
         out.append(Case(name, (uv, K, dist), x, _in_pixels(K[0, 0]), 0.01, "px", shape=(n, 2), key=key,
                         tags=(strength,)))
+    uv, K, dist, x = _slow_corners(rng)
+    out.append(Case("strong wide lens, its four corners (a fixed point contracts slowly there)", (uv, K, dist), x,
+                    _in_pixels(K[0, 0]), 0.01, "px", shape=x.shape, key="slow-corners", tags=("strong",)))
     return out
+
+
+def _fixed_point_slopes(dist, r):
+    """Along a ray, the slopes of the two textbook fixed-point maps at radius r: x <- x + (x_d − d(x)), slope
+    1 − d'(r), and OpenCV's x <- (x_d − tangential) / radial(x), slope 1 − d'(r) / radial(r)."""
+    k1, k2, _, _, k3 = dist
+    radial = 1 + k1 * r ** 2 + k2 * r ** 4 + k3 * r ** 6
+    slope = scene.radial_slope(dist, r)
+    return 1 - slope, 1 - slope / radial
+
+
+def _slow_corners(rng: np.random.Generator, w: int = 1280, h: int = 960, n: int = 200):
+    """A strong lens on a wide camera (80-90°) and points near the four image corners, where both textbook
+    fixed-point maps contract by 0.75-0.9 a step (redrawn until they do: 0.75²⁰ leaves ~0.3 % of the start's
+    10-200 px, over 0.01 px; 0.9¹⁰⁰ leaves ~3e-5 of it, so the same map run until it settles passes, as does
+    Newton). The other cases' lenses contract by ~0.05-0.6 at most, so a fixed 10-20 steps passed them on most
+    draws. Returns (uv, K, dist, x)."""
+    corners = np.array([[0.0, 0.0], [w - 1.0, 0.0], [0.0, h - 1.0], [w - 1.0, h - 1.0]])
+    for _ in range(10_000):
+        K = scene.random_intrinsics(rng, width=w, height=h, hfov_deg=(80, 90))
+        dist = scene.random_distortion(rng, "strong")
+        q = rng.integers(0, 4, n)
+        px = corners[q] + rng.uniform(0, 0.05, (n, 2)) * [w, h] * np.where(corners[q] > 0, -1, 1)
+        x = pixels_to_normalised(px, K)
+        r = np.linalg.norm(x, axis=1)
+        worst = [np.abs(s).max() for s in _fixed_point_slopes(dist, np.linspace(r.min(), r.max(), 64))]
+        if all(0.75 <= m <= 0.9 for m in worst):
+            return cv_project(np.c_[x, np.ones(n)], K, np.eye(3), np.zeros(3), dist), K, dist, x
+    raise RuntimeError("no strong lens whose corners contract slowly")
 
 
 def _bug_undistort_returns_pixels(case):

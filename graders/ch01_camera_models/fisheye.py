@@ -86,6 +86,14 @@ def cases_fisheye_project(rng: np.random.Generator) -> list[Case]:
         # 1e-6 px: the same closed form in float64 on both sides.
         out.append(Case(name, (X_c, K, D), oracle(X_c, K, D), max_distance, 1e-6, "px", shape=(n, 2), key=key,
                         tags=("past-90",) if theta_max > 90 else ()))
+    # The principal ray: points on the optical axis (r = 0) project to (cx, cy), where θ_d(θ) / r is 0 / 0;
+    # and points 1e-9 rad off it, where the same ratio must not lose its digits. OpenCV answers both.
+    K, D = scene.random_fisheye(rng)
+    theta = np.r_[np.zeros(4), np.full(4, 1e-9)]
+    X_c = _rays(theta, rng.uniform(-np.pi, np.pi, 8)) * rng.uniform(0.5, 10, (8, 1))
+    X_c[:4, :2] = 0.0
+    out.append(Case("on the optical axis (r = 0) and 1e-9 rad off it", (X_c, K, D), cv_fisheye_project(X_c, K, D),
+                    max_distance, 1e-6, "px", shape=(8, 2), key="axis"))
     return out
 
 
@@ -99,6 +107,8 @@ FISHEYE_PROJECT_HINTS = [
     like(lambda c: _kb_model(*c.args, lambda r, z: r / z),
          "the polynomial is evaluated at tan θ = r / z, the pinhole radius: Kannala-Brandt distorts the angle "
          "itself, θ = atan2(r, z)."),
+    raised("non-finite", "NaN: a point on the optical axis (r = 0) divided by r? θ_d / r is 0 / 0 there, and the axis "
+           "projects to (cx, cy): scale by θ_d / r only where r > 0 (np.divide(..., where=r > 0))."),
 ]
 
 
@@ -136,6 +146,11 @@ def cases_fisheye_unproject(rng: np.random.Generator) -> list[Case]:
         # 1e-4°: ~0.0006 px at a fisheye's ~6 px/° — converged Newton gives ~1e-10°.
         out.append(Case(name, (uv, K, D), rays, max_angle_deg, 1e-4, "°", shape=(n, 3), convert=_unit_rays,
                         key=key, tags=("past-90",) if theta_max > 90 else ()))
+    # The principal point itself (θ_d = 0: the ray (0, 0, 1), where sin θ / θ_d is 0 / 0) and pixels 1e-6 px from it.
+    K, D = _unproject_lens(rng, 60)
+    uv = K[:2, 2] + np.r_[np.zeros((3, 2)), 1e-6 * rng.normal(size=(3, 2))]
+    out.append(Case("the principal point (θ_d = 0) and 1e-6 px from it", (uv, K, D), gt_fisheye_unproject(uv, K, D),
+                    max_angle_deg, 1e-4, "°", shape=(6, 3), convert=_unit_rays, key="axis"))
     return out
 
 
@@ -161,6 +176,8 @@ FISHEYE_UNPROJECT_HINTS = [
          "the distortion is not inverted: solve θ_d(θ) = |a| for θ (Newton), then build the ray."),
     raised("unit length", "scale each ray to unit length: divide it by its norm, or build it as "
            "(sin θ cos φ, sin θ sin φ, cos θ), which is unit by construction."),
+    raised("non-finite", "NaN: the principal point (θ_d = 0) divided by θ_d? sin θ / θ_d is 0 / 0 there and its ray is "
+           "(0, 0, 1): take the direction from φ = atan2(y, x), or divide only where θ_d > 0."),
 ]
 
 register(

@@ -146,14 +146,27 @@ def traps_sprung(E, x1, x2, truth, rules=("first", "camera1", "strict")) -> bool
     return all(fails[r] for r in rules)
 
 
+def far_wrong_match_first(x1, x2, R, t):
+    """Copies of x1, x2 (normalised) whose first match is made wrong: x2[0] becomes the image of the point at depth
+    −10⁵ on x1[0]'s ray (10⁵ x the baseline), so under the true pose that match lies behind both cameras, far
+    away, and under (R, −t) in front of both. One wrong match among 200 leaves the count of points in front
+    unchanged, but a pose chosen by the first point alone, or by the sum of the depths (the far point outweighs
+    the others), is (R, −t)."""
+    x1, x2 = np.array(x1, float), np.array(x2, float)
+    ray = R @ np.r_[x1[0], 1.0] - np.asarray(t, float) / (1e5 * np.linalg.norm(t))
+    x2[0] = ray[:2] / ray[2]
+    return x1, x2
+
+
 def cases_recover_pose(rng: np.random.Generator) -> list[Case]:
     out = []
     # The forward-motion case is drawn so that the three classic wrong rules fail on it; the case
     # with 10 % wrong matches so that "every point in front" and "the first candidate" fail too (a
-    # second trap: either rule alone passes a random draw about half the time).
+    # second trap: either rule alone passes a random draw about half the time), and its first match made a far wrong
+    # one that only a rule reading one point, or the sum of the depths, follows (`far_wrong_match_first`).
     specs = [("exact", "60 points, no noise", dict(n=60), ()),
-             ("outliers", "200 points, 0.5 px, 10 % wrong matches", dict(n=200, noise=0.5, outliers=0.1),
-              ("first", "strict")),
+             ("outliers", "200 points, 0.5 px, 10 % wrong matches (the first far behind)",
+              dict(n=200, noise=0.5, outliers=0.1), ("first", "strict")),
              ("forward", "forward motion, 100 points, 0.5 px, 5 % wrong",
               dict(n=100, noise=0.5, outliers=0.05, motion="forward"), ("first", "camera1", "strict")),
              ("sideways", "sideways motion, 100 points, 0.5 px", dict(n=100, noise=0.5, motion="sideways"), ())]
@@ -168,6 +181,8 @@ def cases_recover_pose(rng: np.random.Generator) -> list[Case]:
                       if not rules or traps_sprung(sg * scale * s["E"], x1, x2, (s["R"], s["t"]), rules)), None)
             if E is not None:
                 break
+        if key == "outliers":
+            x1, x2 = far_wrong_match_first(x1, x2, s["R"], s["t"])
         R_cv, t_cv = cv_recover_pose(E, x1, x2)
         # max(rotation error, translation-direction error) vs cv2.recoverPose on the same E; 1e-4°:
         # the same SVD gives the same candidates; the wrong candidate is ~180° away.

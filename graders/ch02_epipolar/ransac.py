@@ -318,6 +318,42 @@ def _case_msac(rng: np.random.Generator) -> Case:
                         key="msac-two-lines", tags=("msac",))
 
 
+def _cases_adaptive_inputs(rng: np.random.Generator) -> list[Case]:
+    # The sample count follows the problem's sample size and the confidence it is given (the rows above cannot
+    # tell: they are 2-point samples at p = 0.99, but for the MSAC row, where p is not observable). Error = k / samples
+    # drawn, at most 2 as in the 10 % line row: an honest count stops at k(w_best) >= ~k / 1.3.
+    # F from 7-point samples, 300 matches, 40 % wrong, asked for p = 1 − 10⁻⁶: at the true F's inlier ratio w
+    # (~0.58 at 1 px), k = log(10⁻⁶) / log(1 − w⁷) is ~600; w² in place of w⁷ gives ~40, so such a count stops
+    # at the first good model, after ~1 / w⁷ ≈ 45 samples on average (k / samples < 2 once in ~1,000 draws: the
+    # wait is exponential, P = exp(−log(10⁶) / 2)). w_best exceeds the true F's w by a few matches at most
+    # (k ∝ w⁻⁷: 3 % more inliers is 1.23x fewer samples).
+    s = two_view(rng, 300, noise=0.5, outliers=0.4, held_out=1)
+    p = 1 - 1e-6
+    pF = dict(_fundamental_problem(s["x1"], s["x2"]), confidence=p)
+    w = float(np.mean(gt_sampson(s["F"], s["x1"], s["x2"]) < pF["threshold"]))
+    k7 = k_samples(w, 7, p)
+    out = [_ransac_case(f"adaptive stop: k / samples drawn for 7-point samples at {100 * w:.0f} % inliers, "
+                        f"confidence {p} (k = {k7:.0f})", pF, lambda o, e: e["k"] / max(float(o[2]), 1.0), 2.0, "",
+                        {"k": k7, "k_099": k_samples(w, 7), "w": w, "p": p}, key="adaptive-seven",
+                        tags=("adaptive",))]
+    # The 10 % line again, asked for p = 1 − 10⁻⁶, with k at the true line's inlier ratio w (its 40 points and the
+    # ~2 uniform ones within the 2 px threshold): k = log(10⁻⁶) / log(1 − w²) ≈ 1,250, three times the count at
+    # p = 0.99; a count that ignores `confidence` stops at ~1 / 3 of it (error ~3-3.6), an honest one at ~1-1.2.
+    # (The F row above catches that count too: its k is also three times the p = 0.99 count.)
+    d = rng.normal(size=2)
+    d /= np.linalg.norm(d)
+    pts = rng.uniform([0, 0], [600, 400], (400, 2))
+    base = rng.uniform([250, 150], [350, 250])
+    pts[:40] = base + rng.uniform(-150, 150, (40, 1)) * d + rng.normal(0, 0.3, (40, 1)) * [-d[1], d[0]]
+    problem = dict(line_problem(pts), confidence=p)
+    w_line = float(np.mean(np.abs((pts - base) @ [-d[1], d[0]]) < problem["threshold"]))
+    k_p = k_samples(w_line, 2, p)
+    out.append(_ransac_case(f"adaptive stop: k / samples drawn at {100 * w_line:.1f} % inliers, confidence {p} "
+                            f"(k = {k_p:.0f})", problem, lambda o, e: e["k"] / max(float(o[2]), 1.0),
+                            2.0, "", {"k": k_p, "w": w_line, "p": p}, key="adaptive-confidence", tags=("adaptive",)))
+    return out
+
+
 def cases_ransac(rng: np.random.Generator) -> Iterator[Case]:
     """Built lazily, in this order (an untouched stub stops at the first: no pycolmap run, no SIFT)."""
     yield from _cases_F(rng)
@@ -325,6 +361,7 @@ def cases_ransac(rng: np.random.Generator) -> Iterator[Case]:
     yield from _cases_H(rng)
     yield from _cases_adaptive(rng)
     yield _case_msac(rng)
+    yield from _cases_adaptive_inputs(rng)
 
 
 def _ransac_samples_off(c, out) -> bool:
@@ -358,7 +395,17 @@ def _ransac_not_refitted(c, out) -> bool:
     return m is not None and cost(m) < 0.95 * cost(out[0])
 
 
+def _too_few(key):
+    """The row `key` stopped before half of its k samples."""
+    return lambda c, out: c.key == key and out[2] < c.expected["k"] / 2
+
+
 RANSAC_HINTS = [
+    Hint("too few samples for 7-point samples at this confidence: k = log(1 − p) / log(1 − wˢ) with s = "
+         "`sample_size` (7 here: the exponent is not always 2) and p = `confidence` (here 1 − 10⁻⁶, not a fixed "
+         "0.99).", _too_few("adaptive-seven")),
+    Hint("too few samples for the confidence asked: k = log(1 − p) / log(1 − wˢ) with p = `confidence` (here "
+         "1 − 10⁻⁶), not a fixed 0.99.", _too_few("adaptive-confidence")),
     Hint("the number of samples ignores the inlier ratio — a fixed number of iterations? After each new best model "
          "set k = log(1 − p) / log(1 − wˢ) from its inlier ratio w, and stop once that many samples are drawn.",
          _ransac_samples_off),

@@ -90,6 +90,43 @@ def _at_corners(out, corners):
     return 1.0 - float(np.mean(np.linalg.norm(k[:, None] - corners[None], axis=2).min(1) <= 3.5))
 
 
+def crossings_and_squares(rng: np.random.Generator, size=SIZE, c=0.06) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where Harris and Shi-Tomasi disagree: uint8 image, the 8 square corners A and the 8 crossings B (x, y).
+
+    Left, two turned squares of contrast 1.66 c (their 8 corners: λ1 ~ λ2). Right, two long vertical edges of
+    contrast 3.3 c crossed by four horizontal ones of contrast c that fade in from the middle (no end corner): at a
+    crossing λ1 ~ 11 λ2. Harris' det M − 0.04 tr(M)² ranks the crossings first, λ_min the square corners (measured
+    on 150 draws, n = 8: Harris on OpenCV's filters or ours puts 0 of 8 off the crossings, goodFeaturesToTrack's box
+    window at most 4; λ_min puts at most 1 of 8 on them). Drawn 8x larger, area-averaged down, blurred by 0.7 px."""
+    W, H = size
+    up = 8
+    img = np.full((H * up, W * up), 0.5, np.float32)
+    squares = []
+    for cy in (H / 3, 2 * H / 3):
+        ctr = np.array([W / 4, cy]) + rng.uniform(-5, 5, 2)
+        a, half = rng.uniform(0, np.pi / 2), rng.uniform(18, 24)
+        Rm = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+        v = ctr + (np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * half) @ Rm.T
+        cv2.fillPoly(img, [np.rint((v + 0.5) * up).astype(np.int32)], float(0.5 + rng.choice([-1, 1]) * 1.66 * c))
+        squares.append(v)
+    ys, xs = np.mgrid[0:H * up, 0:W * up]
+    X, Y = (xs + 0.5) / up - 0.5, (ys + 0.5) / up - 0.5
+    xe = [W / 2 + 40 + rng.uniform(-4, 4), W / 2 + 100 + rng.uniform(-4, 4)]
+    ye = np.sort(rng.uniform(-4, 4, 4) + np.linspace(40, H - 40, 4))
+    ramp = np.clip((X - (W / 2 + 5)) / 15, 0, 1)
+    for k, x0 in enumerate(xe):
+        img += np.where(X > x0, 3.3 * c * (1 if k == 0 else -1), 0).astype(np.float32)
+    for k, y0 in enumerate(ye):
+        img += (np.where(Y > y0, c * (1 if k % 2 == 0 else -1), 0) * ramp).astype(np.float32)
+    small = cv2.GaussianBlur(cv2.resize(img, size, interpolation=cv2.INTER_AREA), (0, 0), 0.7)
+    return to_u8(small), np.concatenate(squares), np.array([[x0, y0] for y0 in ye for x0 in xe])
+
+
+def _at_corners_or_none(out, corners):
+    """`_at_corners`, but too few detections count as all off (1.0), so that the hints see the output."""
+    return 1.0 if len(out) < 0.75 * len(corners) else _at_corners(out, corners)
+
+
 def _corner_oracles(n, method):
     """Two correct detectors that differ (a box window and the spec's Gaussian one): a learner is held to the
     weaker. Measured: the Gaussian one alone trails goodFeaturesToTrack by up to 0.28 on strongly foreshortened
@@ -123,7 +160,30 @@ def cases_corners(rng: np.random.Generator) -> list[Case]:
                         (img, len(corners), method), corners, _at_corners, 0.1, "fraction off",
                         convert=lambda o, c: _points(o, c), info={"method": method},
                         key=f"corners-and-edges-{method}", tags=("corners-and-edges",)))
+    # Shi-Tomasi called with Harris' constant k = 0.25, where Harris' R = det M − (tr M)²/4 = −(λ1 − λ2)²/4 is
+    # nowhere positive: λ_min does not read k, so its corners are those of the row above, while code that answers
+    # every method with Harris' R finds at most a stray rounding-level peak (measured 0-1 of 24 on seeds 0-9).
+    img, corners = corners_and_edges(rng)
+    out.append(Case("24 corners among long straight edges, shi-tomasi called with k = 0.25 (Harris' constant: "
+                    "Shi-Tomasi does not use it)", (img, len(corners), "shi-tomasi"), corners, _at_corners_or_none,
+                    0.1, "fraction off", convert=lambda o, c: _points(o, c),
+                    call=lambda fn, img=img, n=len(corners): fn(img, n, "shi-tomasi", k=0.25),
+                    info={"method": "shi-tomasi"}, key="shi-tomasi-ignores-k", tags=("corners-and-edges",)))
+    # Harris on its own ground: 8 crossings of a strong and a weak edge (λ1 ≫ λ2) beside 8 square corners (λ1 ~ λ2).
+    # 0.75: a correct Harris puts at most half of its 8 detections off the crossings (goodFeaturesToTrack's box
+    # window, 150 draws; ours 0), Shi-Tomasi's λ_min at least 7 of 8 (it ranks the square corners first).
+    img, squares, crossings = crossings_and_squares(rng)
+    out.append(Case("8 crossings of a strong and a weak edge beside 8 square corners, harris: detections at the "
+                    "crossings", (img, 8, "harris"), crossings, _at_corners_or_none, 0.75, "fraction off",
+                    convert=lambda o, c: _points(o, c), info={"method": "harris", "squares": squares},
+                    key="crossings-harris"))
     return out
+
+
+def _harris_took_squares(case, out):
+    """On the crossings row: most detections at the square corners (λ_min's choice), few at the crossings."""
+    return (case.key == "crossings-harris" and case.metric(out, case.info["squares"]) <= 0.5
+            < case.metric(out, case.expected))
 
 
 def _on_edges(method):
@@ -142,6 +202,13 @@ CORNER_HINTS = [
     Hint("Harris: your strongest responses lie on the long straight edges, not at the corners. On an edge one "
          "eigenvalue is large and det M ≈ 0, so R = det M − k·tr(M)² must come out negative: subtract k·tr(M)² "
          "(k > 0), don't add it; tr(M) alone (gradient energy) is an edge detector.", _on_edges("harris")),
+    Hint("method='shi-tomasi' with k = 0.25 found (almost) no corners: that is Harris' R, which k = 0.25 makes "
+         "−(λ1 − λ2)²/4 ≤ 0 everywhere. Shi-Tomasi's response is λ_min = tr/2 − sqrt((Sxx − Syy)²/4 + Sxy²), "
+         "whatever k is: branch on `method`.",
+         lambda c, out: c.key == "shi-tomasi-ignores-k" and c.metric(out, c.expected) > 0.5),
+    Hint("method='harris' returned the square corners, where λ_min is largest: Harris' R = det M − k tr(M)² "
+         "ranks the crossings of a strong and a weak edge first (λ1 ≫ λ2 there, so det M is large): branch on "
+         "`method`.", _harris_took_squares),
     Hint("Shi-Tomasi: your strongest responses lie on the long straight edges, not at the corners: the response "
          "is the smaller eigenvalue, tr/2 − sqrt((Sxx − Syy)²/4 + Sxy²); the larger one is large on every edge.",
          _on_edges("shi-tomasi")),

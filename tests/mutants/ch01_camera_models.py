@@ -100,6 +100,29 @@ def undistort_five_steps(uv, K, dist):
     return x
 
 
+def undistort_twenty_steps(uv, K, dist):
+    # The same fixed point, 20 steps (the common "enough" count): fine where it contracts fast, not at a wide
+    # strong lens's corners.
+    xd = _normalise(uv, K)
+    x = xd.copy()
+    for _ in range(20):
+        x = x + (xd - _distort(x, dist))
+    return x
+
+
+def undistort_opencv_iteration_twenty(uv, K, dist):
+    # OpenCV's iteration x <- (x_d - tangential(x)) / radial(x), 20 steps instead of its default 5.
+    xd = _normalise(uv, K)
+    x = xd.copy()
+    k1, k2, p1, p2, k3 = dist
+    for _ in range(20):
+        r2 = np.sum(x * x, axis=1)
+        radial = 1 + k1 * r2 + k2 * r2 ** 2 + k3 * r2 ** 3
+        tangential = _distort(x, dist) - x * radial[:, None]
+        x = (xd - tangential) / radial[:, None]
+    return x
+
+
 def undistort_returns_pixels(uv, K, dist):
     xd = _normalise(uv, K)
     x = xd.copy()
@@ -164,6 +187,22 @@ def fisheye_unproject_not_unit(uv, K, D):
                                                     + 7 * D[2] * theta ** 6 + 9 * D[3] * theta ** 8)
     phi = np.arctan2(a[:, 1], a[:, 0])
     return 2.0 * np.c_[np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)]
+
+
+def fisheye_project_divide_by_r(X_c, K, D):
+    r = np.linalg.norm(X_c[:, :2], axis=1)
+    theta = np.arctan2(r, X_c[:, 2])
+    return _to_pixels(X_c[:, :2] * (_kb(theta, D) / r)[:, None], K)  # 0 / 0 on the optical axis
+
+
+def fisheye_unproject_divide_by_theta_d(uv, K, D):
+    a = _normalise(uv, K)
+    theta_d = np.linalg.norm(a, axis=1)
+    theta = theta_d.copy()
+    for _ in range(50):
+        theta = theta - (_kb(theta, D) - theta_d) / (1 + 3 * D[0] * theta ** 2 + 5 * D[1] * theta ** 4
+                                                    + 7 * D[2] * theta ** 6 + 9 * D[3] * theta ** 8)
+    return np.c_[a * (np.sin(theta) / theta_d)[:, None], np.cos(theta)]  # 0 / 0 at the principal point
 
 
 # ----------------------------------------------------------------- 1.9 frame_change
@@ -311,6 +350,8 @@ MUTANTS = [
     ("1.5", "dist order (k1, k2, k3, p1, p2)", project_k3_order, "OpenCV's order"),
     ("1.6", "seed sketch: radial-only fixed point", undistort_seed_fixed_point, "tangential terms are ignored"),
     ("1.6", "five fixed-point steps", undistort_five_steps, "not converged"),
+    ("1.6", "twenty fixed-point steps", undistort_twenty_steps, "not converged"),
+    ("1.6", "OpenCV's iteration, twenty steps", undistort_opencv_iteration_twenty, "not converged"),
     ("1.6", "returns pixels", undistort_returns_pixels, "returned pixels"),
     ("1.6", "principal point not subtracted", undistort_no_principal_point, "(cx, cy) was not subtracted"),
     ("1.7", "atan instead of atan2", fisheye_project_atan, "atan2"),
@@ -318,7 +359,9 @@ MUTANTS = [
     ("1.7", "polynomial in tan θ", fisheye_project_pinhole, "distorts the angle itself"),
     ("1.8", "ray from tan θ", fisheye_unproject_tan, "past 90°"),
     ("1.8", "θ_d taken for θ", fisheye_unproject_no_inversion, "not inverted"),
+    ("1.7", "θ_d / r on the optical axis", fisheye_project_divide_by_r, "optical axis (r = 0)"),
     ("1.8", "rays not unit length", fisheye_unproject_not_unit, "divide it by its norm"),
+    ("1.8", "sin θ / θ_d at the principal point", fisheye_unproject_divide_by_theta_d, "the principal point (θ_d = 0)"),
     ("1.9", "transposed", frame_change_transposed, "transposed"),
     ("1.9", "Unreal made right-handed", frame_change_unreal_right_handed, "left-handed"),
     ("1.9", "B_dst^T B_src", frame_change_inverse_order, "wrong way round"),

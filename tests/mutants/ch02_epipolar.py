@@ -296,6 +296,20 @@ def recover_negated_t(E, x1, x2):
     return R, -t
 
 
+def recover_first_point(E, x1, x2):
+    # Cheirality decided by one triangulated point (the first match), as many tutorials do.
+    for R, t in _candidates(E):
+        z1, z2 = _depths(R, t, x1[:1], x2[:1])
+        if z1[0] > 0 and z2[0] > 0:
+            return R, t
+    return _candidates(E)[0]
+
+
+def recover_sum_of_depths(E, x1, x2):
+    # "Most in front" scored by the sum of the smaller depth of each match, not by a count: one far match rules it.
+    return max(_candidates(E), key=lambda p: np.sum(np.minimum(*_depths(*p, x1, x2))))
+
+
 # ----------------------------------------------------------------- 2.15 homography_dlt
 
 def _dlt(x1, x2, normalise=True, undo=True):
@@ -388,6 +402,52 @@ def ransac_no_local_optimisation(n, s, solve, residuals, threshold, refit=None, 
     return _loop_ransac(n, s, solve, residuals, threshold, None, confidence, max_iters, rng, lo=False)
 
 
+def _batched_ransac(n, s, solve, residuals, threshold, refit=None, confidence=0.99, max_iters=10_000, rng=None,
+                    k_exponent=None, fixed_confidence=None, batch=32):
+    # Batches of 32 samples, MSAC, refits while the cost drops by > 0.1 %: strong enough for the F, E and H rows.
+    rng = np.random.default_rng(rng)
+    tau2 = threshold ** 2
+    p = confidence if fixed_confidence is None else fixed_confidence
+    best, best_cost, best_inl, k, drawn = None, np.inf, np.zeros(n, bool), max_iters, 0
+    while drawn < min(k, max_iters):
+        idx = np.array([rng.choice(n, s, replace=False) for _ in range(batch)])
+        drawn += batch
+        models = np.asarray(solve(idx))
+        if models.size == 0:
+            continue
+        r = residuals(models)
+        cost = np.minimum(r ** 2, tau2).sum(1)
+        j = int(np.argmin(cost))
+        if cost[j] >= best_cost:
+            continue
+        best, best_cost, best_inl = models[j], cost[j], r[j] < threshold
+        for _ in range(10 if refit is not None else 0):
+            m = refit(best_inl)
+            if m is None:
+                break
+            rm = residuals(np.asarray(m)[None])[0]
+            cm = np.minimum(rm ** 2, tau2).sum()
+            if not cm < 0.999 * best_cost:
+                break
+            best, best_cost, best_inl = np.asarray(m), cm, rm < threshold
+        w = best_inl.mean()
+        e = s if k_exponent is None else k_exponent
+        k = np.log(1 - p) / np.log(1 - w ** e) if 0 < w < 1 else (1 if w >= 1 else max_iters)
+    return best, best_inl
+
+
+def ransac_k_from_w_squared(n, s, solve, residuals, threshold, refit=None, confidence=0.99, max_iters=10_000,
+                            rng=None):
+    # k = log(1 - p) / log(1 - w²), copied from a line-fitting example: right for 2-point samples only.
+    return _batched_ransac(n, s, solve, residuals, threshold, refit, confidence, max_iters, rng, k_exponent=2)
+
+
+def ransac_confidence_ignored(n, s, solve, residuals, threshold, refit=None, confidence=0.99, max_iters=10_000,
+                              rng=None):
+    # Takes `confidence` but always stops at the p = 0.99 count.
+    return _batched_ransac(n, s, solve, residuals, threshold, refit, confidence, max_iters, rng, fixed_confidence=0.99)
+
+
 # ----------------------------------------------------------------- DEBUG 2.17-2.20
 
 def fix_F_unchanged(case):
@@ -449,6 +509,14 @@ def fix_cheirality_camera1(case):
 
 def fix_cheirality_strict(case):
     return recover_all_positive(case["E"], case["x1"], case["x2"])
+
+
+def fix_cheirality_first_point(case):
+    return recover_first_point(case["E"], case["x1"], case["x2"])
+
+
+def fix_cheirality_sum_of_depths(case):
+    return recover_sum_of_depths(case["E"], case["x1"], case["x2"])
 
 
 # ----------------------------------------------------------------- FRONTIER 2.25
@@ -514,6 +582,8 @@ MUTANTS = [
     ("2.14", "depth in camera 1 only", recover_camera1_only, "twisted pair"),
     ("2.14", "all points must be in front", recover_all_positive, "in front of"),
     ("2.14", "t negated", recover_negated_t, "wrong sign"),
+    ("2.14", "cheirality of the first match only", recover_first_point, "most points in front of both"),
+    ("2.14", "sum of depths instead of a count", recover_sum_of_depths, "most points in front of both"),
     ("2.15", "no Hartley normalisation", dlt_unnormalised, "normalisation"),
     ("2.15", "x1 and x2 swapped (inverse)", dlt_swapped, "inverse"),
     ("2.15", "transposed", dlt_transposed, "transposed"),
@@ -525,6 +595,8 @@ MUTANTS = [
     ("2.16", "fixed 128 iterations", _fixed(128), "fixed number of iterations"),
     ("2.16", "fixed 1,000 iterations", _fixed(1000), "fixed number of iterations"),
     ("2.16", "no local optimisation", ransac_no_local_optimisation, "refit"),
+    ("2.16", "k from w² whatever the sample size", ransac_k_from_w_squared, "`sample_size` (7 here"),
+    ("2.16", "confidence ignored (always 0.99)", ransac_confidence_ignored, "not a fixed 0.99"),
     ("2.17", "left unchanged", fix_F_unchanged, "unnormalised"),
     ("2.17", "scaled, not centred", fix_F_scaled_not_centred, "not centred"),
     ("2.17", "no rank 2", fix_F_no_rank2, "rank 2"),
@@ -536,6 +608,8 @@ MUTANTS = [
     ("2.20", "colleague's pose", fix_cheirality_unchanged, "colleague"),
     ("2.20", "camera 1 only", fix_cheirality_camera1, "cameras"),
     ("2.20", "all points in front", fix_cheirality_strict, "in front of"),
+    ("2.20", "cheirality of the first match only", fix_cheirality_first_point, "most points in front of both"),
+    ("2.20", "sum of depths instead of a count", fix_cheirality_sum_of_depths, "most points in front of both"),
     ("2.25", "weights ignored", weighted_ignored, "ignored"),
     ("2.25", "coordinates scaled by w", weighted_points_scaled, "scaled the coordinates"),
     ("2.25", "threshold at 0.5, unnormalised", weighted_threshold_unnormalised, "without Hartley normalisation"),

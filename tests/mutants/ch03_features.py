@@ -61,6 +61,11 @@ corners_k_flipped = _corners_with(lambda Sxx, Sxy, Syy, k, m: Sxx * Syy - Sxy **
 shi_tomasi_larger = _corners_with(lambda Sxx, Sxy, Syy, k, m: _harris(Sxx, Sxy, Syy, k) if m == "harris"
                                   else 0.5 * (Sxx + Syy) + np.sqrt(0.25 * (Sxx - Syy) ** 2 + Sxy ** 2))
 
+# `method` never read: Harris' R for both (Shi-Tomasi corners on ordinary images are nearly the same set)
+corners_method_ignored = _corners_with(lambda Sxx, Sxy, Syy, k, m: _harris(Sxx, Sxy, Syy, k))
+# `method` never read the other way: λ_min for both
+corners_always_shi_tomasi = _corners_with(lambda Sxx, Sxy, Syy, k, m: _lambda_min(Sxx, Sxy, Syy))
+
 
 # ----------------------------------------------------------------- 3.6 fast_detect
 
@@ -415,6 +420,8 @@ MUTANTS = [
     ("3.5", "gradient energy tr(M): an edge detector", corners_trace, "tr(M) alone"),
     ("3.5", "Harris with +k tr(M)²", corners_k_flipped, "subtract k·tr(M)²"),
     ("3.5", "Shi-Tomasi with the larger eigenvalue", shi_tomasi_larger, "the larger one is large on every edge"),
+    ("3.5", "method ignored: Harris for both", corners_method_ignored, "branch on `method`"),
+    ("3.5", "method ignored: Shi-Tomasi for both", corners_always_shi_tomasi, "ranks the crossings"),
     ("3.6", "no NMS", fast_no_nms, "before non-maximum suppression"),
     ("3.6", "FAST-12", fast_12, "12 contiguous pixels"),
     ("3.6", "arc does not wrap", fast_no_wrap, "wraps around"),
