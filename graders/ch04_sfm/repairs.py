@@ -17,7 +17,7 @@ from graders.core.engine import Case, Exercise, Hint, OutputError, register, sha
 from graders.kit.geometry import angle_between_deg, camera_centre, pixels_to_normalised, project
 from ..oracles.sfm_standin import cv_pose
 from graders.kit.scene import two_view
-from .initial_pair import cv_two_view_init, gt_rank_initial_pairs
+from .initial_pair import MAX_WRONG_INLIERS, cv_two_view_init, gt_rank_initial_pairs, wrong_inlier_fraction
 from .triangulation import gt_midpoint, gt_triangulation_angles
 
 # ----------------------------------------------------------------------------------------------- 4.19
@@ -295,10 +295,11 @@ def debug_initial_pair(rng: np.random.Generator) -> tuple[dict, dict]:
         x1 = project(np.c_[pixels_to_normalised(s["x1"], s["K1"]), np.ones(n)], K, np.eye(3), np.zeros(3))[0]
         x2 = project(np.c_[pixels_to_normalised(s["x2"], s["K2"]), np.ones(n)], K, np.eye(3), np.zeros(3))[0]
         pairs.append({"x1": x1, "x2": x2})
-        truth.append({"kind": kind, "R": s["R"], "t": s["t"], "X": s["X"], "is_outlier": s["is_outlier"]})
+        truth.append({"kind": kind, "R": s["R"], "t": s["t"], "X": s["X"], "is_outlier": s["is_outlier"], "x1": x1,
+                      "x2": x2})
     case = {"K": K, "pairs": pairs}
     case.update({k: v for k, v in broken_initial_run(case).items() if k in ("log", "metrics")})
-    return case, {"pairs": truth, "cause": "no_parallax", "kinds": [p["kind"] for p in truth]}
+    return case, {"pairs": truth, "cause": "no_parallax", "kinds": [p["kind"] for p in truth], "K": K}
 
 
 def _convert_initial(out, case):
@@ -366,6 +367,18 @@ def cases_fix_initial_pair(rng: np.random.Generator):
         # 15-30 %, the 25-match pair is padded to 100 %.
         yield Case(f"fresh case {i + 1}: 3D points (median error)", (case,), truth, _metric_points, 1.0, "%",
                    convert=_convert_initial, call=call, key=f"fresh-case-{i + 1}-points", tags=("fix", "points"))
+        # The median above hides up to half of the points: keeping every match as an inlier (15 % wrong) passed it
+        # on 10 of 10 seeds. See initial_pair.WRONG_MATCH_PX.
+        yield Case(f"fresh case {i + 1}: wrong matches among your inliers", (case,), truth, _metric_wrong_inliers,
+                   100 * MAX_WRONG_INLIERS, "%", convert=_convert_initial, call=call,
+                   key=f"fresh-case-{i + 1}-wrong-inliers", tags=("fix", "wrong-inliers"))
+
+
+def _metric_wrong_inliers(out, truth) -> float:
+    """% of the returned inliers that are wrong matches (initial_pair.wrong_inlier_fraction), on the chosen pair."""
+    true = truth["pairs"][out["pair"]]
+    return 100 * wrong_inlier_fraction(true["R"], true["t"], truth["K"], truth["K"], true["x1"], true["x2"],
+                                       out["inliers"])
 
 
 def _chosen(c, out) -> str:
@@ -389,6 +402,10 @@ INITIAL_PAIR_HINTS = [
          lambda c, out: "fix" in c.tags and _chosen(c, out) == "short"),
     Hint("that pair has too few matches (25: < 100 inliers) to seed a reconstruction.",
          lambda c, out: "fix" in c.tags and _chosen(c, out) == "few"),
+    Hint(lambda c, out: f"{_metric_wrong_inliers(out, c.expected):.0f} % of your inliers are wrong matches (more than "
+         "10 px from their epipolar lines): keep only the matches that fit E — and reproject within a few px once "
+         "triangulated — not every match (15 % of them are wrong).",
+         lambda c, out: "wrong-inliers" in c.tags and _chosen(c, out) == "good"),
     Hint("right pair, but the points do not match its geometry: X must be the inliers' points in camera 1's frame "
          "(camera 1 = [I | 0]), in the order of np.flatnonzero(inliers).",
          lambda c, out: "points" in c.tags and _chosen(c, out) == "good"),

@@ -5,7 +5,7 @@ from typing import Iterator
 
 import numpy as np
 
-from graders.core.engine import Case, Exercise, Hint, OutputError, register
+from graders.core.engine import Case, Exercise, Hint, OutputError, raised, register
 from graders.oracles.bundle_adjust import bal_cost, gauge_mask, scipy_bundle_adjust
 from graders.oracles.bundle_adjust import bal_project as gt_project
 
@@ -73,6 +73,20 @@ def cases_bundle_adjust(rng: np.random.Generator) -> Iterator[Case]:
                Lazy(lambda a=args: scipy_bundle_adjust(*a)[2][-1]), _metric_cost, 1e-4, "rel. excess",
                convert=_convert_ba_gauge, kwargs={"fix_gauge": True},
                info={"args": args, "loss": "linear", "scale": 1.0})
+    # 6) 5 % outliers with loss='huber', scale=1 px: the Huber cost against Ceres' (pycolmap), same loss, from a
+    #    close start as in case 3. Case 4 judges Huber against the truth, which any robust loss reaches: Cauchy in
+    #    place of Huber passed all five cases on 20 of 20 seeds. Measured on 8 draws: the reference within 2e-7 of
+    #    Ceres' Huber cost (200 fresh seeds: at worst 3.7e-6); the Cauchy optimum (scale 1 or 2) 6.5e-4 to 2.3e-2
+    #    above it; plain L2 100 % above.
+    #    Drawn last, so cases 1-5 keep their draws.
+    prob = make_problem(rng, n_cams=8, n_points=120, noise=0.5, outliers=0.05, rot_deg=0.3, pos_frac=0.01,
+                        pt_frac=0.01, f_frac=0.005)
+    args = problem_args(prob)
+    yield Case("5 % outliers, loss='huber', scale=1: robust cost vs Ceres (pycolmap)", args,
+               Lazy(lambda a=args: colmap_bundle_adjust(*a, loss="huber", scale=1.0, tight=True)[2][-1]),
+               _metric_cost, 1e-4, "rel. excess", convert=_convert_ba,
+               kwargs={"loss": "huber", "scale": 1.0, "max_iter": 200},
+               info={"args": args, "loss": "huber", "scale": 1.0}, key="huber-cost")
 
 
 def _convert_ba(out, case):
@@ -86,7 +100,27 @@ def _convert_ba(out, case):
         raise OutputError("costs: expected a list of numbers (the cost after every iteration)") from None
     if not costs:
         raise OutputError("costs is empty: it should start with the initial cost")
+    _check_costs(cams, pts, costs, case)
     return cams, pts, costs, case
+
+
+def _check_costs(cams, pts, costs, case) -> None:
+    """costs[0] must be the start's cost and costs[-1] the returned reconstruction's, 0.5 Σ ρ(|r|²) with the case's
+    loss (a constant list, or the L2 cost under a robust loss, got full marks on 20 of 20 seeds when only the cameras
+    and points were judged). 1e-6 relative, plus 1e-12 of the start's cost: two correct formulas of one cost differ
+    by rounding, which at the noise-free optimum (~1e-15 px², residuals ~1e-9 px of ~500 px) is 1e-4 of it."""
+    start, _, ci, pi, obs = case.args
+    loss, scale = case.kwargs.get("loss", "linear"), case.kwargs.get("scale", 1.0)
+    c0 = bal_cost(start, case.args[1], ci, pi, obs, loss, scale)
+    with np.errstate(all="ignore"):
+        c1 = bal_cost(cams, pts, ci, pi, obs, loss, scale)
+    for k, (got, true) in enumerate(((costs[0], c0), (costs[-1], c1))):
+        if not abs(got - true) <= 1e-6 * abs(true) + 1e-12 * c0:
+            raise OutputError(f"costs[{0 if k == 0 else -1}] = {got:.6g}, but the cost of the "
+                              f"{'start' if k == 0 else 'returned cameras and points'} is {true:.6g}: costs[0] is "
+                              f"the initial cost and costs[-1] the final one, 0.5 Σ ρ(|r|²) with loss='{loss}'"
+                              + (" (costs[-1] is not the robust cost of the returned reconstruction)"
+                                 if loss != "linear" else ""))
 
 
 def _convert_ba_gauge(out, case):
@@ -105,14 +139,6 @@ def _metric_cost(out, expected):
     _, _, ci, pi, obs = case.info["args"]
     cost = bal_cost(cams, pts, ci, pi, obs, case.info["loss"], case.info["scale"])
     return max(0.0, cost / val(expected) - 1.0)
-
-
-def _reports_other_cost(case, out) -> bool:
-    """True if the returned final cost is not the (robust) cost of the returned reconstruction."""
-    cams, pts, costs, _ = out
-    _, _, ci, pi, obs = case.args
-    true = bal_cost(cams, pts, ci, pi, obs, case.kwargs.get("loss", "linear"), case.kwargs.get("scale", 1.0))
-    return abs(costs[-1] - true) > 1e-6 * true
 
 
 def _first_order_gain(case, out) -> float:
@@ -155,9 +181,9 @@ def _damping_runs_away(case, out) -> bool:
 
 
 BA_HINTS = [
-    Hint("costs[-1] is not the robust cost of the returned cameras and points: with a robust loss the cost is "
-         "0.5 Σ ρ(|r|²) and each observation is weighted by ρ'(s) in the normal equations.",
-         lambda c, out: c.kwargs.get("loss", "linear") != "linear" and _reports_other_cost(c, out)),
+    raised(r"costs\[(0|-1)\] = ", "costs must be the cost before any step (costs[0]) and after every iteration, "
+           "ending with the cost of the cameras and points you return: 0.5 Σ ρ(|r|²), and with a robust loss each "
+           "observation is weighted by ρ'(s) in the normal equations."),
     Hint("LM stalled although the gradient still promises a large decrease: no step along the model lowers the "
          "cost, so the Jacobian disagrees with the residuals. Compare your Jacobians with finite differences — the "
          "rotation Jacobian's sign (dP/dθ = −[RX]×) and the update R ← Exp(dθ)R must match.",
@@ -172,6 +198,10 @@ BA_HINTS = [
          "increment.",
          lambda c, out: len(out[2]) - 1 >= c.kwargs.get("max_iter", 50)
          and all(out[2][-k - 1] - out[2][-k] > 1e-4 * out[2][-k] for k in (1, 2, 3))),
+    Hint("your Huber cost is above the Huber optimum Ceres reaches from the same start, and your own costs say you "
+         "converged: is loss='huber' Huber's ρ(s) = s for s ≤ c², 2c√s − c² above (weight ρ'(s) = min(1, c/|r|)), "
+         "and not another robust loss?",
+         lambda c, out: c.key == "huber-cost" and (len(out[2]) < 3 or out[2][-2] - out[2][-1] <= 1e-6 * out[2][-1])),
     Hint("the cost is still falling: did it stop early? Iterate until an accepted step lowers the cost by less "
          "than ~1e-8 relative, and check the damping update (lower lambda after a good step, raise it after a "
          "rejected one).", lambda c, out: 0 < c.metric(out, c.expected) < 1.0 and len(out[2]) >= 2

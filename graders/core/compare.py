@@ -60,12 +60,11 @@ def up_to_scale(A: np.ndarray, B: np.ndarray) -> float:
     return float(min(np.linalg.norm(a - b), np.linalg.norm(a + b)))
 
 
-def sampson_rms_px(F: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> float:
-    """RMS Sampson distance in pixels of correspondences x1 <-> x2: (N, 2) under F: (3, 3).
+def sampson_px(F: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
+    """Sampson distance in pixels of each correspondence x1 <-> x2: (N, 2) under F: (3, 3) -> (N,).
 
     The Sampson distance |x2h^T F x1h| / |(F x1h)_12, (F^T x2h)_12| is the first-order geometric
-    (reprojection) error of a match; it judges an F by what it predicts on held-out matches, which
-    is scale- and sign-free, unlike comparing entries. Its square is cv2.sampsonDistance.
+    (reprojection) error of a match, scale- and sign-free in F. Its square is cv2.sampsonDistance.
     """
     x1h = np.c_[np.asarray(x1, float), np.ones(len(x1))]
     x2h = np.c_[np.asarray(x2, float), np.ones(len(x2))]
@@ -73,7 +72,14 @@ def sampson_rms_px(F: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> float:
     Fx1, Ftx2 = x1h @ F.T, x2h @ F
     num = np.sum(x2h * Fx1, axis=1)
     den = Fx1[:, 0] ** 2 + Fx1[:, 1] ** 2 + Ftx2[:, 0] ** 2 + Ftx2[:, 1] ** 2
-    return float(np.sqrt(np.mean(num ** 2 / np.maximum(den, 1e-300)))) if len(x1h) else 0.0
+    return np.sqrt(num ** 2 / np.maximum(den, 1e-300))
+
+
+def sampson_rms_px(F: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> float:
+    """RMS Sampson distance (`sampson_px`) in pixels of correspondences x1 <-> x2 under F: it judges an F by what it
+    predicts on held-out matches, which is scale- and sign-free, unlike comparing entries."""
+    d = sampson_px(F, x1, x2)
+    return float(np.sqrt(np.mean(d ** 2))) if len(d) else 0.0
 
 
 def unordered(A: list, B: list, metric) -> float:

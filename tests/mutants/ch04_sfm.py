@@ -510,3 +510,5 @@ MUTANTS = [
 from mutants.ch04_sfm_mapping import MUTANTS as _MAPPING_MUTANTS  # noqa: E402
 from mutants.ch04_sfm_debug import MUTANTS as _DEBUG_MUTANTS  # noqa: E402
 MUTANTS += _MAPPING_MUTANTS + _DEBUG_MUTANTS
+from mutants.ch04_sfm_outputs import MUTANTS as _OUTPUT_MUTANTS  # noqa: E402
+MUTANTS += _OUTPUT_MUTANTS

@@ -585,3 +585,7 @@ MUTANTS = [
 # ----------------------------------------------------------------- 5.8 central finite differences (its own file)
 from mutants.ch05_bundle_adjustment_fd import MUTANTS as _FD_MUTANTS  # noqa: E402
 MUTANTS += _FD_MUTANTS
+
+# ----------------------------------------------------------------- right cameras, other outputs wrong (its own file)
+from mutants.ch05_bundle_adjustment_outputs import MUTANTS as _OUTPUT_MUTANTS  # noqa: E402
+MUTANTS += _OUTPUT_MUTANTS
