@@ -189,11 +189,14 @@ def cases_two_view_init(rng: np.random.Generator) -> list[Case]:
             n += near
         R_col, t_col = colmap_two_view(s)
         err_col = _two_view_metric((R_col, t_col), s)
-        # max(rotation error, translation-direction error) vs the truth: max(1°, 5 x pycolmap's).
-        # pycolmap's LO-RANSAC + 5-point lands within ~0.05-0.2°, OpenCV's USAC_MAGSAC without a final
-        # refit ~0.7°; a wrong cheirality choice is ~180° off, a missing K⁻¹ or swapped images degrees.
+        # max(rotation error, translation-direction error) vs the truth: max(2°, 5 x pycolmap's).
+        # pycolmap's LO-RANSAC + 5-point lands within ~0.05-0.2°; correct answers reach ~1°-1.3° on rare draws:
+        # OpenCV (the fallback) 1.02° and 1.12° on forward cases (seeds 10 and 0 of a redraw), the reference 1.33°
+        # when a wrong match 9.4 px off its epipolar line was taken in by the refit (seed 2301226521), 1.06° on seed
+        # 3514211180, both failing the earlier 1° floor. A wrong cheirality choice is ~180° off; K1 used for both
+        # images 9-177° on at least one case of every seed 0-11; a missing K⁻¹ or swapped images degrees.
         out.append(Case(f"{name} (pycolmap: {err_col:.3f}°)", (s["x1"], s["x2"], s["K1"], s["K2"]),
-                        {"R": s["R"], "t": s["t"]}, _two_view_metric, max(1.0, 5 * err_col), "°",
+                        {"R": s["R"], "t": s["t"]}, _two_view_metric, max(2.0, 5 * err_col), "°",
                         convert=_convert_two_view, info={"n": n, "scene": s}))
     return out
 
