@@ -51,11 +51,19 @@ def debug_diverges(rng: np.random.Generator) -> tuple[dict, dict]:
 
 
 def debug_outliers(rng: np.random.Generator) -> tuple[dict, dict]:
-    """5.16 — wrong solution: 10 % of the matches are wrong, and the pipeline uses a plain L2 cost."""
-    prob = make_problem(rng, n_cams=10, n_points=200, noise=0.5, outliers=0.10)
-    case = {k: prob[k] for k in ("cameras", "points", "cam_idx", "pt_idx", "obs")}
-    case["settings"] = {"loss": "linear"}
-    return case, dict(prob["truth"], is_outlier=prob["is_outlier"])
+    """5.16 — wrong solution: 10 % of the matches are wrong, and the pipeline uses a plain L2 cost.
+
+    A draw on which the repair the exercise teaches fails is drawn again: Ceres with a Cauchy loss from the same
+    start must land within the exercise's 0.5 px (seed 4165194227's second problem: Ceres and the reference both
+    ended 7e5 px off; over seeds 0-199 every other draw is kept as it was)."""
+    for _ in range(20):
+        prob = make_problem(rng, n_cams=10, n_points=200, noise=0.5, outliers=0.10)
+        case = {k: prob[k] for k in ("cameras", "points", "cam_idx", "pt_idx", "obs")}
+        case["settings"] = {"loss": "linear"}
+        truth = dict(prob["truth"], is_outlier=prob["is_outlier"])
+        if held_out_rms(colmap_fix_outliers(copy.deepcopy(case))[0], truth) <= 0.5:
+            break
+    return case, truth
 
 
 def debug_too_slow(rng: np.random.Generator) -> tuple[dict, dict]:
