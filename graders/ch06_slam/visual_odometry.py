@@ -137,10 +137,10 @@ TOL_ATE = 0.015
 # runs; 0.3 flags a scale that is re-invented along the way.
 TOL_DRIFT = 0.3
 # Orientations (each frame's relative to the first, RMS, deg): PnP on the map gives each rotation directly; over 192
-# sequences (seeds 0-99, both per seed) the reference reached a median 0.21 deg, 90th percentile 0.46, worst 1.01 (worst
-# single frame 2.0 deg); over 200 fresh fairness seeds its worst was 1.35 deg. 3 deg leaves other sound loops room. The truth's yaw swings by
-# 10-20 deg along the run: rotations left at the identity are 6.6-14 deg off over those runs, camera-to-world rotation blocks
-# (beside the right centres) about twice that.
+# sequences (seeds 0-99, both per seed) the reference reached a median 0.21 deg, 90th percentile 0.46, worst 1.01
+# (worst single frame 2.0 deg); over 200 fresh fairness seeds its worst was 1.35 deg. 3 deg leaves other sound loops
+# room. The truth's yaw swings by 10-20 deg along the run: rotations left at the identity are 6.6-14 deg off over those
+# runs, camera-to-world rotation blocks (beside the right centres) about twice that.
 TOL_ROT_DEG = 3.0
 
 
