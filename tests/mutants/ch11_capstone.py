@@ -445,7 +445,27 @@ def flags_no_log(train, stream, alpha=0.01):
     return _mahalanobis_flags(np.asarray(train, float), np.asarray(stream, float), alpha)
 
 
+def flags_chi2_m_minus_1(train, stream, alpha=0.01):
+    """The chi-square line with M - 1 degrees of freedom (as if the mean's estimate cost one)."""
+    from scipy.stats import chi2
+    return _mahalanobis_flags(np.log(train), np.log(stream), alpha, line=chi2.ppf(1 - alpha, train.shape[1] - 1))
+
+
+def flags_two_sided_alpha(train, stream, alpha=0.01):
+    """Splits alpha over two tails, as for a z-test: the line at chi2.ppf(1 - alpha / 2, M)."""
+    from scipy.stats import chi2
+    return _mahalanobis_flags(np.log(train), np.log(stream), alpha, line=chi2.ppf(1 - alpha / 2, train.shape[1]))
+
+
+def flags_alpha_fixed(train, stream, alpha=0.01):
+    """Ignores the alpha passed in: always a 1 % false-alarm line."""
+    return _mahalanobis_flags(np.log(train), np.log(stream), 0.01)
+
+
 MUTANTS += [
+    ("11.17", "chi-square with M - 1 degrees", flags_chi2_m_minus_1, "near the line"),
+    ("11.17", "alpha split over two tails", flags_two_sided_alpha, "near the line"),
+    ("11.17", "alpha ignored (always 1 %)", flags_alpha_fixed, "near the line"),
     ("11.17", "per-metric z", flags_per_metric, "diagonal covariance"),
     ("11.17", "normal quantile", flags_normal_quantile, "chi-square with M degrees"),
     ("11.17", "fit on the stream", flags_fit_on_stream, "not on the stream being checked"),
