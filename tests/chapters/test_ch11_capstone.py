@@ -108,6 +108,6 @@ def test_a_raw_scale_fit_loses_points_on_the_seeds_it_once_passed():
     # seeds 60, 71, 157, 169, 207, 253 and 280 of 0-499 (streams 1-3 differ from the rule by < 2 % of the frames
     # there). The wide stream refuses it, and says why.
     import grader_checks as checks
-    from mutants.ch11_capstone import flags_no_log
+    from mutants.ch11_capstone_frontier import flags_no_log
     checks.assert_mutant_caught(EXERCISES["11.17"], "no log", flags_no_log, "use the log",
                                 [60, 71, 157, 169, 207, 253, 280])
