@@ -76,8 +76,10 @@ def _with_stub(ch, name: str | None = None, source: str = "") -> nbformat.Notebo
 
 def _mutant_source(module, fn, name: str) -> str:
     """A learner cell answering `name` with a catalogued mutant: the catalogue file is run as it stands
-    (its module-level helpers included, which a notebook's definitions-only extraction would drop)."""
-    return (f"MUTANT_CATALOGUE = __import__('runpy').run_path({inspect.getfile(module)!r})\n\n"
+    (its module-level helpers included, which a notebook's definitions-only extraction would drop). The file is the
+    one that defines `fn`: a chapter's catalogue may gather its MUTANTS from several files (ch08_dense_nerf, ...)."""
+    path = inspect.getfile(fn) if inspect.isfunction(fn) else inspect.getfile(module)
+    return (f"MUTANT_CATALOGUE = __import__('runpy').run_path({path!r})\n\n"
             f"def {name}(*args, **kwargs):\n    return MUTANT_CATALOGUE[{fn.__name__!r}](*args, **kwargs)\n")
 
 

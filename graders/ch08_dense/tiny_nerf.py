@@ -1,6 +1,12 @@
 """8.13 — a tiny NeRF trained on CPU: positional encoding + a small MLP, judged on held-out views.
 
-Scene (rendered analytically): an opaque unit sphere at the origin, painted with three sinusoidal stripes
+Scene (rendered analytically): an opaque unit sphere near the origin (its centre 0.15-0.25 from the origin,
+drawn per case: a field that hard-codes the unit sphere and paints it with the nearest training pixel's colour, which
+the notebook's "a unit sphere at the origin" invited, rendered 33 dB on seed 0, 7 dB above the trained NeRF, and kept
+full marks on seeds 0-5; with the centre drawn it loses points on seeds 0-3; the reference kept full marks on 252 fresh
+seeds, at worst 2.3 dB under the stand-in's PSNR, bar 3.5; a smaller sphere, radius 0.7-0.9, failed the 20 dB probe
+cap on 1 of 6), painted
+with three sinusoidal stripes
 c_k(X) = 0.5 + 0.45 sin(ω_k · X + φ_k), |ω_k| ∈ [4, 6] rad/m, on a black background. Training cameras sit on
 a Fibonacci sphere of radius 4 (randomly rotated, so every part of the surface is seen), held-out cameras in
 random directions; 20 × 20 px, f = 24 px. The ground-truth image of a ray is the colour at its first hit.
@@ -33,20 +39,24 @@ from graders.core.memo import cached
 from .nerf import analytic_render
 
 W_NERF, STEPS, N_EVAL = 20, 400, 64
-PROBE_R, PROBE_DB, PROBE_SLACK = 1.6, 20.0, 2.5
+PROBE_OUT, PROBE_DB, PROBE_SLACK = 0.45, 20.0, 2.5   # probe rays start 0.45 outside the sphere: <= 1.7 from the origin
 SIGMA_BIAS = -2.0     # the stand-in's σ starts near softplus(−2) = 0.13 /m: the rays start almost empty
 
 
 def nerf_scene(rng: np.random.Generator,
                W: int = W_NERF, n_train: int = 12, n_test: int = 2, dist: float = 4.0) -> dict:
-    """A painted sphere seen by n_train + n_test cameras. Returns train rays (o, d, rgb): (n_train·W², 3) each,
-    test rays (n_test, W², 3) each, the test images (n_test, W, W, 3), K, poses, near, far, and the
-    colour model (omega (3, 3), phi (3,))."""
+    """A painted unit sphere (its centre 0.15-0.25 from the origin) seen by n_train + n_test cameras looking at
+    the origin. Returns train rays (o, d, rgb): (n_train·W², 3) each, test rays (n_test, W², 3) each, the test images
+    (n_test, W, W, 3), K, poses, near, far, the sphere (centre (3,), radius) and the colour model (omega (3, 3),
+    phi (3,))."""
     f = 1.2 * W
     K = np.array([[f, 0, (W - 1) / 2], [0, f, (W - 1) / 2], [0, 0, 1.0]])
     omega = rng.normal(0, 1, (3, 3))
     omega *= rng.uniform(4, 6, (3, 1)) / np.linalg.norm(omega, axis=1, keepdims=True)
     phi = rng.uniform(0, 2 * np.pi, 3)
+    centre = rng.normal(0, 1, 3)
+    centre *= rng.uniform(0.15, 0.25) / np.linalg.norm(centre)   # >= 0.15 off the origin a reader might assume
+    radius = 1.0
     k = np.arange(n_train) + 0.5            # Fibonacci sphere: evenly spread training directions
     z, az = 1 - 2 * k / n_train, np.pi * (1 + 5 ** 0.5) * k
     fib = np.c_[np.sqrt(1 - z * z) * np.cos(az), np.sqrt(1 - z * z) * np.sin(az), z]
@@ -61,17 +71,19 @@ def nerf_scene(rng: np.random.Generator,
         d = (R.T @ np.linalg.solve(K, pix.T)).T
         d /= np.linalg.norm(d, axis=1, keepdims=True)
         o = np.broadcast_to(dist * v, d.shape).copy()
-        O.append(o), D.append(d), C.append(sphere_colour(o, d, omega, phi)), poses.append((R, t))
+        O.append(o), D.append(d), C.append(sphere_colour(o, d, omega, phi, centre, radius)), poses.append((R, t))
     O, D, C = np.array(O), np.array(D), np.array(C)
     return {"train": (O[:n_train].reshape(-1, 3), D[:n_train].reshape(-1, 3), C[:n_train].reshape(-1, 3)),
             "test": (O[n_train:], D[n_train:], C[n_train:]), "test_images": C[n_train:].reshape(n_test, W, W, 3),
-            "K": K, "poses": poses, "near": dist - 1.5, "far": dist + 1.5, "W": W, "omega": omega, "phi": phi}
+            "K": K, "poses": poses, "near": dist - 1.5, "far": dist + 1.5, "W": W, "omega": omega, "phi": phi,
+            "centre": centre, "radius": radius}
 
 
-def sphere_colour(o, d, omega, phi) -> np.ndarray:
-    """The analytic image: colour (R, 3) at the first hit of rays o + t d (unit d) with the unit sphere, 0 else."""
-    b = (o * d).sum(1)
-    disc = b * b - ((o * o).sum(1) - 1)
+def sphere_colour(o, d, omega, phi, centre=np.zeros(3), radius: float = 1.0) -> np.ndarray:
+    """The analytic image: colour (R, 3) at the first hit of rays o + t d (unit d) with the sphere, 0 else."""
+    oc = o - centre
+    b = (oc * d).sum(1)
+    disc = b * b - ((oc * oc).sum(1) - radius ** 2)
     hit = disc > 0
     X = o + (-b - np.sqrt(np.maximum(disc, 0)))[:, None] * d
     return np.where(hit[:, None], 0.5 + 0.45 * np.sin(X @ omega.T + phi), 0.0)
@@ -219,7 +231,8 @@ def _convert(out, case):
     img = render_field(out, O.reshape(-1, 3), D.reshape(-1, 3), i["near"], i["far"]).reshape(V, i["W"], i["W"], 3)
     sigma, _ = _call_field(out, i["box"])
     n = i["probe"]
-    return {"images": img, "sigma_box": sigma, "probe": render_field(out, PROBE_R * n, -n, 0.0, PROBE_R), "fine": fine,
+    probe = render_field(out, i["centre"] + i["probe_r"] * n, -n, 0.0, i["probe_r"])
+    return {"images": img, "sigma_box": sigma, "probe": probe, "fine": fine,
             "field": out}
 
 
@@ -245,7 +258,8 @@ def _tiny_nerf_cases(rng: np.random.Generator):
     u = (np.arange(N_FINE) + rng.uniform(0, 1, (200, N_FINE))) / N_FINE
     fine_rays = (O.reshape(-1, 3)[k], D.reshape(-1, 3)[k], t_coarse, u)
     info = dict(sc, sharp_gt=_sharpness(GT), box=rng.uniform(-1.5, 1.5, (4000, 3)), probe=n,
-                probe_gt=0.5 + 0.45 * np.sin(n @ sc["omega"].T + sc["phi"]), fine_rays=fine_rays)
+                probe_gt=0.5 + 0.45 * np.sin((sc["centre"] + sc["radius"] * n) @ sc["omega"].T + sc["phi"]),
+                fine_rays=fine_rays, probe_r=sc["radius"] + PROBE_OUT)
 
     def learner(fn):
         with torch_threads(1):
@@ -265,7 +279,9 @@ def _tiny_nerf_cases(rng: np.random.Generator):
     ref, _ = gt_train_tiny_nerf(*sc["train"], sc["near"], sc["far"], STEPS, seed=1)
     p_ref = psnr(render_field(ref, O.reshape(-1, 3), D.reshape(-1, 3), sc["near"], sc["far"]), GT.reshape(-1, 3))
     info["psnr_ref"] = p_ref
-    probe_bar = min(PROBE_DB, psnr(render_field(ref, PROBE_R * n, -n, 0.0, PROBE_R), info["probe_gt"]) - PROBE_SLACK)
+    r_p = info["probe_r"]
+    probe_psnr = psnr(render_field(ref, sc["centre"] + r_p * n, -n, 0.0, r_p), info["probe_gt"])
+    probe_bar = min(PROBE_DB, probe_psnr - PROBE_SLACK)
     # 3.5 dB below the stand-in. Both train with the lr annealed over the last quarter (the spec's schedule). At
     # a constant lr 1e-2 the field returned was wherever Adam's last jump left it: on fairness draw 216705033
     # the reference gave 20.3-24.7 dB over 8 training seeds and the stand-in 22.7-25.0 dB, so 2 draws in ~200
@@ -275,8 +291,9 @@ def _tiny_nerf_cases(rng: np.random.Generator):
     yield Case(f"held-out PSNR (the grader renders your field) ≥ the stand-in's {p_ref:.1f} dB − 3.5 dB", args, p_ref,
                lambda o, e: max(0.0, e - psnr(o["images"], GT)), 3.5, "dB", convert=_convert, call=run, info=info,
                key="psnr")
-    # 20 dB on the surface colour seen along 1500 radial rays from r = 1.6 (a view no camera had): the
-    # reference reaches 21.1-23.8 dB on most draws, a field without positional encoding 14.4-19.8 dB (the stripes
+    # 20 dB on the surface colour seen along 1500 radial rays from 0.45 outside the surface inwards (a view no camera
+    # had; measured on the unit sphere, before the sphere was drawn per case): the reference reaches 21.1-23.8 dB
+    # on most draws, a field without positional encoding 14.4-19.8 dB (the stripes
     # are smeared: spectral bias); the sphere painted in its mean colour ~15 dB. On hard draws (stripes near
     # 6 rad/m on all three channels) the stand-in itself falls to 19.9-21.4 dB and the reference to 19.6 dB
     # (fairness seeds 1806810331, 4175483290; no encoding 16.7 / 13.9 dB there): the bar then drops to the

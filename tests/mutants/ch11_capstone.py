@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mutants.ch11_capstone_frontier import MUTANTS as _FRONTIER_MUTANTS
 from solutions.ch11_capstone.monitor import COMPONENT, MODES, NEEDS
 
 MUTANTS: list[tuple] = []
@@ -405,55 +406,6 @@ MUTANTS += [
 ]
 
 
-# ----------------------------------------------------------------- 11.17 confidence_flags
-
-def _mahalanobis_flags(fit_on, x, alpha, *, diagonal=False, line=None, squared=True):
-    from scipy.stats import chi2
-    mu = fit_on.mean(axis=0)
-    S = np.cov(fit_on.T)
-    if diagonal:
-        S = np.diag(np.diag(S))
-    r = x - mu
-    d2 = np.sum(r @ np.linalg.inv(S) * r, axis=1)
-    line = chi2.ppf(1 - alpha, x.shape[1]) if line is None else line
-    return (d2 if squared else np.sqrt(d2)) > line
-
-
-def flags_per_metric(train, stream, alpha=0.01):
-    """Per-metric z-scores summed (a diagonal covariance): blind to a broken correlation."""
-    return _mahalanobis_flags(np.log(train), np.log(stream), alpha, diagonal=True)
-
-
-def flags_normal_quantile(train, stream, alpha=0.01):
-    """Thresholds d^2 at the squared normal quantile of alpha, as for one metric: 5.4 instead of 13.3 (M = 4)."""
-    from scipy.stats import norm
-    return _mahalanobis_flags(np.log(train), np.log(stream), alpha, line=norm.isf(alpha) ** 2)
-
-
-def flags_fit_on_stream(train, stream, alpha=0.01):
-    """Fits the model on the stream it checks (no separate clean data needed, it thinks)."""
-    return _mahalanobis_flags(np.log(stream), np.log(stream), alpha)
-
-
-def flags_distance_not_squared(train, stream, alpha=0.01):
-    """Compares the distance d, not d^2, with the chi-square quantile: almost nothing is flagged."""
-    return _mahalanobis_flags(np.log(train), np.log(stream), alpha, squared=False)
-
-
-def flags_no_log(train, stream, alpha=0.01):
-    """Fits the raw counts and ratios, not their logs."""
-    return _mahalanobis_flags(np.asarray(train, float), np.asarray(stream, float), alpha)
-
-
-MUTANTS += [
-    ("11.17", "per-metric z", flags_per_metric, "diagonal covariance"),
-    ("11.17", "normal quantile", flags_normal_quantile, "chi-square with M degrees"),
-    ("11.17", "fit on the stream", flags_fit_on_stream, "not on the stream being checked"),
-    ("11.17", "d not d^2", flags_distance_not_squared, "(not d)"),
-    ("11.17", "no log", flags_no_log, "use the log"),
-]
-
-
 # ----------------------------------------------------------------- 11.11 find_smudge
 
 def _smudge_fit(before, now, shape, *, baseline=True):
@@ -594,3 +546,5 @@ MUTANTS += [
     ("11.13", "columns", exposure_blur_along_columns, "not down the columns"),
     ("11.13", "blur without gain", exposure_blur_without_gain, "not brightness-matched"),
 ]
+
+MUTANTS += _FRONTIER_MUTANTS   # 11.17, in ch11_capstone_frontier.py

@@ -477,9 +477,35 @@ def vo_poses_inverted(frames, K, solvers):
     return _fe_vo(frames, K, solvers, invert=True)
 
 
+def _fe_centres_only(T, rotations):
+    """Poses rebuilt from the camera centres C = -R^T t with other rotation blocks: [R' | -R' C]."""
+    C = -np.einsum("nji,nj->ni", T[:, :3, :3], T[:, :3, 3])
+    out = np.tile(np.eye(4), (len(T), 1, 1))
+    out[:, :3, :3] = rotations
+    out[:, :3, 3] = -np.einsum("nij,nj->ni", rotations, C)
+    return out
+
+
+def vo_rotation_block_camera_to_world(frames, K, solvers):
+    """Keeps each frame as (R_wc, C) and writes T_cw = [R_wc | -R_wc C]: the centres are right, the rotation block
+    is the camera-to-world one."""
+    T = _fe_vo(frames, K, solvers)
+    return _fe_centres_only(T, np.transpose(T[:, :3, :3], (0, 2, 1)))
+
+
+def vo_rotations_left_identity(frames, K, solvers):
+    """Tracks only the trajectory: T_cw = [I | -C] (the ATE needs only the centres, it reasons)."""
+    T = _fe_vo(frames, K, solvers)
+    return _fe_centres_only(T, np.tile(np.eye(3), (len(T), 1, 1)))
+
+
 MUTANTS += [  # front-end entries (6.13)
     ("6.13", "poses chained from E frame to frame (unit translations)", vo_chained_essential, None),
     ("6.13", "map never extended beyond the initial pair", vo_map_never_extended, None),
     ("6.13", "camera-to-world poses returned", vo_poses_inverted, "inverted"),
+    ("6.13", "rotation block camera-to-world beside the right centres", vo_rotation_block_camera_to_world,
+     "rotation blocks are transposed"),
+    ("6.13", "rotations left at the identity (centres only)", vo_rotations_left_identity,
+     "orientations are not"),
 ]
 # /fe:mut613
