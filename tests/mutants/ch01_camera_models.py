@@ -91,23 +91,23 @@ def undistort_seed_fixed_point(uv, K, dist, iters=10):
     return x
 
 
-def undistort_five_steps(uv, K, dist):
-    # Fixed point with tangential terms, but OpenCV's default 5 iterations.
+def _fixed_point_steps(uv, K, dist, steps):
     xd = _normalise(uv, K)
     x = xd.copy()
-    for _ in range(5):
+    for _ in range(steps):
         x = x + (xd - _distort(x, dist))
     return x
+
+
+def undistort_five_steps(uv, K, dist):
+    # Fixed point with tangential terms, but OpenCV's default 5 iterations.
+    return _fixed_point_steps(uv, K, dist, 5)
 
 
 def undistort_twenty_steps(uv, K, dist):
     # The same fixed point, 20 steps (the common "enough" count): fine where it contracts fast, not at a wide
     # strong lens's corners.
-    xd = _normalise(uv, K)
-    x = xd.copy()
-    for _ in range(20):
-        x = x + (xd - _distort(x, dist))
-    return x
+    return _fixed_point_steps(uv, K, dist, 20)
 
 
 def undistort_opencv_iteration_twenty(uv, K, dist):
