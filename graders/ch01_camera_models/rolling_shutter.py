@@ -46,7 +46,14 @@ def cases_rolling_shutter(rng: np.random.Generator) -> list[Case]:
     w, h = 1280, 960
     for key, name, rate_deg, speed, readout in [("global", "global shutter (line_time = 0)", 60, 0.5, 0.0),
                                                 ("slow", "slow pan, 30°/s", 30, 0.0, 0.033),
-                                                ("fast", "fast pan, 90°/s + 2 m/s", 90, 2.0, 0.033)]:
+                                                ("fast", "fast pan, 90°/s + 2 m/s", 90, 2.0, 0.033),
+                                                # A whip pan (last: the rows above keep their draws). Each fixed-
+                                                # point step multiplies the row's error by line_time x its speed in
+                                                # px/s, here up to ~0.5: over seeds 0-199 a fixed 4 steps is off by
+                                                # up to 25 px (0 of 200 within 1e-3 px), a fixed 10 steps by up to
+                                                # 0.36 px (154 of 200 within), the map run until the row stops
+                                                # changing by <= 1e-9 px (200 of 200).
+                                                ("whip", "whip pan, 360°/s + 2 m/s", 360, 2.0, 0.033)]:
         K = scene.random_intrinsics(rng, width=w, height=h)
         R, t = scene.random_rotation(rng), rng.normal(0, 1, 3)
         X = scene.random_points_in_view(rng, K, R, t, 100, depth=(2, 15), width=w, height=h)
@@ -54,8 +61,8 @@ def cases_rolling_shutter(rng: np.random.Generator) -> list[Case]:
         omega = np.radians(rate_deg) * axis / np.linalg.norm(axis)
         v = speed * rng.normal(size=3) / np.sqrt(3)
         line_time = readout / h
-        # 1e-3 px: bisection is exact to ~1e-9 px; ten fixed-point steps reach ~1e-12 px, one step
-        # leaves ~0.1-1 px at 90°/s.
+        # 1e-3 px: bisection is exact to ~1e-9 px; at 90°/s ten fixed-point steps reach ~1e-12 px, one step
+        # leaves ~0.1-1 px.
         out.append(Case(name, (X, K, R, t, omega, v, line_time), gt_rolling_shutter(X, K, R, t, omega, v, line_time),
                         max_distance, 1e-3, "px", shape=(100, 2), key=key))
     return out
@@ -84,8 +91,10 @@ ROLLING_HINTS = [
     like(lambda c: _rs_bug(c, v=np.zeros(3)), "the translation velocity v is ignored."),
     like(_rs_column_time, "the readout time comes from the column: the sensor reads row after row, so "
          "τ = y · line_time with y the row, not the column x."),
-    Hint("one step is not enough: the row depends on the time, which depends on the row — iterate until it settles.",
-         lambda c, out: c.metric(out, c.expected) < 3.0),
+    Hint("not converged: the row depends on the time, which depends on the row — iterate until the row stops "
+         "changing, not a fixed number of steps (each step shrinks the error by line_time x the row's speed in px/s: "
+         "~0.05 at 90°/s, up to ~0.5 in a 360°/s whip pan).",
+         lambda c, out: c.metric(out, c.expected) < 30.0),
 ]
 
 register(

@@ -245,6 +245,14 @@ def rolling_one_step(X, K, R, t, omega, v, line_time):
     return _rs_pose_project(X, K, R, t, omega, v, uv0[:, 1] * line_time)
 
 
+def rolling_four_steps(X, K, R, t, omega, v, line_time):
+    # A fixed 4 steps: within 1e-3 px at 90°/s (25 of 40 seeds had full marks), 1-25 px off in a whip pan.
+    uv = _rs_pose_project(X, K, R, t, omega, v, np.zeros(len(X)))
+    for _ in range(4):
+        uv = _rs_pose_project(X, K, R, t, omega, v, uv[:, 1] * line_time)
+    return uv
+
+
 def rolling_column_time(X, K, R, t, omega, v, line_time):
     uv = _rs_pose_project(X, K, R, t, omega, v, np.zeros(len(X)))
     for _ in range(20):
@@ -366,6 +374,7 @@ MUTANTS = [
     ("1.9", "Unreal made right-handed", frame_change_unreal_right_handed, "left-handed"),
     ("1.9", "B_dst^T B_src", frame_change_inverse_order, "wrong way round"),
     ("1.10", "one step", rolling_one_step, "iterate"),
+    ("1.10", "a fixed 4 steps", rolling_four_steps, "not a fixed number of steps"),
     ("1.10", "time from the column", rolling_column_time, "not the column"),
     ("1.10", "motion sign flipped", rolling_wrong_sign, "wrong sign"),
     ("1.11", "file left unchanged", fix_distortion_unchanged, "distortion is still the file's"),
