@@ -166,7 +166,9 @@ def test_shell_grader_on_opencv_notebook(tmp_path):
     for exercise_id in ("1.5", "1.6", "1.11", "1.12", "1.13", "1.18"):
         assert by_id[exercise_id]["score"] == by_id[exercise_id]["max_score"], by_id[exercise_id]["output"]
     fisheye = by_id["1.7"]["output"]
-    assert by_id["1.7"]["score"] == 2 and "beyond 90°" in fisheye and "FAIL" in fisheye, fisheye
+    # cv2.fisheye's model is undefined behind the lens plane: that one of 1.7's four rows fails, the others pass
+    assert by_id["1.7"]["score"] == 0.75 * by_id["1.7"]["max_score"], fisheye
+    assert "beyond 90°" in fisheye and fisheye.count("FAIL") == 1, fisheye
 
 
 def test_shell_grader_survives_hostile_code(tmp_path):
