@@ -196,6 +196,7 @@ def cases_sift(rng: np.random.Generator) -> list[Case]:
                           tol=0.3, probe="zoom2"))
     if datasets.available("homography"):
         out.append(_sift_case("graf", "graf1 → graf3 (real)", *graf_half()))
+    out.append(_edge_case(rng))     # last: the rows above keep their draws
     return out
 
 
@@ -244,6 +245,40 @@ def _sift_case(key, name, img1, img2, H, n=400, tol=0.15, probe=None):
                 convert=_desc_pair(128), call=lambda fn: (fn(img1, k1), fn(img2, k2)), key=key)
 
 
+def _edge_case(rng: np.random.Generator) -> Case:
+    """Nine keypoints on a straight step edge (at a random angle, blurred 1 px). Turned to the edge's normal, every
+    gradient falls in one angle bin of the 8 cells the edge crosses: the unit histogram has ~8 entries near
+    1/√8 ≈ 0.35, all above 0.2, so "normalise, clip at 0.2, renormalise" (Lowe 2004, §6.1) leaves them equal (the
+    reference: 8 tied at the maximum on every keypoint; cv2.SIFT 5-10). Without the clip they follow the Gaussian
+    weight and differ. The matching rows cannot see the clip: an unclipped descriptor with hard bins and no weight
+    kept full marks on 20 of 20 seeds (this row refuses it on seeds 0-11: 89-100 % untied). Hard binning and the
+    Gaussian weight, with the clip, are still not observed."""
+    theta = rng.uniform(0, np.pi)
+    n = np.array([np.cos(theta), np.sin(theta)])
+    ys, xs = np.mgrid[0:200, 0:200]
+    img = np.where((xs - 100) * n[0] + (ys - 100) * n[1] > 0, 170.0, 70.0).astype(np.float32)
+    img = np.clip(cv2.GaussianBlur(img, (0, 0), 1.0), 0, 255).astype(np.uint8)
+    t = np.linspace(-40, 40, 9)
+    kps = np.c_[100 - t * n[1], 100 + t * n[0], rng.uniform(1.6, 3.0, 9)]
+    return Case(f"a step edge at {np.degrees(theta):.0f}°: the largest entries clipped at 0.2 (tied)", (img, kps),
+                {"n": len(kps)}, _untied_share, 0.0, "of keypoints without a tie at the maximum",
+                convert=_unit_descriptors, call=lambda fn: fn(img, kps), key="clip", tags=("clip",))
+
+
+def _unit_descriptors(out, case):
+    d = _points(out, case, 128)
+    if len(d) != case.expected["n"]:
+        raise OutputError("expected one descriptor per keypoint, in order")
+    if np.abs(np.linalg.norm(d, axis=1) - 1).max() > 1e-3:
+        raise OutputError("descriptors must be unit vectors: normalise, clip at 0.2, renormalise")
+    return d
+
+
+def _untied_share(d, exp) -> float:
+    """Share of descriptors whose maximum is not shared by a second entry (to 1e-3 relative)."""
+    return float(np.mean((d >= d.max(1, keepdims=True) * (1 - 1e-3)).sum(1) < 2))
+
+
 def _probe_accuracy(case, out):
     """Nearest-neighbour accuracy between view 1's descriptors and the probe view's (same keypoints)."""
     probe = case.info.get("probe_out")
@@ -263,6 +298,9 @@ def _probe_hint(probe, good, text):
 
 
 SIFT_HINTS = [
+    Hint("on a straight edge your descriptor's largest entries are not equal: after normalising, clip every entry "
+         "at 0.2 and renormalise (Lowe 2004, §6.1), so that a few strong gradients cannot dominate.",
+         lambda c, out: c.key == "clip" and c.metric(out, c.expected) > 0),
     _probe_hint("zoom2", False, "the same view enlarged 2x gives different descriptors: the window must grow with "
                 "the keypoint's sigma (16 samples 0.75 sigma apart, bins 3 sigma wide)."),
     _probe_hint("rot180", True, "your descriptors survive a 180° turn but not a 45-135° one: angles turn the wrong "

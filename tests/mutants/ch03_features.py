@@ -219,7 +219,15 @@ def sift_unnormalised(img, kps):
     return d * np.random.default_rng(0).uniform(1, 50, (len(d), 1))  # e.g. raw histogram sums
 
 
-def _histograms(P, swap=False):
+def sift_hard_bins_unclipped(img, kps):
+    # Turned to the dominant orientation, but hard binning, no Gaussian weight and no clip at 0.2: its matching
+    # accuracy is as good as the reference's (full marks on 20 of 20 seeds before the step-edge row).
+    kps = np.asarray(kps, float)
+    pyr = F.pyramid(F.gray(img), 5)
+    return _histograms(F.sample_patches(pyr, kps, F.dominant_orientation(pyr, kps), 18, 0.75), clip=False)
+
+
+def _histograms(P, swap=False, clip=True):
     gy, gx = np.gradient(P, axis=(1, 2))
     gy, gx = gy[:, 1:-1, 1:-1], gx[:, 1:-1, 1:-1]
     if swap:
@@ -231,7 +239,7 @@ def _histograms(P, swap=False):
     idx = np.arange(N)[:, None, None] * 128 + cell[None] * 8 + o
     d = np.bincount(idx.ravel(), mag.ravel(), N * 128).reshape(N, 128)
     d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
-    d = np.minimum(d, 0.2)
+    d = np.minimum(d, 0.2 if clip else 1.0)
     return d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
 
 
@@ -441,6 +449,7 @@ MUTANTS = [
     ("3.10", "gx, gy swapped (np.gradient order)", sift_swapped_gradient, "np.gradient returns (d/dy, d/dx)"),
     ("3.10", "scale ignored", sift_fixed_size, "must grow with the keypoint's sigma"),
     ("3.10", "not normalised", sift_unnormalised, "unit vectors"),
+    ("3.10", "hard bins, no Gaussian weight, no clip at 0.2", sift_hard_bins_unclipped, "clip every entry at 0.2"),
     ("3.11", "ratio on squared distances", match_squared_ratio, "squared distances"),
     ("3.11", "ratio inverted", match_ratio_inverted, "inverted"),
     ("3.11", "mutual ignored", match_no_mutual, "mutual=True"),
