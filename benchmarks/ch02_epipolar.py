@@ -16,14 +16,16 @@ or transfer error (px); time: median wall time per call over the scenes; ratio =
 that method's time (< 1: the reference is faster); "CPU ms" and "CPU ref / it" are the same for
 the process's CPU time (all its threads), which a busy machine inflates far less than wall time (at a
 load of 10-20 on 2 cores the wall time of a 10 ms Python call is 2-5x its CPU time, that of a 1 ms
-OpenCV call ~1x). Issue 20's goal is the same accuracy as OpenCV's USAC_MAGSAC at no more than 3x its
-time (CPU time; wall time is shown beside it); each OpenCV row gets a verdict: "err ×" = reference error / OpenCV's error
+OpenCV call ~1x). The goal (issue 32; issue 20's was 3x) is the same accuracy as OpenCV's USAC_MAGSAC at no
+more than 2x its time under load (CPU time; wall time is shown beside it); each OpenCV row gets a verdict: "err ×" = reference error / OpenCV's error
 on the task's main metric (F, H: held-out px; E: rotation error), "F1 Δ" = reference F1 − OpenCV's,
-"same accuracy" = err × ≤ 1.10 and F1 Δ ≥ −0.01, "time OK" = CPU ref / it ≤ 3. pycolmap runs with its default RANSACOptions
+"same accuracy" = err × ≤ 1.10 and F1 Δ ≥ −0.01, "time OK" = CPU ref / it ≤ 2. pycolmap runs with its default RANSACOptions
 (confidence 0.9999, at least 1,000 trials) apart from max_error. Every number is the median over
 the five scenes (or seeds).
 """
 from __future__ import annotations
+
+import os
 
 import cv2
 import numpy as np
@@ -97,7 +99,7 @@ def essential_methods(s):
             "OpenCV USAC_MAGSAC": cv(cv2.USAC_MAGSAC), "pycolmap LO-RANSAC": colmap}
 
 
-ACCURACY_SLACK, TIME_GOAL, F1_SLACK = 1.10, 3.0, 0.01
+ACCURACY_SLACK, TIME_GOAL, F1_SLACK = 1.10, 2.0, 0.01
 
 
 def wall_and_cpu(methods: dict, repeat: int = 9) -> dict[str, tuple[float, float]]:
@@ -143,7 +145,12 @@ def _rows(task, per_method, ref_name, err_key):
     return rows
 
 
+def _load() -> str:
+    return f"{' '.join(f'{x:.1f}' for x in os.getloadavg())} ({os.cpu_count()} CPUs)"
+
+
 def run() -> list[dict]:
+    print(f"load average before: {_load()}")
     rows = []
     columns = ["task", "method", "rot err °", "t dir °", "held-out px", "inlier F1", "median ms", "ref / it", "CPU ms", "CPU ref / it",
                "err ×", "F1 Δ", "verdict"]
@@ -224,6 +231,7 @@ def run() -> list[dict]:
     print(f"err × = reference error / that method's (F, H: held-out px; E: rotation); F1 Δ = reference F1 − its; "
           f"verdict: same accuracy = err × ≤ {ACCURACY_SLACK:.2f} and F1 Δ ≥ −{F1_SLACK}, time OK = CPU ref / it ≤ "
           f"{TIME_GOAL:g}×.")
+    print(f"load average after: {_load()}")
     return rows
 
 
