@@ -159,13 +159,19 @@ def fisheye_project_pinhole(X_c, K, D):
     return _to_pixels(x * (_kb(r, D) / r)[:, None], K)  # polynomial in tan θ instead of θ
 
 
-def fisheye_unproject_tan(uv, K, D):
-    a = _normalise(uv, K)
-    theta_d = np.linalg.norm(a, axis=1)
+def _kb_inverse(theta_d, D):
+    """θ with θ_d = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸), by 50 Newton steps from θ_d."""
     theta = theta_d.copy()
     for _ in range(50):
         theta = theta - (_kb(theta, D) - theta_d) / (1 + 3 * D[0] * theta ** 2 + 5 * D[1] * theta ** 4
                                                     + 7 * D[2] * theta ** 6 + 9 * D[3] * theta ** 8)
+    return theta
+
+
+def fisheye_unproject_tan(uv, K, D):
+    a = _normalise(uv, K)
+    theta_d = np.linalg.norm(a, axis=1)
+    theta = _kb_inverse(theta_d, D)
     x = a * (np.tan(theta) / theta_d)[:, None]  # cv2.fisheye.undistortPoints' representation
     rays = np.c_[x, np.ones(len(x))]
     return rays / np.linalg.norm(rays, axis=1, keepdims=True)
@@ -181,10 +187,7 @@ def fisheye_unproject_no_inversion(uv, K, D):
 def fisheye_unproject_not_unit(uv, K, D):
     a = _normalise(uv, K)
     theta_d = np.linalg.norm(a, axis=1)
-    theta = theta_d.copy()
-    for _ in range(50):
-        theta = theta - (_kb(theta, D) - theta_d) / (1 + 3 * D[0] * theta ** 2 + 5 * D[1] * theta ** 4
-                                                    + 7 * D[2] * theta ** 6 + 9 * D[3] * theta ** 8)
+    theta = _kb_inverse(theta_d, D)
     phi = np.arctan2(a[:, 1], a[:, 0])
     return 2.0 * np.c_[np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)]
 
@@ -198,10 +201,7 @@ def fisheye_project_divide_by_r(X_c, K, D):
 def fisheye_unproject_divide_by_theta_d(uv, K, D):
     a = _normalise(uv, K)
     theta_d = np.linalg.norm(a, axis=1)
-    theta = theta_d.copy()
-    for _ in range(50):
-        theta = theta - (_kb(theta, D) - theta_d) / (1 + 3 * D[0] * theta ** 2 + 5 * D[1] * theta ** 4
-                                                    + 7 * D[2] * theta ** 6 + 9 * D[3] * theta ** 8)
+    theta = _kb_inverse(theta_d, D)
     return np.c_[a * (np.sin(theta) / theta_d)[:, None], np.cos(theta)]  # 0 / 0 at the principal point
 
 

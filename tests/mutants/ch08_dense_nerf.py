@@ -49,6 +49,20 @@ def _passes(F, o, d, t, far, u, fine="union", transmittance="exclusive"):
     return C_c, _render(sigma, col, ts, far, transmittance)[1]
 
 
+def _field_and_render(F, far, **passes):
+    """The (field, render) pair a 8.13 answer returns, in numpy, around the torch field F."""
+    def field(X):
+        with torch.no_grad():
+            s, col = F(torch.as_tensor(np.asarray(X), dtype=torch.float32))
+        return s.numpy(), col.numpy()
+
+    def render(rays_o, rays_d, t, u):
+        with torch.no_grad():
+            o_, d_, t_, u_ = (torch.as_tensor(np.asarray(a), dtype=torch.float32) for a in (rays_o, rays_d, t, u))
+            return _passes(F, o_, d_, t_, far, u_, **passes)[1].numpy()
+    return field, render
+
+
 def _train(rays_o, rays_d, rgb, near, far, steps, seed, *, density="softplus", transmittance="exclusive",
            train_steps=None, fine="union"):
     import torch
@@ -82,16 +96,7 @@ def _train(rays_o, rays_d, rgb, near, far, steps, seed, *, density="softplus", t
         loss.backward()
         opt.step()
 
-    def field(X):
-        with torch.no_grad():
-            s, col = F(torch.as_tensor(np.asarray(X), dtype=torch.float32))
-        return s.numpy(), col.numpy()
-
-    def render(rays_o, rays_d, t, u):
-        with torch.no_grad():
-            o_, d_, t_, u_ = (torch.as_tensor(np.asarray(a), dtype=torch.float32) for a in (rays_o, rays_d, t, u))
-            return _passes(F, o_, d_, t_, far, u_, fine, transmittance)[1].numpy()
-    return field, render
+    return _field_and_render(F, far, fine=fine, transmittance=transmittance)
 
 
 def nerf_no_encoding(rays_o, rays_d, rgb, near, far, steps=400, seed=0):
@@ -150,16 +155,7 @@ def nerf_unit_sphere_lookup(rays_o, rays_d, rgb, near, far, steps=400, seed=0):
         col = torch.cat([colours[torch.cdist(n[k:k + 8192], P).argmin(1)] for k in range(0, len(n), 8192)])
         return sigma.reshape(X.shape[:-1]), col.reshape(*X.shape[:-1], 3)
 
-    def field(X):
-        with torch.no_grad():
-            s, col = F(torch.as_tensor(np.asarray(X), dtype=torch.float32))
-        return s.numpy(), col.numpy()
-
-    def render(rays_o, rays_d, t, u):
-        with torch.no_grad():
-            o_, d_, t_, u_ = (torch.as_tensor(np.asarray(a), dtype=torch.float32) for a in (rays_o, rays_d, t, u))
-            return _passes(F, o_, d_, t_, far, u_)[1].numpy()
-    return field, render
+    return _field_and_render(F, far)
 
 
 MUTANTS: list[tuple] = [
