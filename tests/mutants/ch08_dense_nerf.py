@@ -51,6 +51,7 @@ def _passes(F, o, d, t, far, u, fine="union", transmittance="exclusive"):
 
 def _field_and_render(F, far, **passes):
     """The (field, render) pair a 8.13 answer returns, in numpy, around the torch field F."""
+    import torch
     def field(X):
         with torch.no_grad():
             s, col = F(torch.as_tensor(np.asarray(X), dtype=torch.float32))
