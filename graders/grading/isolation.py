@@ -52,7 +52,7 @@ from graders.grading.callbacks import MAX_CONCURRENT, CallbackServing
 from graders.grading.learner import receive_bytes, send
 from graders.grading import users
 from graders.kit import diskcache
-from graders.grading.processes import WALL_FACTOR, PidsLimit
+from graders.grading.processes import WALL_FACTOR, PidsLimit, die_with_parent
 from graders.grading.policy import refusal
 from graders.grading.quota import DISK_GB, POLL_S, DiskQuota, empty, unmount_stale
 from graders.grading.transport import RemoteError, gradients_back, loads, swap_callables, tensors_back
@@ -87,7 +87,12 @@ def level() -> str:
 
 
 def _limits(memory_gb: float, pids: PidsLimit, max_file_gb: float) -> Callable[[], None]:
+    # Started from the judge's main thread (which lives as long as the judge), the learner dies with the judge:
+    # a judge killed mid-grade leaves no learner behind. From another thread, the next run's stale-cgroup sweep.
+    arm = die_with_parent() if threading.current_thread() is threading.main_thread() else (lambda: None)
+
     def apply() -> None:   # in the child, between fork and exec
+        arm()
         resource.setrlimit(resource.RLIMIT_AS, (int(memory_gb * 2**30),) * 2)
         resource.setrlimit(resource.RLIMIT_FSIZE, (int(max_file_gb * 2**30),) * 2)
         resource.setrlimit(resource.RLIMIT_CPU, (CPU_SECONDS, CPU_SECONDS))   # a backstop behind the time limits
@@ -333,6 +338,8 @@ class LearnerProcess(CallbackServing):
                 "extra_path": list(dict.fromkeys([CHECKOUT, os.path.dirname(solutions_dir)])) if reference else [],
                 "hide": hide, "keep": keep,
                 "uid": self.uid, "gid": self.gid, "drop": self.drop,
+                # PID 1 under unshare, else the judge's thread that starts it (see `_limits`)
+                "die_with_parent": self.level == "namespaces" or threading.current_thread() is threading.main_thread(),
                 "tmpfs_mb": max(1, min(256, self.quota.limit >> 20))}   # /tmp, /dev/shm, ...: each within the quota
 
     # -- life cycle

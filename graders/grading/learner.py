@@ -504,14 +504,14 @@ def _lock_down(config: dict) -> None:
     libc.sethostname(host, len(host))
     # An unprivileged user: it owns nothing but its home, so it can neither undo the mounts nor write the
     # cgroup that holds its process limit, nor read what root keeps private.
-    _become(libc, config["uid"], config["gid"])
+    _become(libc, config["uid"], config["gid"], config["die_with_parent"])
     os.chdir(home)
 
 
-def _become(libc, uid: int, gid: int) -> None:
+def _become(libc, uid: int, gid: int, die_with_parent: bool) -> None:
     """From root to `uid`/`gid` for good: no supplementary groups, no capabilities (bounding set dropped too),
-    no-new-privileges (a setuid binary gives nothing back)."""
-    PR_SET_NO_NEW_PRIVS, PR_CAPBSET_DROP = 38, 24
+    no-new-privileges (a setuid binary gives nothing back); with `die_with_parent`, killed when its parent ends."""
+    PR_SET_NO_NEW_PRIVS, PR_CAPBSET_DROP, PR_SET_PDEATHSIG = 38, 24, 1
     libc.prctl(PR_SET_NO_NEW_PRIVS, 1, 0, 0, 0)
     for cap in range(64):
         libc.prctl(PR_CAPBSET_DROP, cap, 0, 0, 0)
@@ -520,6 +520,8 @@ def _become(libc, uid: int, gid: int) -> None:
     os.setresuid(uid, uid, uid)                # from root to another uid: every capability is cleared
     if os.getuid() == 0 or os.geteuid() == 0:
         raise SystemExit("could not leave root")
+    if die_with_parent:                        # the uid change cleared PR_SET_PDEATHSIG (prctl(2)): set it again
+        libc.prctl(PR_SET_PDEATHSIG, 9, 0, 0, 0)
 
 
 def _python_path(config: dict) -> None:
@@ -538,7 +540,7 @@ def main() -> None:
     else:
         if config.get("drop"):                 # process level as root (a container without unshare): not root
             import ctypes
-            _become(ctypes.CDLL(None, use_errno=True), config["uid"], config["gid"])
+            _become(ctypes.CDLL(None, use_errno=True), config["uid"], config["gid"], config["die_with_parent"])
         os.chdir(config["home"])
     # The learner's prints are captured per call; anything written at the C level goes nowhere.
     devnull = os.open(os.devnull, os.O_WRONLY)

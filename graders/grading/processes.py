@@ -8,6 +8,7 @@ import os
 import resource
 import shutil
 import time
+from typing import Callable
 
 # A time limit here counts the CPU time the kernel reports for the learner's processes, not wall-clock time: on a
 # busy machine (a batch on every core, the first `import torch` beside a venv being installed) a correct answer must
@@ -127,7 +128,8 @@ class PidsLimit:
 
 
 def _remove_stale(root: str) -> None:
-    """Empty cgroups of learner processes whose grader has ended (a killed grader cannot remove its own)."""
+    """Cgroups of learner processes whose grader has ended (a killed grader can remove neither its cgroup nor
+    what still runs in it): what is left inside is killed, then the cgroup removed."""
     for name in os.listdir(root):
         if not name.startswith("cv3d-learner-"):
             continue
@@ -135,12 +137,55 @@ def _remove_stale(root: str) -> None:
             owner = int(name.split("-")[2])
             os.kill(owner, 0)              # the grader that made it is still running: leave it
         except ProcessLookupError:
-            try:
-                os.rmdir(os.path.join(root, name))
-            except OSError:
-                pass
+            _kill_members(os.path.join(root, name))
+            _remove_when_empty(os.path.join(root, name))
         except (ValueError, IndexError, PermissionError):
             pass
+
+
+def remove_stale_learners() -> None:
+    """What killed graders left behind in this machine's learner cgroups (see `_remove_stale`)."""
+    for root in (PIDS_CGROUP, CPUACCT_CGROUP, "/sys/fs/cgroup"):
+        if os.path.exists(os.path.join(root, "cgroup.procs")) and os.access(root, os.W_OK):
+            _remove_stale(root)
+
+
+def _kill_members(path: str) -> None:
+    """SIGKILL every process in the cgroup at `path` until none is left (a fork bomb refills as we kill)."""
+    for _ in range(200):
+        try:
+            with open(os.path.join(path, "cgroup.procs")) as f:
+                members = [int(p) for p in f.read().split()]
+        except OSError:
+            return
+        if not members:
+            return
+        for pid in members:
+            try:
+                os.kill(pid, 9)
+            except OSError:
+                pass
+        time.sleep(0.005)
+
+
+def die_with_parent() -> Callable[[], None]:
+    """For a child's preexec_fn, made in the parent: the kernel kills the child (SIGKILL) when the thread that
+    forked it ends, so a grader killed mid-grade (a batch stopped, a cluster worker lost) leaves no judge or
+    learner running in the grade folder that the next run removes. Use it only from a thread that outlives the
+    child. Linux; elsewhere a no-op (the next run's `remove_stale_learners` is then the only backstop)."""
+    import ctypes
+    PR_SET_PDEATHSIG = 1
+    parent = os.getpid()
+    try:
+        prctl = ctypes.CDLL(None, use_errno=True).prctl   # looked up here: the child only calls it
+    except (OSError, AttributeError):
+        return lambda: None
+
+    def arm() -> None:
+        prctl(PR_SET_PDEATHSIG, 9, 0, 0, 0)
+        if os.getppid() != parent:         # the parent died before the signal was armed
+            os._exit(1)
+    return arm
 
 
 def most_seen(pids: set[int], seen: dict[tuple[int, int], float]) -> float:

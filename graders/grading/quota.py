@@ -105,9 +105,10 @@ def empty(folder: str) -> None:
 STALE = re.compile(r"/cv3d-learner-(\d+)-[^/]*$")
 
 
-def unmount_stale(under: str = "/") -> list[str]:
+def unmount_stale(under: str = "/", every: bool = False) -> list[str]:
     """Detach the quota tmpfs of learner folders whose grader was killed (their names carry its pid), under
-    `under`; returns their mount points. Only root can have mounted them."""
+    `under`; with `every`, all of them there (`under` is a dead grader's folder: whatever still runs in it is
+    an orphan about to be killed). Returns their mount points. Only root can have mounted them."""
     if os.geteuid() != 0:
         return []
     try:
@@ -118,7 +119,7 @@ def unmount_stale(under: str = "/") -> list[str]:
     gone = []
     for point in points:
         m = STALE.search(point)
-        if not m or not point.startswith(under.rstrip("/") + "/") or _alive(int(m.group(1))):
+        if not m or not point.startswith(under.rstrip("/") + "/") or (not every and _alive(int(m.group(1)))):
             continue
         if _libc().umount2(point.encode(), MNT_DETACH) == 0:
             gone.append(point)
@@ -126,10 +127,15 @@ def unmount_stale(under: str = "/") -> list[str]:
 
 
 def _alive(pid: int) -> bool:
+    """Running: a killed grader stays a zombie until its new parent reaps it, and a zombie holds no mount."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:
         return True
-    return True
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            return f.read().rsplit(b")", 1)[1].split()[0] != b"Z"
+    except (OSError, IndexError):
+        return True

@@ -41,7 +41,7 @@ from typing import Callable
 from graders.core.chapters import READY
 from graders.core.engine import chapter
 from graders.grading.extract import extract, read_cells
-from graders.grading.processes import WALL_FACTOR, most_seen, tree
+from graders.grading.processes import WALL_FACTOR, die_with_parent, most_seen, tree
 from graders.grading.quota import unmount_stale
 from graders.grading.scratch import GRADE_PREFIX, mark_grade_folder
 from graders.core.report import ExerciseResult, result_from_dict
@@ -73,9 +73,14 @@ def _failed(ex, message: str, seed: int, status: str = "error") -> ExerciseResul
 
 
 def _limit_memory(gb: float) -> Callable[[], None]:
+    """The judge's preexec_fn: its memory limit, and its death with the grader (the thread that starts it waits
+    for it to end, in `_watch`)."""
+    arm = die_with_parent()
+
     def apply() -> None:   # runs in the child between fork and exec
         limit = int(gb * 2**30)
         resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+        arm()
     return apply
 
 

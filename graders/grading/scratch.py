@@ -8,6 +8,7 @@ import stat
 import tempfile
 from pathlib import Path
 
+from graders.grading.processes import remove_stale_learners
 from graders.grading.quota import unmount_stale
 
 GRADE_PREFIX = "cv3d-grade-"      # a grade's temporary folder (the learner's code and scratch space)
@@ -61,6 +62,7 @@ def clean_stale_grade_folders(root: str | Path | None = None) -> list[str]:
     symlinks are never followed (lstat, O_NOFOLLOW, and shutil.rmtree's fd-based walk). Returns their names."""
     import shutil
     removed = []
+    remove_stale_learners()            # first what still runs of a killed grader's learners: it may write here
     root = Path(root or tempfile.gettempdir())
     for entry in os.scandir(root):
         if not entry.name.startswith(GRADE_PREFIX) or entry.is_symlink() or not entry.is_dir(follow_symlinks=False):
@@ -70,7 +72,7 @@ def clean_stale_grade_folders(root: str | Path | None = None) -> list[str]:
             continue
         if not shutil.rmtree.avoids_symlink_attacks:   # no fd-based walk on this platform: leave it
             continue
-        unmount_stale(entry.path)                      # its learners' quota tmpfs (graded mode as root)
+        unmount_stale(entry.path, every=True)          # its learners' quota tmpfs (graded mode as root)
         shutil.rmtree(entry.path, ignore_errors=True)
         removed.append(entry.name)
     return removed
