@@ -107,20 +107,7 @@ class PidsLimit:
         """Kill every member (a fork bomb keeps making new ones), then remove the cgroups: the CPU account's last,
         once the pids cgroup's kill has emptied it too."""
         if self.path:
-            for _ in range(100):
-                try:
-                    with open(os.path.join(self.path, "cgroup.procs")) as f:
-                        pids = [int(p) for p in f.read().split()]
-                except OSError:
-                    break
-                if not pids:
-                    break
-                for pid in pids:
-                    try:
-                        os.kill(pid, 9)
-                    except OSError:
-                        pass
-                time.sleep(0.02)
+            _kill_members(self.path)
             _remove_when_empty(self.path)
         if self.cpu_path and self.cpu_path != self.path:
             _remove_when_empty(self.cpu_path)
