@@ -45,30 +45,32 @@ def _patches(images: np.ndarray, c: np.ndarray, win: int) -> list[np.ndarray]:
     return [R[starts].reshape(len(c), (win + 1) ** 2) for R in runs]   # one image at a time: stays in the CPU cache
 
 
-def _windows(images: np.ndarray, x0: np.ndarray, win: int) -> list[np.ndarray]:
+def _windows(images: np.ndarray, x0: np.ndarray, win: int, block: int = 128) -> np.ndarray:
     """Every point's win x win window of each image, sampled bilinearly from its top-left sample x0 (N, 2) on;
     outside the image, the nearest border value. images: (C, H + 2m, W + 2m) float32, padded by m = win + 1
-    replicated pixels on each side (np.pad mode "edge"). -> C arrays (N, L) float32, L = win (win + 1) - 1: each
+    replicated pixels on each side (np.pad mode "edge"). -> (C, N, L) float32, L = win (win + 1) - 1: each
     window on its patch's grid, flattened (row stride win + 1), the column past each row's end set to 0.
 
     One gather of the (win + 1)^2 integer pixels P around the window (_patches) and two linear interpolations
     with the point's own weights (a, b) (_corner), along x then along y, replace a per-pixel bilinear lookup (as
     OpenCV does). On the flattened patch both are shifted slices: P[t + 1] is the right neighbour of P[t] and
     P[t + win + 1] the one below, so each interpolation is one pass over contiguous memory; the one wrong value
-    per row (a row's last pixel blended with the next row's first) falls in the zeroed column."""
+    per row (a row's last pixel blended with the next row's first) falls in the zeroed column. `block` points
+    at a time: their temporaries stay in the CPU cache (5-18 % less CPU than all 900 at once, on a busy machine)."""
     c, w = _corner(x0, images.shape[1:], win)
-    a, b = w[:, :1], w[:, 1:]                                       # (N, 1) each
     s, L = win + 1, win * (win + 1) - 1
-    out = []
-    for P in _patches(images, c, win):                              # (N, s * s)
-        Q = P[:, 1:] - P[:, :-1]                                    # along x: P_left + a (P_right - P_left)
-        Q *= a
-        Q += P[:, :-1]                                              # (N, s * s - 1)
-        R = Q[:, s:] - Q[:, :-s]                                    # along y: Q_top + b (Q_bottom - Q_top)
-        R *= b
-        R += Q[:, :-s]                                              # (N, s * s - 1 - s) = (N, L)
-        R[:, win::s] = 0                                            # the column past each row's end
-        out.append(R)
+    out = np.empty((len(images), len(x0), L), np.float32)
+    for i in range(0, len(x0), block):
+        a, b = w[i:i + block, :1], w[i:i + block, 1:]               # (n, 1) each
+        for k, P in enumerate(_patches(images, c[i:i + block], win)):   # (n, s * s)
+            Q = P[:, 1:] - P[:, :-1]                                # along x: P_left + a (P_right - P_left)
+            Q *= a
+            Q += P[:, :-1]                                          # (n, s * s - 1)
+            R = out[k, i:i + block]
+            np.subtract(Q[:, s:], Q[:, :-s], out=R)                 # along y: Q_top + b (Q_bottom - Q_top)
+            R *= b
+            R += Q[:, :-s]                                          # (n, s * s - 1 - s) = (n, L)
+            R[:, win::s] = 0                                        # the column past each row's end
     return out
 
 
@@ -77,16 +79,20 @@ def _padded(*images: np.ndarray, win: int) -> np.ndarray:
     return np.stack([np.pad(np.asarray(I, np.float32), win + 1, mode="edge") for I in images])
 
 
-def _cell_sums(I2p: np.ndarray, c: np.ndarray, g: np.ndarray, win: int) -> np.ndarray:
+def _cell_sums(I2p: np.ndarray, c: np.ndarray, g: np.ndarray, win: int, block: int = 128) -> np.ndarray:
     """S[n, k, l] = sum_w P[i + k, j + l] g[n, :, i, j] for k, l in {0, 1}: each point's gradient windows
     g (N, 2, L) (_windows' layout) against the four win x win sub-windows of I2's patch P (_patches) at its
     corner c (N, 2). On the flattened patch the sub-window at (k, l) is the run of L values from k (win + 1) + l
     on, matched entry for entry with g's layout (its zero column drops the values past each row): the runs
     from k (win + 1) and k (win + 1) + 1 are two consecutive entries of a sliding-window view (no copy).
-    -> S (N, 2, 2, 2) float32: (point, k, l, gradient)."""
-    P, = _patches(I2p, c, win)                                      # (N, (win + 1)^2)
-    runs = sliding_window_view(P, g.shape[-1], axis=1)              # runs[n, o] = P[n, o:o + L]
-    return np.stack([np.einsum("nlt,nct->nlc", runs[:, o:o + 2], g) for o in (0, win + 1)], 1)
+    `block` points at a time (as _windows). -> S (N, 2, 2, 2) float32: (point, k, l, gradient)."""
+    S = np.empty((len(c), 2, 2, 2), np.float32)
+    for i in range(0, len(c), block):
+        P, = _patches(I2p, c[i:i + block], win)                     # (n, (win + 1)^2)
+        runs = sliding_window_view(P, g.shape[-1], axis=1)          # runs[n, o] = P[n, o:o + L]
+        for k in (0, 1):
+            S[i:i + block, k] = np.einsum("nlt,nct->nlc", runs[:, k * (win + 1):k * (win + 1) + 2], g[i:i + block])
+    return S
 
 
 def _track_level(I1, I2, Ix, Iy, pts, d0, win, iters, eps, min_eig):
