@@ -106,7 +106,7 @@ def _track_level(I1, I2, Ix, Iy, pts, d0, win, iters, eps, min_eig):
     sum_kl w_kl S_kl, S_kl = sum_w P[. + k, . + l] g (_cell_sums), computed when a point enters a cell. They
     serve every step it stays there, and such a step costs a few numbers per point instead of a pass over its
     window: past the first step or two most points stay in their cell (benchmarks/ch09_flow.py's first scene, 900
-    points over 4 levels: 6.8k cell entries for 16k point-steps)."""
+    points over 4 levels: 6.8k cell entries where interpolating J at every step took 12.8k windows)."""
     x0 = pts - (win - 1) / 2                                        # (N, 2): each window's top-left sample
     T, gx, gy = _windows(_padded(I1, Ix, Iy, win=win), x0, win)     # (N, L) each
     dot = lambda p, q: np.einsum("nt,nt->n", p, q)                  # noqa: E731  sum over each window
