@@ -61,14 +61,15 @@ shared, and the ratio moves by 10-30 % between runs).
 Issue 32, third round (2026-12-06). Sparse LK: a Gauss-Newton step needs sum_w J g, and J blends four shifted
 sub-windows of the same (win + 1)^2 pixels, those of the cell of its top-left sample, with the bilinear weights; so
 sum_w J g = sum_kl w_kl S_kl, the 8 sums S_kl computed when a point enters a cell and reused while it stays there
-(scene 1: 6.8k cell entries over the 4 levels where 12.8k windows of I2 were interpolated). Windows points-first, flattened on the patch's
-grid (both interpolations shifted slices of one contiguous row, no transposed copy), 128 points at a time. Same
-answers: statuses identical, converged points within 2e-5 px of the former code's (40 smooth scenes, win 5-31),
-this table's columns unchanged to 3 decimals; 9.10 / 9.11 / 9.18 fairness 200 seeds each, 0 failures. Old (33b605e)
-/ new / OpenCV taking turns (10 rounds, the 3 scenes summed) at load 15-24: 8.52x -> 7.10x (-17 %); at load
-24-30: 10.0x -> 7.8x; at 43-110 (the cell sums not yet in blocks): 11.1x -> 8.4x. This benchmark: 6.9-7.4x at load 15 (`python -m benchmarks.ch09_flow
-sparse`). Left: I1's three windows per level (~30 % of the time), ~100 late steps per run for the few points still
-moving (numpy's per-call cost, ~1 in 5 of the time), the pyramids and padding (~1 in 10).
+(scene 1: 6.8k cell entries over the 4 levels where 12.8k windows of I2 were interpolated). Windows points-first,
+flattened on the patch's grid (both interpolations shifted slices of one contiguous row, no transposed copy), 128
+points at a time. Same answers: statuses identical, converged points within 2e-5 px of the former code's (40
+smooth scenes, win 5-31), this table's columns unchanged to 3 decimals; 9.10 / 9.11 / 9.18 fairness 200 seeds
+each, 0 failures. Old (33b605e) / new / OpenCV taking turns (10 rounds, the 3 scenes summed): at load 15-24
+8.52x -> 7.10x (-17 %); at 24-30 10.0x -> 7.8x; at 43-110 (the cell sums not yet in blocks) 11.1x -> 8.4x. This
+benchmark (`python -m benchmarks.ch09_flow sparse`): 6.9-7.4x at load 15, 7.1-7.5x at load 15-17. Left: I1's
+three windows per level (~30 % of the time), ~100 late steps per run for the few points still moving (numpy's
+per-call cost, ~1 in 5 of the time), the pyramids and padding (~1 in 10).
 """
 from __future__ import annotations
 
