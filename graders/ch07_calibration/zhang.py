@@ -13,7 +13,7 @@ import numpy as np
 from graders.core.compare import max_abs, up_to_scale
 from graders.core.convert import OutputError, as_array, as_rotation, as_pose
 from graders.core.engine import Case, Exercise, Hint, like, raised, register, shared_run
-from graders.kit.geometry import from_h, project, to_h
+from graders.kit.geometry import from_h, project, project_to_so3, to_h
 
 from . import boards
 
@@ -212,6 +212,18 @@ def _pose_error_px(pose, info):
     return float(np.sqrt(np.mean(np.sum((uv - info["uv_true"]) ** 2, 1))))
 
 
+def _sound_variants(H, K) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The decompositions the spec allows besides the oracle's: λ = 1/|m1|, 1/|m2| (Zhang's two equal forms) or
+    2/(|m1| + |m2|), each with the nearest rotation to [r1 r2 r1×r2] (SVD), sign so that t_z > 0."""
+    M = np.linalg.solve(np.asarray(K, float), np.asarray(H, float))
+    n1, n2 = np.linalg.norm(M[:, 0]), np.linalg.norm(M[:, 1])
+    poses = []
+    for lam in (1.0 / n1, 1.0 / n2, 2.0 / (n1 + n2)):
+        A = lam * np.sign(M[2, 2]) * M
+        poses.append((project_to_so3(np.c_[A[:, 0], A[:, 1], np.cross(A[:, 0], A[:, 1])]), A[:, 2]))
+    return poses
+
+
 def _sheared(H, rng):
     """H with its first two columns mixed symmetrically, [h1 h2] (I + ε [[0, 1], [1, 0]]), ε in ±[0.005, 0.01]:
     K⁻¹[h1 h2] = λ [r1 r2] (I + εJ), so [r1 r2 r1×r2] = R S with S symmetric positive definite, whose nearest
@@ -237,11 +249,13 @@ def _extrinsics_cases(rng: np.random.Generator):
         H = H * rng.choice([-1.0, 1.0]) * rng.uniform(0.2, 5.0)
         info = {"X": rig["X"], "K": rig["K"], "uv_true": rig["uv_true"][0], "H": H}
         oracle = _pose_error_px(gt_extrinsics_from_homography(H, rig["K"]), info)
-        # exact: 1e-6 px. noisy: within 1.5x the oracle's pose error on the same H + 0.05 px (the two
-        # sound variants, SVD of [r1 r2 r1×r2] or Procrustes on [r1 r2], and λ from |K⁻¹h1| alone or
-        # the mean of both norms, differ by < 20 % of that error at 0.3 px noise). sheared: the same form; every
-        # nearest rotation is the rig's R exactly, and λ = 1/|m1| scales t by 1/√(1 + ε²), ≤ 5e-5 (≤ 0.02 px).
-        tol = 1e-6 if key == "exact" else 0.5 * oracle + 0.05
+        spread = max(_pose_error_px(p, info) for p in _sound_variants(H, rig["K"])) - oracle
+        # exact: 1e-6 px. noisy: within 1.5x the oracle's pose error on the same H, or the worst of the sound
+        # variants' on it (SVD of [r1 r2 r1×r2] or Procrustes on [r1 r2]; λ from |K⁻¹h1|, |K⁻¹h2| or their mean:
+        # usually < 20 % of that error at 0.3 px noise, but λ = 1/|m1| passed the 1.5x bar on 997 of 1000 seeds
+        # and 1/|m2| on 45 of 60), + 0.05 px. sheared: the same form; every nearest rotation is the rig's R exactly,
+        # and λ = 1/|m1| scales t by 1/√(1 + ε²), ≤ 5e-5 (≤ 0.02 px).
+        tol = 1e-6 if key == "exact" else max(0.5 * oracle, spread) + 0.05
         name = {"exact": "noise-free H", "sheared": "H with columns sheared 0.5-1 % (nearest rotation)"}.get(
             key, "H from 0.3 px corners")
         cases.append(Case(name + " (px beyond the oracle)", (H, rig["K"]), oracle,
