@@ -315,6 +315,23 @@ def _velocity_ignored(c, out) -> bool:
     return abs(out["line_delay"] - d) < 0.02 * abs(d)
 
 
+def _fitted_as(c, out, **changed) -> bool:
+    """The line delay the stand-in fits to the case with `changed` fields (a wrong model written as other data), 2 %."""
+    d = gt_fix_rolling_shutter(dict(c.args[0], **changed))["line_delay"]
+    return abs(out["line_delay"] - d) < 0.02 * abs(d)
+
+
+def _velocity_flipped(c, out) -> bool:
+    return _fitted_as(c, out, v=-np.asarray(c.args[0]["v"], float))
+
+
+def _rate_in_world(c, out) -> bool:
+    """R0 Exp(ωτ)ᵀ = Exp((R0 ω)τ)ᵀ R0: the world-frame slip is the right model with ω replaced by R0 ω."""
+    case = c.args[0]
+    return _fitted_as(c, out, omega=np.einsum("fij,fj->fi", np.asarray(case["R0"], float),
+                                              np.asarray(case["omega"], float)))
+
+
 RS_HINTS = [
     Hint("a global-shutter model (line delay 0): re-calibrating K fits one pan's skew into the principal point and "
          "focal length, and the next pan goes another way. Model each row's exposure time and fit the line delay.",
@@ -324,6 +341,12 @@ RS_HINTS = [
     Hint("the camera's velocity is left out: by the time row y is exposed it has moved by v τ as well as turned "
          "(C(τ) = C0 + v τ). In the frame taken driving at several m/s that motion skews the image too, and a "
          "rotation-only model puts it into the line delay.", _velocity_ignored),
+    Hint("the camera's motion during the readout is taken the wrong way: by the time row y is exposed the centre is at "
+         "C(τ) = C0 + v τ (it has moved forward along v), not C0 − v τ; the frame driving straight shows it.",
+         _velocity_flipped),
+    Hint("the gyro's rate is applied in the world frame (R0 Exp(ωτ)ᵀ): ω is measured in the camera frame, so the "
+         "camera turns as R(τ) = Exp(ωτ)ᵀ R0 (the frame taken with the camera rolled shows the difference).",
+         _rate_in_world),
     Hint("a negative line delay: rows are read top to bottom, so a fit that wants time to run backwards is turning "
          "the camera the wrong way (R(tau) = Exp(omega tau)^T R0 for a gyro rate in the camera frame).",
          lambda c, out: out["line_delay"] < -1e-7),

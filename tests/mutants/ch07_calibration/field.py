@@ -139,8 +139,8 @@ def rs_rate_in_world_frame(case):
 
 
 MUTANTS += [
-    ("7.22", "velocity applied the wrong way (C0 - v tau)", rs_velocity_sign_flipped, None),
-    ("7.22", "gyro rate in the world frame (R0 Exp(omega tau)^T)", rs_rate_in_world_frame, None),
+    ("7.22", "velocity applied the wrong way (C0 - v tau)", rs_velocity_sign_flipped, "C0 − v τ"),
+    ("7.22", "gyro rate in the world frame (R0 Exp(omega tau)^T)", rs_rate_in_world_frame, "in the world frame"),
     ("7.22", "K re-calibrated, global shutter", rs_recalibrated_K, "global-shutter model"),
     ("7.22", "velocity left out (rotation-only shutter)", rs_velocity_ignored, "velocity is left out"),
     ("7.22", "readout time of the whole frame", rs_frame_readout, "whole frame"),
