@@ -122,12 +122,12 @@ def real_stereo() -> dict | None:
             "Rs2": Rs2, "ts2": ts2, "R": R, "t": t, "rms": rms}
 
 
-def synthetic_stereo(rng: np.random.Generator, n_views: int = 8, noise: float = 0.2) -> dict:
+def synthetic_stereo(rng: np.random.Generator, n_views: int = 8, noise: float = 0.2, strength: str = "moderate") -> dict:
     """A stereo rig with known truth: baseline 6-12 cm along ±x, a few degrees of relative rotation,
-    both lenses moderate; every board seen whole by both cameras."""
+    both lenses of `strength` (moderate unless given); every board seen whole by both cameras."""
     X = boards.board()
-    rig1 = boards.synthetic_rig(rng, n_views=1, noise=0.0)
-    rig2 = boards.synthetic_rig(rng, n_views=1, noise=0.0)
+    rig1 = boards.synthetic_rig(rng, n_views=1, noise=0.0, strength=strength)
+    rig2 = boards.synthetic_rig(rng, n_views=1, noise=0.0, strength=strength)
     K1, d1, K2, d2 = rig1["K"], rig1["dist"], rig2["K"], rig2["dist"]
     w = rng.normal(size=3)
     R = so3_exp(w / np.linalg.norm(w) * np.radians(rng.uniform(1.0, 5.0)))
@@ -275,12 +275,21 @@ def invertible(x: np.ndarray, dist, margin: float = 0.9) -> np.ndarray:
     return (np.abs(2 * r2 * (k1 + 2 * k2 * r2 + 3 * k3 * r2 * r2)) < margin * radial).all(axis=1)
 
 
-def held_out_pairs(rng: np.random.Generator, d: dict, n: int = 300) -> dict:
-    """Exact (noise-free) correspondences the rectification never saw: pixels of camera 1 drawn over the image,
-    depths 0.4-5 m, seen through the rig (R, t) by camera 2; kept if inside both images and where both lenses
-    are invertible (`invertible`)."""
+def held_out_pairs(rng: np.random.Generator, d: dict, n: int = 300, edges: int = 0) -> dict:
+    """Exact (noise-free) correspondences the rectification never saw: pixels of camera 1 drawn over the image
+    (and `edges` more within 60 px of its border, where a lens is strongest), depths 0.4-5 m, seen through the rig
+    (R, t) by camera 2; kept if inside both images and where both lenses are invertible (`invertible`)."""
     w, h = boards.SIZE
     u1 = np.c_[rng.uniform(15, w - 15, n), rng.uniform(15, h - 15, n)]
+    if edges:
+        side = rng.integers(0, 4, edges)             # left, right, top, bottom band
+        along = rng.uniform(0.0, 1.0, edges)
+        depth = rng.uniform(15, 75, edges)
+        band = np.where(side[:, None] < 2,
+                        np.c_[np.where(side == 0, depth, w - depth), 15 + along * (h - 30)],
+                        np.c_[15 + along * (w - 30), np.where(side == 2, depth, h - depth)])
+        u1 = np.r_[u1, band]
+        n = len(u1)
     x1 = cv2.undistortPoints(u1.reshape(-1, 1, 2), d["K1"], d["d1"], None, None, None,
                              (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-14)).reshape(-1, 2)
     X1 = np.c_[x1, np.ones(n)] * rng.uniform(0.4, 5.0, (n, 1))

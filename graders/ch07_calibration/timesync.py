@@ -74,10 +74,15 @@ def _ms(out, delta):
 
 def _cases(rng: np.random.Generator):
     cases = []
-    draws = [("general", None, True), ("half-sample", None, True), ("aligned-frames", None, False)]
+    draws = [("general", None, True), ("half-sample", None, True), ("aligned-frames", None, False),
+             ("quarter-sample", None, True)]
     for key, delta, rotate in draws:
         if key == "half-sample":   # halfway between gyro samples: integer-lag answers are 1.5-2.5 ms off
             delta = rng.choice([-1, 1]) * ((rng.integers(1, 7) + 0.5) / IMU_HZ + rng.uniform(-0.0005, 0.0005))
+        if key == "quarter-sample":   # a quarter of a sample off the grid: answers on a 2.5 ms grid (half a sample,
+            # which the half-sample draw sits on) are 1-1.5 ms off, as integer lags are (full marks on 6 of 30 seeds)
+            delta = rng.choice([-1, 1]) * ((rng.integers(1, 7) + rng.choice([0.25, 0.75])) / IMU_HZ
+                                           + rng.uniform(-0.00025, 0.00025))
         d = imu_camera_rates(rng, delta, rotate)
         args = (d["t_imu"], d["w_imu"], d["t_cam"], d["w_cam"])
         # 0.5 ms (a tenth of the gyro period) beyond the stand-in's own error on this draw: the offset is
@@ -85,7 +90,8 @@ def _cases(rng: np.random.Generator):
         # an answer at whole-sample resolution is 1.5-2.5 ms off on the half-sample draw.
         slack = _ms(gt_time_offset(*args), d["delta"])
         cases.append(Case({"general": "offset, rotated camera frame", "half-sample": "offset between two gyro samples",
-                           "aligned-frames": "offset, frames aligned"}[key], args, d["delta"], _ms, 0.5 + slack, "ms",
+                           "aligned-frames": "offset, frames aligned",
+                           "quarter-sample": "offset a quarter of a gyro sample off the grid"}[key], args, d["delta"], _ms, 0.5 + slack, "ms",
                           shape=(), key=key, info=d))
     return cases
 
@@ -95,8 +101,12 @@ SYNC_HINTS = [
          lambda c, out: abs(float(out) + c.expected) < 1e-3),
     Hint("the answer sits on the gyro's sample grid: interpolate (or fit a parabola to the correlation peak) to "
          "get below one sample period (5 ms).", lambda c, out: c.key == "half-sample"),
+    Hint("the answer sits on a coarse grid of offsets (whole or half gyro samples): refine the correlation peak below "
+         "it (a parabola through the peak and its neighbours) to reach a tenth of a sample.",
+         lambda c, out: c.key == "quarter-sample"),
+    # more than half a gyro sample off on the rotated draw: not a resolution problem (a grid of offsets is <= 2.5 ms off)
     Hint("right with aligned frames, wrong with a rotated camera: correlate |ω| (frame-independent), not one "
-         "axis of ω.", lambda c, out: c.key == "general"),
+         "axis of ω.", lambda c, out: c.key == "general" and _ms(out, c.expected) > 2.6),
 ]
 
 register(Exercise(

@@ -129,6 +129,15 @@ def extrinsics_r3_reversed(H, K):
     return U @ Vt, M[:, 2]     # re-orthogonalised, but r2 x r1 makes it a reflection
 
 
+def extrinsics_gram_schmidt(H, K):
+    """Orthonormalised, but by Gram-Schmidt (r1 kept, r2 made orthogonal to it), not the nearest rotation (SVD)."""
+    M = _columns(H, K)
+    r1 = M[:, 0] / np.linalg.norm(M[:, 0])
+    r2 = M[:, 1] - (r1 @ M[:, 1]) * r1
+    r2 = r2 / np.linalg.norm(r2)
+    return np.c_[r1, r2, np.cross(r1, r2)], M[:, 2]
+
+
 def extrinsics_K_not_inverted(H, K):
     M = np.asarray(K, float) @ np.asarray(H, float)
     M = M / np.linalg.norm(M[:, 0]) * np.sign(M[2, 2])
@@ -225,6 +234,7 @@ MUTANTS = [
     ("7.7", "sign of H not fixed", extrinsics_sign_not_fixed, "behind the camera"),
     ("7.7", "r3 = r2 x r1", extrinsics_r3_reversed, "r2 × r1"),
     ("7.7", "K H instead of K^-1 H", extrinsics_K_not_inverted, None),
+    ("7.7", "Gram-Schmidt, not the nearest rotation", extrinsics_gram_schmidt, "not to the nearest rotation"),
     ("7.8", "lens not refined", refine_no_distortion, "distortion is exactly the start"),
     ("7.8", "k3 never estimated", refine_no_k3, "k3 is exactly 0"),
     ("7.8", "poses held fixed", refine_poses_fixed, "poses are exactly the start"),
@@ -427,6 +437,16 @@ def offset_whole_gyro_samples(t_imu, w_imu, t_cam, w_cam):
     return float(lags[int(np.argmax(scores))])
 
 
+def offset_half_sample_grid(t_imu, w_imu, t_cam, w_cam):
+    """The mean squared difference of |ω| scanned on a 2.5 ms grid (half a gyro sample), its best lag taken as is: the
+    half-sample draw sits on this grid, a quarter-sample one does not."""
+    n_imu, n_cam = np.linalg.norm(w_imu, axis=1), np.linalg.norm(w_cam, axis=1)
+    keep = (t_cam - 0.1 > t_imu[0]) & (t_cam + 0.1 < t_imu[-1])
+    lags = np.arange(-40, 41) * 0.0025
+    cost = [np.mean((np.interp(t_cam[keep] + d, t_imu, n_imu) - n_cam[keep]) ** 2) for d in lags]
+    return float(lags[int(np.argmin(cost))])
+
+
 def offset_x_axis_only(t_imu, w_imu, t_cam, w_cam):
     """One axis of ω correlated (as if the camera and IMU frames were aligned)."""
     return ref_motion.time_offset(t_imu, np.c_[w_imu[:, 0], 0 * w_imu[:, 1:]], t_cam,
@@ -444,6 +464,7 @@ MUTANTS += [
     ("7.12", "sign of the offset", offset_sign_flipped, "sign is flipped"),
     ("7.12", "whole gyro samples", offset_whole_gyro_samples, "sample grid"),
     ("7.12", "one axis of omega", offset_x_axis_only, "|ω|"),
+    ("7.12", "2.5 ms grid (half a gyro sample)", offset_half_sample_grid, "coarse grid of offsets"),
 ]
 
 

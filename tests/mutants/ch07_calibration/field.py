@@ -74,17 +74,18 @@ MUTANTS += [
 
 # ----------------------------------------------------------------- 7.22 fix_rolling_shutter
 
-def _fit_delay(case, row_of=lambda uv: uv[:, 1], sign=1.0, velocity=True):
+def _fit_delay(case, row_of=lambda uv: uv[:, 1], sign=1.0, velocity=True, v_sign=1.0, world_rate=False):
     K, dist = np.asarray(case["K"], float), np.asarray(case["dist"], float)
 
     def pixels(f, delay):
         X, R0, t0, w, v = (np.asarray(case[k][f], float) for k in ("X", "R0", "t0", "omega", "v"))
-        v = v if velocity else np.zeros(3)
+        v = v_sign * v if velocity else np.zeros(3)
         C0 = -R0.T @ t0
         uv = _pixels(X, K, dist, R0, t0)
         for _ in range(10):
             tau = delay * row_of(uv)
-            R = np.swapaxes(rodrigues(sign * np.outer(tau, w)), 1, 2) @ R0
+            turn = np.swapaxes(rodrigues(sign * np.outer(tau, w)), 1, 2)
+            R = R0 @ turn if world_rate else turn @ R0
             Xc = np.einsum("nij,nj->ni", R, X - C0 - np.outer(tau, v))
             uv = _pixels(Xc, K, dist, np.eye(3), np.zeros(3))
         return uv
@@ -127,7 +128,19 @@ def rs_velocity_ignored(case):
     return {"K": np.asarray(case["K"], float), "line_delay": _fit_delay(case, velocity=False)}
 
 
+def rs_velocity_sign_flipped(case):
+    """C(tau) = C0 - v tau: the camera's motion during the readout taken the wrong way."""
+    return {"K": np.asarray(case["K"], float), "line_delay": _fit_delay(case, v_sign=-1.0)}
+
+
+def rs_rate_in_world_frame(case):
+    """R(tau) = R0 Exp(omega tau)^T: the gyro's rate applied in the world frame (right of R0), not the camera's."""
+    return {"K": np.asarray(case["K"], float), "line_delay": _fit_delay(case, world_rate=True)}
+
+
 MUTANTS += [
+    ("7.22", "velocity applied the wrong way (C0 - v tau)", rs_velocity_sign_flipped, "C0 − v τ"),
+    ("7.22", "gyro rate in the world frame (R0 Exp(omega tau)^T)", rs_rate_in_world_frame, "in the world frame"),
     ("7.22", "K re-calibrated, global shutter", rs_recalibrated_K, "global-shutter model"),
     ("7.22", "velocity left out (rotation-only shutter)", rs_velocity_ignored, "velocity is left out"),
     ("7.22", "readout time of the whole frame", rs_frame_readout, "whole frame"),

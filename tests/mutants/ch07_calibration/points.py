@@ -102,6 +102,25 @@ def rectify_points_one_iteration(case):
         ref_debug._undistort = saved
 
 
+def _rectify_steps(case, steps):
+    saved = ref_debug._undistort
+    ref_debug._undistort = lambda x_d, dist, iters=steps, tol=0.0: saved(x_d, dist, iters=steps, tol=0.0)
+    try:
+        return ref_debug.fix_rectify_points(case)
+    finally:
+        ref_debug._undistort = saved
+
+
+def rectify_points_default_five_steps(case):
+    """The inverse lens by 5 fixed-point steps, cv2.undistortPoints' default count (no criteria passed)."""
+    return _rectify_steps(case, 5)
+
+
+def rectify_points_ten_steps(case):
+    """The inverse lens by a fixed 10 fixed-point steps: converged for a moderate lens, not for a strong one's edges."""
+    return _rectify_steps(case, 10)
+
+
 def clock_unchanged(case):
     return np.asarray(case["t_cam"], float).copy()
 
@@ -124,6 +143,8 @@ MUTANTS += [
     ("7.18", "lens ignored (the colleague's code)", rectify_points_lens_ignored, "lens is ignored"),
     ("7.18", "lens applied forward", rectify_points_lens_forward, "applied forward"),
     ("7.18", "one fixed-point step", rectify_points_one_iteration, "not converged"),
+    ("7.18", "five fixed-point steps (cv2.undistortPoints' default)", rectify_points_default_five_steps, "not converged"),
+    ("7.18", "ten fixed-point steps", rectify_points_ten_steps, "not converged"),
     ("7.19", "timestamps unchanged", clock_unchanged, "unchanged"),
     ("7.19", "one constant offset (7.12 on the whole log)", clock_constant_offset, "one constant shift"),
     ("7.19", "drift applied the wrong way", clock_drift_wrong_way, "wrong way"),
