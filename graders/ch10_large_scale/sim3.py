@@ -216,6 +216,10 @@ SIM3_HINTS = [
     Hint("your inliers look like those with r² < threshold: the threshold is a distance, so compare r² with "
          "threshold² (or r with threshold). Here that bar is 2-7x too wide and takes in the near misses.",
          _threshold_squared),
+    Hint("on a repeated structure the true pairs are the largest consensus (30 %), not a majority: a fit that keeps a "
+         "fixed share of the pairs (the better half, the least median of squares) takes in pairs of the other "
+         "similarities. Count the pairs within the threshold for each sampled model, keep the most, and refit on them.",
+         lambda c, out: "repeated" in c.tags),
     Hint(lambda c, out: f"right transform, but the held-out residual is {held_rms(out, c.expected):.3g} where the "
          f"truth leaves {held_rms((c.expected['s'], c.expected['R'], c.expected['t']), c.expected):.3g}: refit "
          "Umeyama on all the inliers of the best sample (the 3-point fit alone carries its noise).",
