@@ -158,7 +158,17 @@ def _cases(label, draws, arg_names):
 def _single_draws(rng: np.random.Generator):
     return [dict(width=200, height=150, shift=rng.uniform(0.5, 1.5), warp=0.005, win=9, min_eig=1.0),
             dict(width=180, height=140, shift=rng.uniform(0.5, 1.5), warp=0.005, win=int(rng.choice([7, 11])),
-                 min_eig=float(rng.choice([0.5, 2.0])))]
+                 min_eig=float(rng.choice([0.5, 2.0]))),
+            _far_single(rng)]
+
+
+def _far_single(rng: np.random.Generator) -> dict:
+    """A 3-3.5 px motion, still within one level's reach of a 9-11 px window (the reference's and OpenCV's 90th
+    percentile <= 0.08 px over 80 draws of each): one Gauss-Newton step, or a fixed two, stops short there (two
+    steps' 90th percentile >= 0.28 px; issue 29: at 0.5-1.5 px one step kept full marks on seed 3, two steps on
+    every seed)."""
+    return dict(width=200, height=150, shift=rng.uniform(3.0, 3.5), warp=0.005, win=int(rng.choice([9, 11])),
+                min_eig=1.0)
 
 
 def _pyr_draws(rng: np.random.Generator):
@@ -169,7 +179,10 @@ def _pyr_draws(rng: np.random.Generator):
     # draws (564) had 30 clearly trackable points, so 50 draws fell short on ~5 % of seeds.
     return [dict(width=320, height=240, shift=rng.uniform(20.0, 30.0), warp=0.003, win=13, max_level=3,
                  min_eig=float(rng.choice([0.5, 1.0]))),
-            dict(width=400, height=300, shift=rng.uniform(30.0, 42.0), warp=0.003, win=21, max_level=3, min_eig=1.0)]
+            dict(width=400, height=300, shift=rng.uniform(30.0, 42.0), warp=0.003, win=21, max_level=3, min_eig=1.0),
+            # max_level 0 (cv2's maxLevel=0 is one level): the level's own iteration, which a pyramid hides (two
+            # fixed steps per level kept full marks on 5 of 12 seeds at 3 levels; issue 29).
+            {**_far_single(rng), "max_level": 0}]
 
 
 def _status_hint(c, out):
@@ -196,6 +209,15 @@ def _ratio(c, out):
     d_true = t["exact"][t["good"]] - t["pts"][t["good"]]
     d_out = out[0][t["good"]] - t["pts"][t["good"]]
     return float(np.median(np.sum(d_out * d_true, 1) / np.maximum(np.sum(d_true ** 2, 1), 1e-9)))
+
+
+def _short(c, out) -> float:
+    """Fraction of the judged points more than 0.2 px off and less than 0.95 of the way along their motion."""
+    t = c.expected
+    g = t["good"]
+    d_true, d_out = t["exact"][g] - t["pts"][g], out[0][g] - t["pts"][g]
+    along = np.sum(d_out * d_true, 1) / np.maximum(np.sum(d_true ** 2, 1), 1e-9)
+    return float(np.mean((np.linalg.norm(d_out - d_true, axis=1) > 0.2) & (along < 0.95)))
 
 
 def _far(c, out) -> float:
@@ -233,12 +255,16 @@ def _pos_hints(pyramidal: bool):
         hints.append(Hint(lambda c, out: f"{100 * _far(c, out):.0f} % of the well-textured points end > 1 px off on a "
                           f"{c.info['shift']:.0f} px motion: beyond one level's reach. Track pts / 2^L at level L and "
                           "pass the guess down doubled: g_(L-1) = 2 (g_L + d_L).",
-                          lambda c, out: "positions" in c.tags and _far(c, out) > 0.02))
-    else:
-        hints.append(Hint(lambda c, out: f"your displacements are {_ratio(c, out):.2f} of the true ones: check "
-                          "the gradient's scale (a unit ramp must give I_x = 1) and iterate (warp I2 by the current "
-                          "d, solve again) until the step is below eps.",
-                          lambda c, out: "positions" in c.tags and 0.05 < _ratio(c, out) < 0.9))
+                          lambda c, out: "positions" in c.tags and c.info.get("max_level") and _far(c, out) > 0.02))
+    # 9.10's, and 9.11's level-0 case: a gradient on the wrong scale, or too few Gauss-Newton steps
+    hints.append(Hint(lambda c, out: f"your displacements are {_ratio(c, out):.2f} of the true ones: check "
+                      "the gradient's scale (a unit ramp must give I_x = 1) and iterate (warp I2 by the current "
+                      "d, solve again) until the step is below eps.",
+                      lambda c, out: "positions" in c.tags and 0.05 < _ratio(c, out) < 0.9))
+    hints.append(Hint(lambda c, out: f"{100 * _short(c, out):.0f} % of the well-textured points stop short of the "
+                      f"{c.info['shift']:.1f} px motion: one Gauss-Newton step moves only part of the way. iterate (warp "
+                      "I2 by the current d, solve again) until the step is below eps or iters steps are done.",
+                      lambda c, out: "positions" in c.tags and not c.info.get("max_level") and _short(c, out) > 0.1))
     return hints
 
 

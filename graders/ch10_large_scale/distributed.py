@@ -41,7 +41,7 @@ from graders.core.convert import OutputError
 from graders.core.engine import Case, Exercise, Hint, raised, register, shared_run
 from graders.core.sandbox import learner_of, restart_point
 
-from .stages import PipelineStages, _open_no_link, _runs, pair_key, task_key
+from .stages import PipelineStages, _open_no_link, _runs, pair_key, retried, task_key
 
 STALE = {"pairs": [[0, 1, -1]], "note": "the previous run's result"}
 
@@ -192,14 +192,16 @@ def _run_and_inspect(fn, images, pairs, flaky_kinds: tuple[str, ...]) -> dict:
         inode = os.stat(out_path).st_ino
         reference = PipelineStages()._reliable()
         feats = [reference.extract(img) for img in images]
-        keys = {"extract": task_key("extract", images[len(images) // 2]),
-                "verify": task_key("verify", feats[0][0], feats[2][0])}
-        stages = PipelineStages(flaky=tuple(keys[k] for k in flaky_kinds), scratch=scratch, paths=tuple(paths))
+        keys = {"extract": (task_key("extract", images[len(images) // 2]),),
+                "verify": (task_key("verify", feats[0][0], feats[2][0]), task_key("verify", feats[2][0], feats[0][0]))}
+        groups = [keys[k] for k in flaky_kinds]
+        stages = PipelineStages(flaky=tuple(k for g in groups for k in g), scratch=scratch, paths=tuple(paths))
         state = dict(vars(stages))      # self-study: what the learner's code could change
         with _open_no_link(out_path, "r") as reader:         # a reader of the previous version
             rows = fn(paths, list(pairs), stages, out_path, batch_size=JUDGE_BATCH)
             old_text = reader.read()
         return {"rows": rows, "old_intact": old_text == json.dumps(STALE), "tampered": dict(vars(stages)) != state,
+                "unretried": retried(scratch, groups),
                 "replaced": os.stat(out_path).st_ino != inode if os.path.exists(out_path) else False,
                 **_after_run(folder, scratch, out_path, learner_of(fn) is not None)}
     finally:
@@ -260,6 +262,19 @@ def _convert_rows(out, case: Case) -> np.ndarray:
     if not np.array_equal(rows, np.round(rows)):
         raise OutputError("rows must be integers (i, j, inliers)")
     return rows.astype(int)
+
+
+def _convert_transient(out, case: Case) -> dict:
+    if not isinstance(out, dict) or "unretried" not in out:
+        raise OutputError("the pipeline returned nothing to inspect")
+    return dict(out, rows=_convert_rows(out, case))
+
+
+def _transient_problems(out, expected: np.ndarray) -> float:
+    """The rows against the serial pipeline's, + 1 for each task armed to fail that was not failed and then run
+    again through the given stages (issue 29: in self-study, extraction and verification through the stages'
+    unmarked copy, `stages._reliable()`, wherever `stages._flaky` was set, scored full marks with no retries)."""
+    return _rows_differ(out["rows"], expected) + out["unretried"]
 
 
 def _rows_differ(rows: np.ndarray, expected: np.ndarray) -> float:
@@ -326,13 +341,18 @@ def _convert_file(out, case: Case) -> dict:
     return out
 
 
-def _same_rows_other_order(case: Case, rows: np.ndarray) -> bool:
-    e = case.expected
+def _rows_of(out):
+    return out.get("rows") if isinstance(out, dict) else out
+
+
+def _same_rows_other_order(case: Case, out) -> bool:
+    e, rows = case.expected, _rows_of(out)
     return isinstance(rows, np.ndarray) and len(rows) == len(e) and not np.array_equal(rows, e) and np.array_equal(
         rows[np.lexsort((rows[:, 1], rows[:, 0]))], e)
 
 
-def _duplicates(case: Case, rows: np.ndarray) -> bool:
+def _duplicates(case: Case, out) -> bool:
+    rows = _rows_of(out)
     return isinstance(rows, np.ndarray) and (len(rows) > len(case.expected) or bool((rows[:, 0] >= rows[:, 1]).any()))
 
 
@@ -371,6 +391,9 @@ def _dask_text(case: Case, out: dict) -> str:
 PIPELINE_HINTS = [
     raised("TransientTaskError", "a task failed once and the run gave up: pass retries= to client.submit/map "
            "(and retry in your serial fallback too); transient failures are normal on a cluster."),
+    Hint(lambda c, out: f"{out['unretried']} task(s) that failed once were not run again through the stages you were "
+         "given (a task that never ran through them, or ran through a copy of them, does not count): retry the failed "
+         "task itself (retries= on client.submit).", lambda c, out: "transient" in c.tags and out["unretried"] > 0),
     Hint("the right rows in another order: gather the results in submission order (or sort by (i, j)), never "
          "in completion order (as_completed).", _same_rows_other_order),
     Hint("duplicated pairs: retrieval returns (i, j) and (j, i) and repeats; match each unordered pair i < j once "
@@ -402,8 +425,9 @@ def _cases(rng: np.random.Generator):
     # Exact: the stages are deterministic, so every row must equal the serial pipeline's.
     yield Case(f"{label}: rows as the serial pipeline", (), expected, _rows_differ, 0, "rows differ",
                convert=_convert_rows, call=runs[()], key="serial")
-    yield Case(f"{label}, an extraction and a verification fail once (worker lost)", (), expected, _rows_differ, 0,
-               "rows differ", convert=_convert_rows, call=runs[("extract", "verify")], key="transient")
+    yield Case(f"{label}, an extraction and a verification fail once (worker lost)", (), expected, _transient_problems,
+               0, "problems", convert=_convert_transient, call=runs[("extract", "verify")], key="transient",
+               tags=("transient",))
     yield Case(f"{label}: result file replaced atomically", (), expected, _file_problems, 0, "problems",
                convert=_convert_file, call=runs[()], key="atomic", tags=("atomic",))
     # The second run (after the first): every task on a Dask worker, and no worker of the first run left running

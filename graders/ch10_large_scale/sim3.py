@@ -24,7 +24,8 @@ def _unfixed_det(X: np.ndarray, Y: np.ndarray) -> float:
 
 
 def sim3_problem(rng: np.random.Generator, n: int = 200, outliers: float = 0.3, planar: bool = False,
-                 sigma: float = 0.02, n_held: int = 80) -> dict:
+                 sigma: float = 0.02, n_held: int = 80, coherent: float = 0.0, near_share: float = 0.4,
+                 groups: int = 1) -> dict:
     """3D-3D pairs Y_i = s R X_i + t + noise, a fraction `outliers` of them replaced by random points.
 
     X: landmarks of cluster B, a 10 m scene (planar=True: a façade, z within ~1 mm); s log-uniform in [0.3, 0.7] or
@@ -52,10 +53,27 @@ def sim3_problem(rng: np.random.Generator, n: int = 200, outliers: float = 0.3, 
     # 40 % of the outliers are near misses: a repeated structure matched one bay over, each moved 1.5-2.5
     # thresholds along one direction. A sound RANSAC rejects them (their residual is 5-9 noise sigmas); a
     # threshold read as r² < threshold (1.9-7x too large here) takes them in and drags the fit.
-    near = bad[: int(round(0.4 * len(bad)))]
+    near = bad[: int(round(near_share * len(bad)))]
     u = rng.normal(size=3)
     Y[near] = s * X[near] @ R.T + t + E[near] + np.outer(rng.uniform(1.5, 2.5, len(near)) * 3.5 * noise,
                                                         u / np.linalg.norm(u))
+    if coherent:
+        # A repeated structure: `coherent` x n of the outliers (after the near misses), in `groups` groups, each
+        # following one other similarity: the true one turned 20-40° about a random axis, scaled by 0.7-1.4 and
+        # moved 2-5 m, with the same noise. The true pairs outnumber each group, so the largest consensus is still
+        # the truth's (RANSAC's and pycolmap's answer); a fit that starts from every pair, or keeps the better half,
+        # starts among them.
+        m = int(round(coherent * n / groups))
+        for g in range(groups):
+            group = bad[len(near) + g * m: len(near) + (g + 1) * m]
+            axis = rng.normal(size=3)
+            axis *= np.radians(rng.uniform(20, 40)) / np.linalg.norm(axis)
+            K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+            th = np.linalg.norm(axis)
+            R2 = (np.eye(3) + np.sin(th) / th * K + (1 - np.cos(th)) / th ** 2 * K @ K) @ R
+            shift = rng.normal(size=3)
+            t2 = t + rng.uniform(2, 5) * s * shift / np.linalg.norm(shift)
+            Y[group] = s * rng.uniform(0.7, 1.4) * X[group] @ R2.T + t2 + E[group]
     is_out = np.zeros(n, bool)
     is_out[bad] = True
     return {"X": X, "Y": Y, "threshold": 3.5 * noise, "is_outlier": is_out, "s": s, "R": R, "t": t,
@@ -135,7 +153,13 @@ def _cases(rng: np.random.Generator):
     # RANSAC's draws are the learner's own: the tolerances hold for any seed (2x pycolmap's error + floors).
     for key, label, kw in [("general", "30 % outliers", dict(outliers=0.3)),
                            ("heavy", "50 % outliers", dict(outliers=0.5)),
-                           ("planar", "a façade (planar landmarks), 25 % outliers", dict(outliers=0.25, planar=True))]:
+                           ("planar", "a façade (planar landmarks), 25 % outliers", dict(outliers=0.25, planar=True)),
+                           # issue 29: least median of squares, or Umeyama on the better half of the residuals
+                           # iterated, kept full marks on 14 and 18 of 20 seeds without it, a RANSAC of a fixed 15
+                           # samples on 17. 100 draws: the reference and pycolmap + refit pass all, those two none,
+                           # the 15 samples 17 (IRLS from every pair passes 97: a robust fit that lands on the truth)
+                           ("repeated", "a repeated structure: 30 % true pairs, 4 groups of 10 % following other "
+                            "similarities", dict(n=400, outliers=0.7, coherent=0.4, near_share=0.25, groups=4))]:
         P = sim3_problem(rng, **kw)
         args = (P["X"], P["Y"], P["threshold"])
         run = shared_run(lambda fn, a=args: fn(*a))
@@ -192,6 +216,10 @@ SIM3_HINTS = [
     Hint("your inliers look like those with r² < threshold: the threshold is a distance, so compare r² with "
          "threshold² (or r with threshold). Here that bar is 2-7x too wide and takes in the near misses.",
          _threshold_squared),
+    Hint("on a repeated structure the true pairs are the largest consensus (30 %), not a majority: a fit that keeps a "
+         "fixed share of the pairs (the better half, the least median of squares) takes in pairs of the other "
+         "similarities. Count the pairs within the threshold for each sampled model, keep the most, and refit on them.",
+         lambda c, out: "repeated" in c.tags),
     Hint(lambda c, out: f"right transform, but the held-out residual is {held_rms(out, c.expected):.3g} where the "
          f"truth leaves {held_rms((c.expected['s'], c.expected['R'], c.expected['t']), c.expected):.3g}: refit "
          "Umeyama on all the inliers of the best sample (the 3-point fit alone carries its noise).",

@@ -72,7 +72,11 @@ class PipelineStages:
             return
         try:   # first call only: O_EXCL makes "first" exact across threads and processes
             os.close(os.open(os.path.join(self._scratch, f".failed-{key}"), os.O_CREAT | os.O_EXCL | os.O_WRONLY))
-        except FileExistsError:
+        except FileExistsError:   # a retry: the failed task ran again through these stages (`retried` counts it)
+            try:
+                os.close(os.open(os.path.join(self._scratch, f".retried-{key}"), os.O_CREAT | os.O_WRONLY))
+            except OSError:
+                pass
             return
         _lose_this_worker(self._scratch)
         raise TransientTaskError(f"task {key} failed transiently (simulated: its worker was lost); retry it")
@@ -173,6 +177,13 @@ def _record_where(scratch: str, kind: str, start_ns: int) -> None:
         os.close(os.open(os.path.join(scratch, name), os.O_CREAT | os.O_EXCL | os.O_WRONLY))
     except OSError:
         pass
+
+
+def retried(scratch: str, groups: list[tuple[str, ...]]) -> int:
+    """How many of the flaky tasks (each a group of keys: a verification's two orders) were not both failed and run
+    again through the stages: a run that never called them, or called an unmarked copy instead of retrying."""
+    names = set(os.listdir(scratch))
+    return sum(not any(f".failed-{k}" in names and f".retried-{k}" in names for k in keys) for keys in groups)
 
 
 def _runs(scratch: str | None, kind: str) -> int:

@@ -302,6 +302,24 @@ def pipeline_failing_stages_swapped(image_paths, pairs, stages, out_path, addres
     return _pipeline(image_paths, pairs, stages, out_path, retries=0, batch_size=batch_size)
 
 
+class _UnmarkedWhereFlaky:
+    """The given stages' load and match (their markers show Dask workers), and extract and verify from their unmarked
+    copy (`stages._reliable()`) wherever the run is armed to fail (`stages._flaky`, read off the grader's source;
+    self-study only: graded mode refuses `_` names). The given stages are not changed."""
+
+    def __init__(self, stages):
+        self.load, self.match = stages.load, stages.match
+        source = stages._reliable() if stages._flaky else stages
+        self.extract, self.verify = source.extract, source.verify
+
+
+def pipeline_unmarked_where_flaky(image_paths, pairs, stages, out_path, address=None, n_workers=2, retries=3,
+                                  batch_size=64):
+    """No retries: the tasks that would fail go through the stages' unmarked copy. Full marks in self-study (issue 29:
+    seeds 0-3) before the transient row wanted each task armed to fail failed and run again through the given stages."""
+    return _pipeline(image_paths, pairs, _UnmarkedWhereFlaky(stages), out_path, retries=0, batch_size=batch_size)
+
+
 MUTANTS += [
     ("10.10", "a serial loop, no Dask", pipeline_serial_loop, "ran outside a Dask worker"),
     ("10.10", "LocalCluster left open", pipeline_cluster_left_open, "still running"),
@@ -315,6 +333,8 @@ MUTANTS += [
     ("10.10", "finished batches kept in memory, not on disk", pipeline_checkpoints_in_memory, "pairs again"),
     ("10.10", "the stages' unmarked copy after a crash", pipeline_reliable_stages_after_a_crash, "no call of its stages"),
     ("10.10", "failing stages swapped for reliable ones, no retries", pipeline_failing_stages_swapped, "changed the stages"),
+    ("10.10", "the unmarked copy where the run is armed to fail, no retries", pipeline_unmarked_where_flaky,
+     "not run again through the stages"),
 ]
 
 
@@ -517,7 +537,19 @@ def focal_least_squares(X, C):
     return _focal_lsq(p, q, C.ravel())
 
 
+def focal_confidence_cut(X, C):
+    """Least squares on the pixels whose confidence is above 0.9 (a cut in the gap between this generator's sky, C <
+    0.5, and ground, C >= 1), unweighted."""
+    X, C = np.asarray(X, float), np.asarray(C, float)
+    H, W = C.shape
+    u, v = np.meshgrid(np.arange(W) - (W - 1) / 2, np.arange(H) - (H - 1) / 2)
+    p, q = np.stack([u, v], -1).reshape(-1, 2), (X[..., :2] / X[..., 2:]).reshape(-1, 2)
+    keep = C.ravel() > 0.9
+    return float(np.sum(p[keep] * q[keep]) / np.sum(q[keep] ** 2))
+
+
 MUTANTS += [
+    ("10.17", "confidence > 0.9, then least squares", focal_confidence_cut, "relative"),   # issue 29: 40/40 seeds before
     ("10.17", "pixels from the corner", focal_uncentred, "principal point"),
     ("10.17", "axes swapped", focal_axes_swapped, "the truth"),
     ("10.17", "squared loss", focal_least_squares, "Weiszfeld"),
