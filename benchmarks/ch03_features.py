@@ -47,6 +47,18 @@ Rejected this round: the orientation inside the 64-keypoint blocks (per-call set
 corners by a 16-bit code before scoring (the uint8 scoring made it pointless), reusing scratch buffers in
 FAST's pre-test (no gain), gathering Harris windows as runs of a flattened image (slower than
 sliding_window_view's fancy index for 9-byte runs).
+Fourth round (2026-12-06, issue 32). Profile of graf1 + graf3 (process CPU, load 14-16, ~60 ms in all): FAST 17-28
+ms (pre-test 9, candidate scoring 9, circle gathers 4, NMS 5), descriptors 18 (turned reads ~11, box sums 4,
+orientation 3), pyramid 10, Harris on every FAST corner 7-8. FAST's pre-test now also asks for one whole opposite
+pair brighter (darker): an arc of 9, i, ..., i + 8, holds both its ends. That costs two uint8 passes and rules
+out straight edges: on graf's 16 levels 301k -> 176k candidates (115k corners), FAST 27.6 -> 17.7 ms. Same
+keypoints and descriptor bits on all 12 images; fast_detect identical on 696 calls (their 116 pyramid levels and
+20 random 60 x 70 images, thresholds 5 / 20 / 40, with and without NMS). Old (3bf82bf) / new / OpenCV ORB
+interleaved (process CPU, medians): 30 rounds at load 15: 73.1 -> 65.3 vs 18.5 ms (3.96x -> 3.54x); 40 rounds
+at load 12-13: 65.9 -> 57.6 vs 16.3 ms (4.03x -> 3.52x), 12 % less CPU. This benchmark's taking-turns row: 63 / 18
+ms = 3.52x at load 10.5; graf's MMA@3px 0.71 vs 0.73, as before. Rejected: Harris gradients as two long
+subtractions over the windows laid end to end (6.0 -> 6.7 ms: 81 values a window instead of 63, two fresh
+arrays), FAST's circles read by np.take(out=) into one array instead of np.stack (16.4 -> 16.8 ms).
 ORB-like's MMA depends on its learned pattern: from one learning seed to the next, graf's MMA@3px
 moves by +-0.04 (learn_brief_pattern's docstring).
 """

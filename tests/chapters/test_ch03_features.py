@@ -39,6 +39,17 @@ def test_reference_fast_equals_opencv_exactly():
         assert ch3.set_f1_error(mine, ch3.cv_fast(img, 20, nms)) == 0.0
 
 
+def test_reference_fast_pretest_keeps_every_opencv_corner_on_noise():
+    # fast_detect's pre-test only drops pixels that cannot be corners: on noise (every arc configuration
+    # occurs) at low, default and high thresholds it still finds exactly cv2.FastFeatureDetector's corners
+    rng = np.random.default_rng(1)
+    for _ in range(10):
+        img = rng.integers(0, 256, (40, 50), dtype=np.uint8)
+        for t in (5, 20, 40):
+            for nms in (False, True):
+                assert ch3.set_f1_error(features.fast_detect(img, t, nms), ch3.cv_fast(img, t, nms)) == 0.0
+
+
 def test_default_opencv_sift_is_told_about_its_upscaling_offset():
     # cv2.SIFT's default upscaling puts every keypoint 0.25 px right of and below the pixel-centre convention;
     # the notebook says so, and the sub-pixel blob case names it (enable_precise_upscale=True passes, above).
