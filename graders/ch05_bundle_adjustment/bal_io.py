@@ -2,14 +2,12 @@
 from __future__ import annotations
 
 import io
-import os
-import tempfile
 from functools import lru_cache
 
 import numpy as np
 
 from graders.kit import datasets
-from graders.core.engine import Case, Exercise, Hint, OutputError, as_array, like, register
+from graders.core.engine import Case, Exercise, Hint, OutputError, as_array, like, register, with_file
 from graders.oracles.bundle_adjust import bal_project as gt_project
 
 from graders.core.memo import cached, val
@@ -49,18 +47,6 @@ def write_bal(path, cameras, points, cam_idx, pt_idx, obs, per_line: int = 1) ->
         f.write(bal_text(cameras, points, cam_idx, pt_idx, obs, per_line))
 
 
-def _read_from_temporary_file(text: str):
-    """How 5.5 calls the learner: with the path of a BAL file that exists only during the call (a
-    temporary folder removed afterwards, also when the learner's code raises or is stopped)."""
-    def call(fn):
-        with tempfile.TemporaryDirectory(prefix="cv3d_ch05_") as folder:
-            path = os.path.join(folder, "problem.txt")
-            with open(path, "w") as f:
-                f.write(text)
-            return fn(path)
-    return call
-
-
 def cases_read_bal(rng: np.random.Generator) -> list[Case]:
     out = []
     for name, per_line, kw in [("BAL layout, one number per line", 1, dict(n_cams=4, n_points=30)),
@@ -70,12 +56,12 @@ def cases_read_bal(rng: np.random.Generator) -> list[Case]:
         expected = gt_read_bal(io.StringIO(text))
         # 1e-9: the file holds 15-17 significant digits; parsing them is exact to ~1e-16 relative.
         out.append(Case(name, ("problem.txt",), expected, _metric_read, 1e-9, "rel.", convert=_convert_read,
-                        call=_read_from_temporary_file(text), key=f"synthetic-{per_line}-per-line"))
+                        call=with_file("problem.txt", text), key=f"synthetic-{per_line}-per-line"))
     if datasets.available("bal"):
         path = datasets.path("bal", "problem-49-7776-pre.txt")
         out.append(Case("real: BAL problem-49-7776-pre (49 cameras, 7,776 points, 31,843 observations)",
-                        (str(path),), _real_bal(), _metric_read, 1e-9, "rel.", convert=_convert_read,
-                        key="real-bal-49", tags=("real",)))
+                        ("problem.txt",), _real_bal(), _metric_read, 1e-9, "rel.", convert=_convert_read,
+                        call=with_file("problem.txt", path), key="real-bal-49", tags=("real",)))
     return out
 
 

@@ -25,7 +25,7 @@ import tempfile
 import numpy as np
 
 from graders.kit import datasets
-from graders.core.engine import Case, Exercise, Hint, OutputError, like, raised, register
+from graders.core.engine import Case, Exercise, Hint, OutputError, like, raised, register, with_file
 from graders.core.sandbox import folder_for_learner, read_text_no_link
 
 from .manifold import gt_exp, random_poses
@@ -135,17 +135,6 @@ def _without_vertices(rng: np.random.Generator, text: str, clutter: bool) -> str
     return "\n".join(head + lines) + "\n"
 
 
-def _from_temporary_file(text: str):
-    """How 6.8 calls the learner: with the path of a g2o file that exists only during the call."""
-    def call(fn):
-        with tempfile.TemporaryDirectory(prefix="cv3d_ch06_") as folder:
-            path = os.path.join(folder, "graph.g2o")
-            with open(path, "w") as f:
-                f.write(text)
-            return fn(path)
-    return call
-
-
 def _expected_from_text(text: str) -> dict:
     with tempfile.TemporaryDirectory(prefix="cv3d_ch06_") as folder:
         path = os.path.join(folder, "graph.g2o")
@@ -239,22 +228,22 @@ HINTS = [
 def cases_read_g2o(rng: np.random.Generator):
     yield Case("SE(2): ids out of order and not contiguous, full information", ("graph.g2o",),
                _expected_from_text(t := _se2_text(rng)), _metric, 1e-9, "max", convert=_convert,
-               call=_from_temporary_file(t), key="synthetic-se2")
+               call=with_file("graph.g2o", t), key="synthetic-se2")
     yield Case("SE(3): written by gtsam.writeG2o, full information", ("graph.g2o",),
                _expected_from_text(t3 := _se3_text(rng)), _metric, 1e-9, "max", convert=_convert,
-               call=_from_temporary_file(t3), key="synthetic-se3")
+               call=with_file("graph.g2o", t3), key="synthetic-se3")
     t = _without_vertices(rng, _se2_text(rng), clutter=True)
     yield Case("SE(2) without VERTEX lines (start: the odometry chain), with comments, FIX and landmark lines to skip",
                ("graph.g2o",), _expected_from_text(t), _metric, 1e-9, "max", convert=_convert,
-               call=_from_temporary_file(t), key="no-vertices-se2")
+               call=with_file("graph.g2o", t), key="no-vertices-se2")
     t = _without_vertices(rng, _se3_text(rng), clutter=False)
     yield Case("SE(3) without VERTEX lines (start: the odometry chain)", ("graph.g2o",), _expected_from_text(t),
-               _metric, 1e-9, "max", convert=_convert, call=_from_temporary_file(t), key="no-vertices-se3")
+               _metric, 1e-9, "max", convert=_convert, call=with_file("graph.g2o", t), key="no-vertices-se3")
     if datasets.available("posegraph"):
         for name, what in (("intel", "1,728 poses, 2,512 edges"), ("garage", "1,661 poses, 6,275 edges")):
-            path = str(datasets.path("posegraph", POSEGRAPH_FILES[name]))
-            yield Case(f"real: {POSEGRAPH_FILES[name]} ({what})", (path,), _real(name), _metric, 1e-9, "max",
-                       convert=_convert, key=f"real-{name}", tags=("real",))
+            path = datasets.path("posegraph", POSEGRAPH_FILES[name])
+            yield Case(f"real: {POSEGRAPH_FILES[name]} ({what})", (path.name,), _real(name), _metric, 1e-9, "max",
+                       convert=_convert, call=with_file(path.name, path), key=f"real-{name}", tags=("real",))
 
 
 _REAL: dict = {}

@@ -12,11 +12,15 @@ from __future__ import annotations
 
 import copy
 import importlib
+import os
 import re
 import secrets
+import shutil
+import tempfile
 import time
 import types
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
@@ -286,6 +290,22 @@ class shared_run:
         if not ok:
             raise value
         return value
+
+
+def with_file(name: str, content: "str | Path") -> Callable[[Callable], Any]:
+    """`Case(call=...)` for an exercise that reads a file: the learner is called with the path of a copy named
+    `name` (of the text, or of the file at `content`) that exists only during the call, in a temporary folder the
+    learner may read (in graded mode its exchange folder: the data folders themselves are hidden from it)."""
+    def call(fn: Callable) -> Any:
+        with tempfile.TemporaryDirectory(prefix="cv3d_file_") as folder:
+            path = os.path.join(folder, name)
+            if isinstance(content, Path):
+                shutil.copyfile(content, path)
+            else:
+                with open(path, "w") as f:
+                    f.write(content)
+            return fn(path)
+    return call
 
 
 def _rebound(fn: Callable, memo: dict) -> Callable:

@@ -51,7 +51,7 @@ from graders.core.sandbox import TimeLimitExceeded, current_cotangent
 from graders.grading.callbacks import MAX_CONCURRENT, CallbackServing
 from graders.grading.learner import receive_bytes, send
 from graders.grading import users
-from graders.kit import diskcache
+from graders.kit import datasets, diskcache
 from graders.grading.processes import WALL_FACTOR, PidsLimit, die_with_parent
 from graders.grading.policy import refusal
 from graders.grading.quota import DISK_GB, POLL_S, DiskQuota, empty, unmount_stale
@@ -87,8 +87,7 @@ def level() -> str:
 
 
 def _limits(memory_gb: float, pids: PidsLimit, max_file_gb: float) -> Callable[[], None]:
-    # Started from the judge's main thread (which lives as long as the judge), the learner dies with the judge:
-    # a judge killed mid-grade leaves no learner behind. From another thread, the next run's stale-cgroup sweep.
+    # Started by the judge's main thread (alive as long as the judge), the learner dies with a killed judge.
     arm = die_with_parent() if threading.current_thread() is threading.main_thread() else (lambda: None)
 
     def apply() -> None:   # in the child, between fork and exec
@@ -219,6 +218,11 @@ def _distribution_folders(library: str) -> tuple[str, ...]:
 CHECKOUT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))   # holds graders/
 
 
+def _data_folders() -> list[str]:
+    """$COURSE_DATA and the cache: datasets with their ground truth; the learner gets arrays or a file's copy."""
+    return [p for p in (os.path.realpath(r) for r in datasets.roots()) if p != "/"]
+
+
 def _course_roots() -> list[str]:
     """Folders that hold the course's packages (graders, solutions, benchmarks): this checkout, and any an
     editable install points to."""
@@ -321,7 +325,7 @@ class LearnerProcess(CallbackServing):
             grades = os.path.dirname(os.path.dirname(os.path.dirname(self.private)))   # the grader's temp root
             hide += ["/root", "/home", "/autograder", "/etc/shadow", "/etc/gshadow", "/srv", "/mnt", "/media",
                      *_course_roots(), *(lib for name in self.refused for lib in _distribution_folders(name))]
-            hide += [grades] if grades not in ("/", "") else []
+            hide += _data_folders() + ([grades] if grades not in ("/", "") else [])
         # The test suite grading the course's own reference (and mutant catalogues) in graded mode, never
         # set to grade learners: this checkout's `solutions` and `tests/mutants` stay importable and visible.
         reference = os.environ.get("CV3D_GRADE_REFERENCE") == "1"

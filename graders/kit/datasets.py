@@ -71,15 +71,15 @@ def _course_data() -> Path | None:
     return Path(value).expanduser() if value else None
 
 
-def _roots() -> list[Path]:
+def roots() -> list[Path]:
     """Folders searched, in order: $COURSE_DATA (if set and present), then the cache (if present)."""
     return [p for p in (_course_data(), cache_dir()) if p is not None and p.is_dir()]
 
 
 def data_root() -> Path | None:
     """$COURSE_DATA if set and present, else the cache folder if present, else None."""
-    roots = _roots()
-    return roots[0] if roots else None
+    found = roots()
+    return found[0] if found else None
 
 
 def _missing_message(dataset: str, what: str) -> str:
@@ -105,7 +105,7 @@ def path(dataset: str, file: str | None = None) -> Path:
     known = [f["path"] for f in entry["files"]]
     if rel not in known:
         raise KeyError(f"dataset {dataset!r} has no file {file!r}; it has {[k[len(folder) + 1:] for k in known]}")
-    for root in _roots():
+    for root in roots():
         if (root / rel).is_file():
             return root / rel
     raise DatasetMissing(_missing_message(dataset, rel))
@@ -114,7 +114,7 @@ def path(dataset: str, file: str | None = None) -> Path:
 def where(dataset: str) -> Path | None:
     """The first of $COURSE_DATA / cache that holds every file of `dataset`, else None."""
     wanted = [f["path"] for f in info(dataset)["files"]]
-    return next((root for root in _roots() if all((root / p).is_file() for p in wanted)), None)
+    return next((root for root in roots() if all((root / p).is_file() for p in wanted)), None)
 
 
 def available(dataset: str) -> bool:
@@ -166,7 +166,7 @@ def verify(dataset: str, root: Path | None = None) -> list[str]:
     the dataset's folder."""
     entry = info(dataset)
     if root is None:
-        root = next((r for r in _roots() if (r / entry["folder"]).is_dir()), None)
+        root = next((r for r in roots() if (r / entry["folder"]).is_dir()), None)
         if root is None:
             return [_missing_message(dataset, entry["folder"] + "/")]
     problems = []

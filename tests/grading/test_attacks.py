@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from graders.grading import isolation, processes, worker
-from graders.core.engine import Case, Exercise, get, shared_run
+from graders.core.engine import Case, Exercise, get, shared_run, with_file
 from graders.grading.isolation import sandbox_level
 
 LEVELS = ["namespaces", "process"]
@@ -139,6 +139,25 @@ def test_forbidden_files_are_absent_from_the_learner_view(monkeypatch):
         seen = learner.function("probe", get("1.5"))()
     assert all(not listing for listing in seen), seen
 
+
+def test_the_datasets_and_their_ground_truth_are_absent_from_the_learner_view(monkeypatch):
+    """Namespaces: $COURSE_DATA (real pairs with their ground truth) is hidden; a file an exercise reads (5.5's
+    BAL problem, 6.8's g2o graphs) reaches the learner as a copy in its exchange folder (engine.with_file)."""
+    from graders.kit import datasets
+    if not NAMESPACES or not datasets.roots():
+        pytest.skip("needs namespaces and a data folder")
+    data = datasets.roots()[0]
+    file = min((p for p in data.rglob("*") if p.is_file() and p.stat().st_size < 1 << 20), key=lambda p: str(p))
+    monkeypatch.setattr(isolation, "_LEVEL", "namespaces")
+    source = ("import os\ndef probe(path):\n    return [os.listdir(%r), os.path.exists(%r), open(path, 'rb').read()]\n"
+              % (str(data), str(file)))
+    with isolation.LearnerProcess(source) as learner:
+        probe = learner.function("probe", get("1.5"))
+        monkeypatch.setattr(tempfile, "tempdir", learner.exchange)   # as the judge does for each exercise
+        monkeypatch.setattr(tempfile, "mkdtemp", tempfile.mkdtemp)
+        worker._judge_folders_readable_by(learner)
+        seen = with_file("problem.txt", file)(probe)
+    assert seen[:2] == [[], False] and seen[2] == file.read_bytes(), (file, seen[:2])
 
 
 def test_the_hidden_library_folders_are_what_importlib_metadata_lists():
