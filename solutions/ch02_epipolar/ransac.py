@@ -62,7 +62,8 @@ class _LocalOptimiser:
         self.subset, self.batched, self.band = subset or max(2 * sample_size, 12), batched, band
 
     def cost_of(self, r):
-        return np.minimum(r * r, self.tau2).sum(-1)
+        r2 = r * r
+        return np.minimum(r2, self.tau2, out=r2).sum(-1)    # MSAC: sum_i min(r_i², threshold²)
 
     def _attempt(self, best, inliers):
         """Refit on `inliers`; keep the refit in `best` (model, cost, residuals, the mask it was
