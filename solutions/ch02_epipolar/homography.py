@@ -62,5 +62,6 @@ def transfer_h(H: np.ndarray, x1h: np.ndarray, x2: np.ndarray) -> np.ndarray:
             o = out[block]                      # written in place: no (M, N) temporaries
             np.add(d[:, 0], d[:, 1], out=o)
             np.sqrt(o, out=o)                   # (np.hypot is ~10x slower and pixels cannot overflow)
-            o[np.isnan(o)] = np.inf             # a point mapped to infinity (0 / 0): never an inlier
+            if np.isnan(o.sum()):               # (a sum of distances is NaN only if one is: one pass, no mask)
+                o[np.isnan(o)] = np.inf         # a point mapped to infinity (0 / 0): never an inlier
     return out.reshape(H.shape[:-2] + (len(x1h),))

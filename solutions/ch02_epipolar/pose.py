@@ -47,10 +47,14 @@ def recover_pose(E: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndar
     E: (3, 3); x1, x2: (N, 2) normalised coordinates. Returns (R: (3, 3), t: (3,) unit), X_2 = R X_1 + t.
     """
     best, best_count = None, -1
-    for R, t in decompose_essential(E):
+    candidates = decompose_essential(E)
+    for R, t in candidates[::2]:                       # (R, t); its partner (R, -t) follows in the list
+        # Flipping t flips the sign of both depths (z1 a + z2 b = -t is linear in t): one
+        # triangulation counts the points in front of both cameras for t and for -t.
         z1, z2 = triangulate_depths(R, t, x1, x2)
-        count = int(np.sum((z1 > 0) & (z2 > 0)))
-        if count > best_count:
-            best, best_count = (R, t), count
+        for sign in (1.0, -1.0):
+            count = int(np.count_nonzero((sign * z1 > 0) & (sign * z2 > 0)))
+            if count > best_count:
+                best, best_count = (R, sign * t), count
     return best
 

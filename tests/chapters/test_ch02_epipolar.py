@@ -175,3 +175,18 @@ def test_usac_comparison_shows_what_the_notebook_says():
     # lowest held-out error at 30 % wrong matches (in 12 of 12 draws tried).
     at = {m: cell[(m, 0.3, 1.5)]["rms_px"] for m in ch2.USAC_METHODS}
     assert min(at, key=at.get) == "USAC_MAGSAC", at
+
+
+# ------------------------------------------------------------ the reference RANSAC's building blocks (issue 32)
+
+def test_normal_blocks_are_each_matchs_share_of_the_normal_matrix():
+    # `normal_blocks` (filled one row of the triangle at a time) against AᵀWA built directly: for any weights w,
+    # w @ blocks is the upper triangle (numpy's triu order, as its docstring says) of Aᵀ diag(w) A, with one row of
+    # A per match (F, E) or two (H's DLT).
+    from solutions.ch02_epipolar.ransac import normal_blocks
+    rng = np.random.default_rng(0)
+    for r in (1, 2):
+        rows, w = rng.standard_normal((40, r, 9)), rng.random(40)
+        A = rows.reshape(-1, 9)
+        want = (A.T @ (np.repeat(w, r)[:, None] * A))[np.triu_indices(9)]
+        assert np.allclose(w @ normal_blocks(rows), want, rtol=1e-12, atol=1e-12)
