@@ -17,7 +17,10 @@ the training views than the start: near-transparent or hidden padding does not c
 (3)-(5) count only with (1) met; (6) densification pays: the held-out PSNR at least GAIN_DB above the learner's
 own fit from the same start with no room to densify (a second call: strays removed, max_gaussians = the start's
 count), since a fit that never densifies, trained longer than asked, reaches (1) and (2) on most scenes and a count
-can be padded with copies.
+can be padded with copies; (7) densification follows the gradient: a third call on a probe scene where one Gaussian
+alone is wrong and the budget leaves room for two more (PROBE_*), since (6) trusts the learner's second run (a fit
+that trains that run worse passed it) and cannot tell gradient-driven densification from splitting everything once
+after training.
 """
 from __future__ import annotations
 
@@ -81,18 +84,23 @@ DRAWS = 0.01
 # Fairness (python -m graders fairness --only 8.25, with this row): 200 fresh seeds, 0 failures.
 GAIN_DB = 1.0
 WALL_SIDE = 6          # the wall is WALL_SIDE² Gaussians, first in the truth; the panel's 9 follow
-# The selection probe (a third call): does densification go where the 2D position gradient is? The draw's panel is
-# seen alone with PROBE_DISTRACTORS small discs in its plane, on a ring 1.25-1.35 m from its centre (outside its
-# footprint in every training view), exact from the start; the panel itself starts as one grey Gaussian (σ 15 cm,
-# o = 0.5) at a random index that is neither first nor last, and max_gaussians leaves room for one Gaussian more.
-# Splitting or cloning the largest accumulated 2D gradient picks the panel's Gaussian: the exact discs see only the
-# residual that reaches them past the panel's footprint. Measured with the reference on seeds 0-39 of this layout:
-# at the first densification the panel's accumulated gradient is 1.7-6.3x the largest disc's; at the end 2 drawing
-# Gaussians lie within PROBE_NEAR of the panel's centre, 0.35-0.49 m apart (seeds 0-11). Splitting in index order,
-# trained or not, splits a disc (1 near the panel); a copy split in place of the most opaque Gaussian is a disc or
-# coincides with the panel's (0.00 m apart).
+# The selection probe (a third call): does densification go where the 2D position gradient is (Kerbl et al. 2023,
+# Sec. 5.2: densify where the view-space positional gradient is large; here the largest, within the budget)? The
+# draw's panel is seen alone with PROBE_DISTRACTORS small discs in its plane, on a ring PROBE_RING-PROBE_RING + 0.1 m
+# from its centre, exact from the start; the panel itself starts as one grey Gaussian (σ 15 cm, o = 0.5) at a random
+# index not among the first or last PROBE_ROOM, and max_gaussians leaves room for PROBE_ROOM more. The exact discs see
+# only the residual that reaches them past the panel's footprint, so the panel's Gaussian leads the accumulated 2D
+# gradient. Measured with the reference (ring 1.25 m, room 1, seeds 0-39): at the first densification the panel's
+# accumulated gradient was 1.7-6.3x the largest disc's, and 2 drawing Gaussians ended within PROBE_NEAR of the panel,
+# 0.35-0.49 m apart (seeds 0-11); the fairness sweep then found 1 of 178 fresh seeds (4170328609) where a disc led by
+# 1 % (the panel's Gaussian grows over the ring while it trains), so the ring moved out to 1.35 m and the room to 2
+# (that seed: the panel's Gaussian ranks second, within the room). Splitting in index order, trained or not, splits
+# discs (1 near the panel); a copy split in place of the most opaque Gaussian is a disc or coincides with the panel's
+# (0.00 m apart). Not separated: a densifier that picks the largest Gaussians (the panel's is the largest here).
 PROBE_DISTRACTORS = 8
-PROBE_NEAR = 0.9       # m from the panel's centre; the discs sit ≥ 1.25 m away
+PROBE_RING = 1.35      # m: the discs' distance from the panel's centre, up to 0.1 more
+PROBE_ROOM = 2         # max_gaussians = the start's count + PROBE_ROOM
+PROBE_NEAR = 0.9       # m from the panel's centre; the discs sit ≥ PROBE_RING away
 PROBE_APART = 0.01     # m: two Gaussians at one place (a copy never trained apart) count once
 
 
@@ -227,14 +235,14 @@ def probe_scene(rng: np.random.Generator, views: dict, hidden: dict) -> tuple[di
     pan = {k: np.asarray(v)[WALL_SIDE ** 2:] for k, v in hidden["truth"].items()}
     c, n = pan["mu"].mean(0), PROBE_DISTRACTORS
     ang = rng.uniform(0, 2 * np.pi) + np.linspace(0, 2 * np.pi, n, endpoint=False)
-    rad = rng.uniform(1.25, 1.35, n)
+    rad = rng.uniform(PROBE_RING, PROBE_RING + 0.1, n)
     discs = {"mu": np.c_[c[0] + rad * np.cos(ang), c[1] + rad * np.sin(ang), np.full(n, c[2])],
              "q": Rotation.from_euler("z", rng.uniform(0, np.pi, (n, 1))).as_quat()[:, [3, 0, 1, 2]],
              "s": np.c_[rng.uniform(0.04, 0.07, (n, 2)), np.full(n, 0.01)],
              "color": rng.uniform(0.1, 0.9, (n, 3)), "opacity": rng.uniform(0.7, 0.99, n)}
     one = {"mu": c[None], "q": np.array([[1.0, 0, 0, 0]]), "s": np.full((1, 3), 0.15), "color": np.full((1, 3), 0.5),
            "opacity": np.array([0.5])}
-    at = int(rng.integers(1, n))                        # neither first nor last: no fixed index finds it
+    at = int(rng.integers(PROBE_ROOM, n + 1 - PROBE_ROOM))   # not among the first or last PROBE_ROOM: no index rule finds it
     start = {k: np.insert(discs[k], at, one[k], axis=0) for k in discs}
     truth = _join(discs, pan)
     cams = list(zip(views["Ks"], views["Rs"], views["ts"]))
@@ -298,7 +306,7 @@ def _fit3d_cases(rng: np.random.Generator):
 
     def probe_call(fn):
         with torch_threads(1):
-            return fn(copy.deepcopy(p_views), copy.deepcopy(p_start), STEPS, probe["n"] + 1)
+            return fn(copy.deepcopy(p_views), copy.deepcopy(p_start), STEPS, probe["n"] + PROBE_ROOM)
     held = lambda o, e: max(0.0, PSNR_BAR - _held_psnr(o, info))       # dB short of the bar
     # 26 dB: see PSNR_BAR's measurement. The rows below are guards the initialisation meets: they count only
     # with a fit that passes the held-out bar (99 otherwise), so returning init earns nothing.
@@ -321,7 +329,7 @@ def _fit3d_cases(rng: np.random.Generator):
                call=lambda fn: (run(fn), run_no_room(fn)), info=info, key="gain")
     # PROBE_*: see their measurement. The third run is the learner's own code on a scene where one Gaussian is wrong.
     yield Case(f"densification follows the gradient: a scene of {probe['n'] - 1} exact discs and one grey Gaussian for a "
-               f"panel, max_gaussians = {probe['n'] + 1}: the one new Gaussian must go to the panel", args, 0.0,
+               f"panel, max_gaussians = {probe['n'] + PROBE_ROOM}: a new Gaussian must go to the panel", args, 0.0,
                lambda o, e: _probe_short(o, probe), 0.0, "(1: not at the panel)", convert=_convert, call=probe_call,
                info=dict(info, probe=probe), key="selection")
     yield Case(f"at most {BUDGET} Gaussians, with the held-out views fitted", args, BUDGET,
