@@ -98,7 +98,8 @@ WALL_SIDE = 6          # the wall is WALL_SIDE² Gaussians, first in the truth; 
 # discs (1 near the panel); a copy split in place of the most opaque Gaussian is a disc or coincides with the panel's
 # (0.00 m apart). Not separated: a densifier that picks the largest Gaussians (the panel's is the largest here).
 # Fairness of this row (the reference on the probe of 400 fresh seeds, the judge's own functions): 0 failures, the two
-# Gaussians at the panel at least 0.305 m apart. The whole exercise with room 1: 177 of 178 fresh seeds (the one above).
+# Gaussians at the panel at least 0.305 m apart. The whole exercise with room 1: 177 of 178 fresh seeds (the one above);
+# as it stands (python -m graders fairness --only 8.25): 200 fresh seeds, 0 failures, 2.4 s a grade.
 PROBE_DISTRACTORS = 8
 PROBE_RING = 1.35      # m: the discs' distance from the panel's centre, up to 0.1 more
 PROBE_ROOM = 2         # max_gaussians = the start's count + PROBE_ROOM
