@@ -67,6 +67,19 @@ corners_method_ignored = _corners_with(lambda Sxx, Sxy, Syy, k, m: _harris(Sxx, 
 corners_always_shi_tomasi = _corners_with(lambda Sxx, Sxy, Syy, k, m: _lambda_min(Sxx, Sxy, Syy))
 
 
+# Issue 29: each of these kept full marks on 5 of 5 seeds (radius 2 of 5) before the parameters row.
+def corners_sigma_ignored(img, n=500, method="harris", k=0.04, sigma=1.5, radius=3):
+    return F.detect_corners(img, n, method, k, 1.5, radius)
+
+
+def corners_k_ignored(img, n=500, method="harris", k=0.04, sigma=1.5, radius=3):
+    return F.detect_corners(img, n, method, 0.04, sigma, radius)
+
+
+def corners_radius_ignored(img, n=500, method="harris", k=0.04, sigma=1.5, radius=3):
+    return F.detect_corners(img, n, method, k, sigma, 3)
+
+
 # ----------------------------------------------------------------- 3.6 fast_detect
 
 def fast_no_nms(img, threshold=20, nms=True):
@@ -468,6 +481,9 @@ MUTANTS = [
     ("3.5", "Shi-Tomasi with the larger eigenvalue", shi_tomasi_larger, "the larger one is large on every edge"),
     ("3.5", "method ignored: Harris for both", corners_method_ignored, "branch on `method`"),
     ("3.5", "method ignored: Shi-Tomasi for both", corners_always_shi_tomasi, "ranks the crossings"),
+    ("3.5", "sigma ignored (1.5)", corners_sigma_ignored, "default sigma = 1.5"),
+    ("3.5", "k ignored (0.04)", corners_k_ignored, "those of k = 0.04"),
+    ("3.5", "radius ignored (3)", corners_radius_ignored, "those of radius = 3"),
     ("3.6", "no NMS", fast_no_nms, "before non-maximum suppression"),
     ("3.6", "FAST-12", fast_12, "12 contiguous pixels"),
     ("3.6", "arc does not wrap", fast_no_wrap, "wraps around"),
