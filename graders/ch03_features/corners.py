@@ -185,23 +185,34 @@ PARAMETERS = {"k": 0.15, "sigma": 3.0, "radius": 10}   # none of them the defaul
 
 
 def _set_error(out, exp):
-    """1 - the mean of precision and recall within 1 px (0: the same corners)."""
+    """1 - the mean of precision and recall within 1 px, over the corners at least MARGIN px inside the image
+    (0: the same corners). exp: {"corners": (n, 2), "shape": (H, W)}."""
     k = np.asarray(out, float)
     if len(k) == 0:
         raise OutputError("no corners")
-    d = np.linalg.norm(k[:, None] - exp[None], axis=2)
+    H, W = exp["shape"]
+    inside = lambda p: p[np.all((p >= MARGIN) & (p <= [W - 1 - MARGIN, H - 1 - MARGIN]), axis=1)]  # noqa: E731
+    a, b = inside(k), inside(exp["corners"])
+    if len(a) == 0 or len(b) == 0:
+        return 1.0
+    d = np.linalg.norm(a[:, None] - b[None], axis=2)
     return float(1 - 0.5 * (np.mean(d.min(1) <= 1.0) + np.mean(d.min(0) <= 1.0)))
+
+
+# Within 3 sigma of the 8 px border band the response depends on how gradients are taken at the image's edge
+# (np.gradient's one-sided differences, cv2.Sobel's reflection), which the spec leaves open: 8 + 3 * 3 + 3 px.
+MARGIN = 20
 
 
 def _parameters_case(rng: np.random.Generator) -> Case:
     """k, sigma and radius away from their defaults (issue 29: code that ignored any one of them kept full marks):
-    the 100 strongest Harris corners against the spec on OpenCV's filters with the same arguments. 0.07: the
-    reference differs by at most 0.02 (100 draws, seven textures: np.gradient's one-sided differences at the border
-    and ties at the 100th corner); ignoring sigma costs 0.49-0.78, k 0.24-0.83, radius 0.13-0.46.
+    the 100 strongest Harris corners against the spec on OpenCV's filters with the same arguments, compared at
+    least MARGIN px inside. 0.07: the reference differs by at most 0.012 there (151 draws, seven textures; by 0.061
+    with the border band, seed 3068072084); ignoring sigma costs 0.46-0.86, k 0.26-0.88, radius 0.13-0.48.
     cv2.goodFeaturesToTrack (a box window, no sigma) cannot answer it."""
     tex = str(rng.choice(["astronaut", "coffee", "brick", "grass", "gravel", "chelsea", "text"]))
     img = homography_pair(rng, tex)[0]
-    exp = cv_corners_gaussian(img, 100, "harris", **PARAMETERS)
+    exp = {"corners": cv_corners_gaussian(img, 100, "harris", **PARAMETERS), "shape": img.shape}
     args = ", ".join(f"{k} = {v}" for k, v in PARAMETERS.items())
     return Case(f"{tex}, harris with {args}: the spec's 100 corners", (img, 100, "harris"), exp, _set_error, 0.07,
                 "1 - (precision + recall) / 2", convert=lambda o, c: _points(o, c),
@@ -213,7 +224,8 @@ def _ignored_parameter(case, out) -> str | None:
     if case.key != "parameters" or case.metric(out, case.expected) <= case.tol:
         return None
     for name, default in (("sigma", 1.5), ("k", 0.04), ("radius", 3)):
-        alt = cv_corners_gaussian(case.info["img"], 100, "harris", **dict(PARAMETERS, **{name: default}))
+        alt = dict(case.expected, corners=cv_corners_gaussian(case.info["img"], 100, "harris",
+                                                              **dict(PARAMETERS, **{name: default})))
         if case.metric(out, alt) <= case.tol:
             return name
     return None
