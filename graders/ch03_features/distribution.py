@@ -45,6 +45,24 @@ def clustered_keypoints(rng: np.random.Generator, n=1500, size=(640, 480)):
     return kps[order], scores[order]
 
 
+def lattice_keypoints(rng: np.random.Generator, size=(640, 480), blocks=(8, 8), strong=12, weak=12):
+    """A facade: in every block of an 8 x 8 lattice a clump of `strong` keypoints (scores 0.7-1, within 6 px of a
+    random point) and `weak` ones spread over the block (scores 0.35-0.65): (n, 2) (x, y) and (n,) scores.
+    A grid as coarse as the lattice takes the clumps first and leaves the rest of every block empty."""
+    W, H = size
+    bw, bh = W / blocks[0], H / blocks[1]
+    kps, scores = [], []
+    for i in range(blocks[0]):
+        for j in range(blocks[1]):
+            c = rng.uniform([i * bw + 8, j * bh + 8], [(i + 1) * bw - 8, (j + 1) * bh - 8])
+            kps += [c + rng.uniform(-6, 6, (strong, 2)), rng.uniform([i * bw, j * bh], [(i + 1) * bw - 1, (j + 1) * bh - 1],
+                                                                      (weak, 2))]
+            scores += [rng.uniform(0.7, 1.0, strong), rng.uniform(0.35, 0.65, weak)]
+    kps, scores = np.clip(np.concatenate(kps), 0, [W - 1, H - 1]), np.concatenate(scores)
+    order = rng.permutation(len(kps))
+    return kps[order], scores[order]
+
+
 def _coverage(kps, sel, image_size, cells):
     occupied = np.unique(cell_of(kps, image_size, cells))
     return len(np.unique(cell_of(kps[sel], image_size, cells))) / len(occupied)
@@ -73,11 +91,27 @@ def cases_distribute(rng: np.random.Generator) -> list[Case]:
         kps, scores = clustered_keypoints(rng, size=size)
         exp = {"kps": kps, "scores": scores, "size": size, "cells": cells, "n": n}
         out.append(Case(name, (kps, scores, size, n, cells), exp, _distribution_metric, 1.0, "× allowance",
-                        convert=lambda o, c: np.asarray(as_array(o, Case("", (), None, None, 0))).reshape(-1), key=key))
+                        convert=_indices, key=key))
+    # `cells` sets the grid (issue 29: code that always used 8 x 8 kept full marks, as the clustered rows cannot
+    # tell). On a lattice of 8 x 8 clumps with 32 x 24 cells asked for, the default grid leaves 32-38 % of the
+    # occupied cells empty (100 seeds), plain ANMS at most 3 % and the quadtree 9 % (their score gaps 17 % and 9 %),
+    # all judged by the same allowances as above.
+    size, n, cells = (640, 480), 300, (32, 24)
+    kps, scores = lattice_keypoints(rng, size)
+    exp = {"kps": kps, "scores": scores, "size": size, "cells": cells, "n": n}
+    out.append(Case("a facade of 8 × 8 clumps, n = 300, 32 × 24 cells", (kps, scores, size, n, cells), exp,
+                    _distribution_metric, 1.0, "× allowance", convert=_indices, key="lattice", tags=("cells",)))
     return out
 
 
+def _indices(out, case):
+    return np.asarray(as_array(out, Case("", (), None, None, 0))).reshape(-1)
+
+
 DISTRIBUTE_HINTS = [
+    Hint("that is the 8 × 8 grid whatever `cells` asks for: divide the image into cells = (columns, rows) cells.",
+         lambda c, out: "cells" in c.tags and tuple(c.args[4]) != (8, 8)
+         and set(np.asarray(out, int).tolist()) == set(gt_distribute(*c.args[:4], (8, 8)).tolist())),
     Hint("that is the strongest n overall — all on the poster: take the best of every cell first.",
          lambda c, out: set(np.asarray(out, int).tolist()) == set(np.argsort(-c.args[1])[:c.args[3]].tolist())),
     Hint("your picks leave many occupied cells empty, and they are not the strongest either: go round the cells, "

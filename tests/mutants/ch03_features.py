@@ -67,6 +67,19 @@ corners_method_ignored = _corners_with(lambda Sxx, Sxy, Syy, k, m: _harris(Sxx, 
 corners_always_shi_tomasi = _corners_with(lambda Sxx, Sxy, Syy, k, m: _lambda_min(Sxx, Sxy, Syy))
 
 
+# Issue 29: each of these kept full marks on 5 of 5 seeds (radius 2 of 5) before the parameters row.
+def corners_sigma_ignored(img, n=500, method="harris", k=0.04, sigma=1.5, radius=3):
+    return F.detect_corners(img, n, method, k, 1.5, radius)
+
+
+def corners_k_ignored(img, n=500, method="harris", k=0.04, sigma=1.5, radius=3):
+    return F.detect_corners(img, n, method, 0.04, sigma, radius)
+
+
+def corners_radius_ignored(img, n=500, method="harris", k=0.04, sigma=1.5, radius=3):
+    return F.detect_corners(img, n, method, k, sigma, 3)
+
+
 # ----------------------------------------------------------------- 3.6 fast_detect
 
 def fast_no_nms(img, threshold=20, nms=True):
@@ -227,17 +240,49 @@ def sift_hard_bins_unclipped(img, kps):
     return _histograms(F.sample_patches(pyr, kps, F.dominant_orientation(pyr, kps), 18, 0.75), clip=False)
 
 
-def _histograms(P, swap=False, clip=True):
+def sift_hard_bins_no_weight(img, kps):
+    # Issue 29: the clip at 0.2 kept, but each sample dropped into one cell and one angle bin, and no Gaussian
+    # window: full marks on 30 of 30 seeds before the window-weight and cell-interpolation rows.
+    return _histograms(_turned_patches(img, kps))
+
+
+def sift_hard_bins_weighted(img, kps):
+    # The Gaussian window applied, but hard cells and angle bins (no trilinear interpolation).
+    return _histograms(_turned_patches(img, kps), weight=True)
+
+
+def sift_trilinear_no_weight(img, kps):
+    # Trilinear interpolation, but the Gaussian window forgotten.
+    return _histograms(_turned_patches(img, kps), trilinear=True)
+
+
+def _turned_patches(img, kps):
+    kps = np.asarray(kps, float)
+    pyr = F.pyramid(F.gray(img), 5)
+    return F.sample_patches(pyr, kps, F.dominant_orientation(pyr, kps), 18, 0.75)
+
+
+def _histograms(P, swap=False, clip=True, weight=False, trilinear=False):
     gy, gx = np.gradient(P, axis=(1, 2))
     gy, gx = gy[:, 1:-1, 1:-1], gx[:, 1:-1, 1:-1]
     if swap:
         gx, gy = gy, gx
     mag = np.hypot(gx, gy)
-    o = ((np.arctan2(gy, gx) % (2 * np.pi)) / (2 * np.pi) * 8).astype(int) % 8
+    if weight:  # Gaussian of sigma = 8 samples, half the window
+        c = np.arange(16) - 7.5
+        mag = mag * np.exp(-(c[None, :] ** 2 + c[:, None] ** 2) / 128.0)
+    a = (np.arctan2(gy, gx) % (2 * np.pi)) / (2 * np.pi) * 8
     N = len(P)
-    cell = (np.arange(16)[:, None] // 4) * 4 + np.arange(16)[None, :] // 4
-    idx = np.arange(N)[:, None, None] * 128 + cell[None] * 8 + o
-    d = np.bincount(idx.ravel(), mag.ravel(), N * 128).reshape(N, 128)
+    if trilinear:  # tents over the 8 angle bins and over the cell centres (samples 1.5, 5.5, 9.5, 13.5)
+        da = np.abs(a[..., None] - np.arange(8))
+        O = mag[..., None] * np.maximum(0, 1 - np.minimum(da, 8 - da))                       # (N, 16, 16, 8)
+        w = np.maximum(0, 1 - np.abs(np.arange(16)[:, None] - (4 * np.arange(4) + 1.5)) / 4)  # (16, 4)
+        d = np.einsum("nyxo,yi,xj->nijo", O, w, w).reshape(N, 128)
+    else:
+        o = a.astype(int) % 8
+        cell = (np.arange(16)[:, None] // 4) * 4 + np.arange(16)[None, :] // 4
+        idx = np.arange(N)[:, None, None] * 128 + cell[None] * 8 + o
+        d = np.bincount(idx.ravel(), mag.ravel(), N * 128).reshape(N, 128)
     d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
     d = np.minimum(d, 0.2 if clip else 1.0)
     return d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
@@ -289,6 +334,12 @@ def distribute_one_per_cell(kps, scores, image_size, n, cells=(8, 8)):
          + np.floor((np.asarray(kps)[sel, 0] + 0.5) * cells[0] / W))
     _, first = np.unique(c, return_index=True)
     return sel[np.sort(first)]
+
+
+def distribute_cells_ignored(kps, scores, image_size, n, cells=(8, 8)):
+    # Issue 29: the round-robin on a fixed 8 x 8 grid, whatever `cells` says (full marks on 30 of 30 seeds before
+    # the lattice row).
+    return F.distribute_keypoints(kps, scores, image_size, n, (8, 8))
 
 
 def distribute_random(kps, scores, image_size, n, cells=(8, 8)):
@@ -430,6 +481,9 @@ MUTANTS = [
     ("3.5", "Shi-Tomasi with the larger eigenvalue", shi_tomasi_larger, "the larger one is large on every edge"),
     ("3.5", "method ignored: Harris for both", corners_method_ignored, "branch on `method`"),
     ("3.5", "method ignored: Shi-Tomasi for both", corners_always_shi_tomasi, "ranks the crossings"),
+    ("3.5", "sigma ignored (1.5)", corners_sigma_ignored, "default sigma = 1.5"),
+    ("3.5", "k ignored (0.04)", corners_k_ignored, "those of k = 0.04"),
+    ("3.5", "radius ignored (3)", corners_radius_ignored, "those of radius = 3"),
     ("3.6", "no NMS", fast_no_nms, "before non-maximum suppression"),
     ("3.6", "FAST-12", fast_12, "12 contiguous pixels"),
     ("3.6", "arc does not wrap", fast_no_wrap, "wraps around"),
@@ -450,6 +504,9 @@ MUTANTS = [
     ("3.10", "scale ignored", sift_fixed_size, "must grow with the keypoint's sigma"),
     ("3.10", "not normalised", sift_unnormalised, "unit vectors"),
     ("3.10", "hard bins, no Gaussian weight, no clip at 0.2", sift_hard_bins_unclipped, "clip every entry at 0.2"),
+    ("3.10", "hard bins, no Gaussian weight, clipped", sift_hard_bins_no_weight, "Gaussian of sigma = half"),
+    ("3.10", "hard bins, Gaussian weight", sift_hard_bins_weighted, "neighbouring cells' histograms jump"),
+    ("3.10", "trilinear, no Gaussian weight", sift_trilinear_no_weight, "Gaussian of sigma = half"),
     ("3.11", "ratio on squared distances", match_squared_ratio, "squared distances"),
     ("3.11", "ratio inverted", match_ratio_inverted, "inverted"),
     ("3.11", "mutual ignored", match_no_mutual, "mutual=True"),
@@ -457,6 +514,7 @@ MUTANTS = [
     ("3.12", "strongest n", distribute_top_n, "strongest n"),
     ("3.12", "one per cell", distribute_one_per_cell, "distinct indices"),
     ("3.12", "random", distribute_random, "leave many occupied cells empty"),
+    ("3.12", "cells ignored: always 8 × 8", distribute_cells_ignored, "whatever `cells` asks for"),
     ("3.13", "ratio relaxed, still 150 keypoints", too_few_ratio_only, "match (nearly) all detections"),
     ("3.13", "more keypoints, still ratio 0.6", too_few_more_only, "relax the ratio"),
     ("3.13", "ratio test dropped", too_few_no_ratio, "Keep the ratio test"),

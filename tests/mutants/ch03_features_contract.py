@@ -79,7 +79,9 @@ def anms_clustered(case):
 # the library cannot answer that case (those cases must fail).
 _ORB_CANNOT = {"bits": "the bit-by-bit case specifies the course's pattern and box smoothing; "
                        "cv2.ORB has its own learned pattern and Gaussian smoothing"}
-LIBRARY = [Library("3.5", "goodFeaturesToTrack, quality 0.01", cv_gftt_usual),
+_GFTT_CANNOT = {"parameters": "goodFeaturesToTrack sums the structure tensor over a box (blockSize): it has no sigma, "
+                              "and its minimum distance is not the spec's (2 radius + 1)^2 suppression"}
+LIBRARY = [Library("3.5", "goodFeaturesToTrack, quality 0.01", cv_gftt_usual, _GFTT_CANNOT, cannot_must_fail=True),
            Library("3.9", "OpenCV SIFT, precise upscale", cv_sift_keypoints(True)),
            Library("3.7", "OpenCV ORB", cv_orb_descriptors, _ORB_CANNOT, cannot_must_fail=True),
            Library("3.8", "OpenCV batchDistance", cv_hamming_batch),
