@@ -81,6 +81,19 @@ pairs k = l need none, the rest are gathered in cache-sized chunks), the rest of
 (V_j^-1 W_k^T alone ~8 ms), the normal equations ~17 ms. Not tried: block-Jacobi PCG on the implicit S
 (Ceres' ITERATIVE_SCHUR; one implicit product S x costs 6.8 ms in numpy on BAL-49, so ~7 CG iterations
 would eat the assembly it saves) and torch.
+Round 4 (issue 32; f3028e1, `--before` = 3bf82bf, whose row runs its default SuperLU, so the dense-vs-dense
+before/after comes from a separate harness: both packages in one process with one BLAS thread, taking turns,
+8 rounds, load 12-17): dense Schur 1.60 -> 1.51 CPU s (median; 0.94x), same 32 steps, cost equal to 1e-12.
+cProfile (process-time clock) before it: ~60 ms an iteration, of which the Jacobians ~16 ms (J_pt as
+broadcast column-times-row sums ~3 ms), the per-observation V_k, W_k^T ~5 ms, and schur_solve's own lines
+~6 ms (W V^-1 g_p from strided column products of W^T). Now: J_pt = du/dP R and V_k, W_k^T = (w J_pt)^T
+[J_pt, J_cam] as batched matmuls on a contiguous (w J_pt)^T, W V^-1 g_p and g_p as einsums; schur_solve's own
+lines ~1 ms. BAL-49, this benchmark, 5 rounds: run 1 (load 15.4 -> 13.8, chapter 5's fairness beside it):
+one thread 1.58 CPU s (0.99x Ceres' 1.60), two threads 1.73 (1.08x), before 2.21 (SuperLU); run 2 (load
+12.3 -> 10.0): one thread 1.56 (1.01x Ceres' 1.54), two threads 1.78 (1.15x). Costs 1.33443e4 (0.9980x
+Ceres'), 32 steps vs 31. So the one-thread reference is now level with Ceres in CPU (0.99-1.01x), not clearly
+below it. Left: W V^-1 W^T's per-block Python loop (~1,000 blocks an iteration; writing each product with
+matmul(out=) instead of += saves ~0.5 ms of its ~8); the Jacobian's strided J_cam column writes (~4 ms).
 """
 from __future__ import annotations
 
