@@ -165,13 +165,21 @@ def _excess_cost(out, expected) -> float:
 def cases_too_slow(rng: np.random.Generator) -> Iterable[Case]:
     """5.17: one problem, one run of the learner's fix, judged twice: held-out reprojection (as the other
     DEBUG fixes) and the cost it reached against the converged cost (a fix that stops early is not a fix)."""
-    case, truth = debug_too_slow(rng)
+    while True:
+        # A draw whose start leads Ceres to a local minimum is drawn again (a correct fix can end there too): on
+        # seed 2791920782 Ceres ended 250x above the cost at the truth, and the reference 4x above it, 0.502 px
+        # on held-out points (two cameras pulled by a few points stuck far off). Seeds 0-39: Ceres ends at
+        # 0.785-0.786 of the cost at the truth, except seed 37 (1.3e10 x), which is now drawn again.
+        case, truth = debug_too_slow(rng)
+        cams, pts, ci, pi, obs = problem_args(case)
+        c0, p0, _ = colmap_bundle_adjust(cams, pts, ci, pi, obs, tight=True)
+        converged = bal_cost(c0, p0, ci, pi, obs)
+        if converged <= 1.5 * bal_cost(truth["cameras"], truth["points"], ci, pi, obs):
+            break
     run = shared_run(lambda fn, case=case: fn(copy.deepcopy(case)))
     yield Case("hidden problem 1", (case,), truth, _metric_fix, 0.5, "px RMS", convert=_convert_fix, call=run,
                key="hidden-problem-1")
-    cams, pts, ci, pi, obs = problem_args(case)
-    c0, p0, _ = colmap_bundle_adjust(cams, pts, ci, pi, obs, tight=True)
-    expected = {"observations": (ci, pi, obs), "converged_cost": bal_cost(c0, p0, ci, pi, obs)}
+    expected = {"observations": (ci, pi, obs), "converged_cost": converged}
     yield Case("hidden problem 1: your cost / the converged cost − 1", (case,), expected, _excess_cost,
                TOO_SLOW_COST_TOL, "", convert=_convert_fix, call=run, key="converged", tags=("converged",))
 
