@@ -1,7 +1,8 @@
 """3.9 Difference-of-Gaussians detector and 3.10 SIFT-lite descriptor: OpenCV oracles, cases, hints.
 
 The detector is judged by repeatability next to cv2.SIFT's detector and on Gaussian blobs with known
-centres and widths; the descriptor by MMA@3px on OpenCV's own keypoints next to cv2.SIFT's
+centres and widths, and by three rows on two synthetic images for the spec's filters (contrast threshold,
+strongest-first cut, edge rejection); the descriptor by MMA@3px on OpenCV's own keypoints next to cv2.SIFT's
 descriptors, with probe views (the same view turned 180° or enlarged 2x) that tell the hints why.
 """
 from __future__ import annotations
