@@ -273,8 +273,9 @@ CORNER_HINTS = [
 
 
 def _corners_standin(img, n=500, method="harris", k=0.04, sigma=1.5, radius=3):
-    """3.5's stand-in: cv2.goodFeaturesToTrack at the defaults; the spec on OpenCV's filters when k, sigma or
-    radius is given (goodFeaturesToTrack has no sigma)."""
+    """3.5's stand-in: cv2.goodFeaturesToTrack (blockSize 5, qualityLevel 1e-6, minDistance 4) when k, sigma and
+    radius are the spec's defaults; the spec on OpenCV's filters when any is given (goodFeaturesToTrack has no
+    sigma)."""
     if (k, sigma, radius) == (0.04, 1.5, 3):
         return cv_corners(img, n, method)
     return cv_corners_gaussian(img, n, method, k, sigma, radius)

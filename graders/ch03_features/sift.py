@@ -234,7 +234,8 @@ def _constant_sigma(case, out):
 
 DOG_HINTS = [
     Hint("you keep keypoints on blobs of |D(x̂)| below the threshold: reject an extremum when the refined "
-         "|D(x̂)| = |D + ½ gᵀx̂| < 0.03/3 (images in [0, 1]; Lowe 2004, §4).",
+         "|D(x̂)| = |D + ½ gᵀx̂| < 0.03/3 = 0.01 (images in [0, 1]; the chapter's threshold: Lowe 2004 §4 uses 0.03, "
+         "OpenCV 0.04/nOctaveLayers).",
          lambda c, out: c.key == "blob-contrast" and c.metric(out, c.expected) > c.tol),
     Hint("with a small n_features you return weaker keypoints before stronger ones: sort all refined keypoints by "
          "|D(x̂)|, strongest first, and only then keep the first n_features.",
@@ -399,8 +400,9 @@ def window_ratio(d: np.ndarray) -> float:
 def window_ratio_spec() -> float:
     """window_ratio of the specification on a texture whose gradient statistics do not depend on position (the
     clip aside): 16 samples per axis at k - 7.5 (sample units), a Gaussian weight of sigma = 8 samples (half the
-    window, Lowe 2004 §6.1), each sample shared by the cell centres at -6, -2, 2, 6 with tent weights of width 4
-    (trilinear interpolation). 0.647; without the weight 0.839 (tents) or 1.0 (hard cells)."""
+    window, Lowe 2004 §6.1), each sample shared by the cell centres at -6, -2, 2, 6 with tent weights 1 - |d|/4
+    (half-width 4 samples, one cell: trilinear interpolation). 0.647; without the weight 0.839 (tents) or 1.0
+    (hard cells)."""
     k = np.arange(16) - 7.5
     tent = np.maximum(0.0, 1 - np.abs(k[:, None] - (4.0 * np.arange(4) - 6)) / 4)   # (16 samples, 4 cells)
     m = np.exp(-k ** 2 / (2 * 8.0 ** 2)) @ tent                                      # each cell's mass along an axis
