@@ -187,14 +187,23 @@ def most_seen(pids: set[int], seen: dict[tuple[int, int], float]) -> float:
     return sum(seen.values())
 
 
+def stat_fields(pid: int) -> list[bytes]:
+    """/proc/<pid>/stat's fields from the state on (field 3, so field n is at n - 3), after the command name,
+    which may hold ')' and spaces; [] when the process is gone or unreadable."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            return f.read().rsplit(b")", 1)[1].split()
+    except (OSError, IndexError):
+        return []
+
+
 def _stat(pid: int) -> tuple[tuple[int, int] | None, float]:
     """((pid, start time), user + system CPU seconds of the process, its threads and its reaped children) from
     /proc/<pid>/stat; (None, 0) when it is gone or unreadable (the wall-clock backstop then still holds)."""
+    fields = stat_fields(pid)
     try:
-        with open(f"/proc/{pid}/stat", "rb") as f:
-            fields = f.read().rsplit(b")", 1)[1].split()   # after the name, which may hold ')' and spaces
         return (pid, int(fields[19])), sum(int(v) for v in fields[11:15]) / _TICKS   # fields 22; 14-17
-    except (OSError, IndexError, ValueError):
+    except (IndexError, ValueError):
         return None, 0.0
 
 

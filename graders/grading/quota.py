@@ -21,6 +21,8 @@ import os
 import re
 import shutil
 
+from graders.grading.processes import stat_fields
+
 DISK_GB = 1.0          # the learner's quota (the judge's files for its cases count too: a COLMAP model, a g2o file)
 INODES = 100_000       # files and folders in the quota
 POLL_S = 0.25          # seconds between two looks at the folder while the learner runs
@@ -134,8 +136,5 @@ def _alive(pid: int) -> bool:
         return False
     except PermissionError:
         return True
-    try:
-        with open(f"/proc/{pid}/stat", "rb") as f:
-            return f.read().rsplit(b")", 1)[1].split()[0] != b"Z"
-    except (OSError, IndexError):
-        return True
+    fields = stat_fields(pid)
+    return not fields or fields[0] != b"Z"

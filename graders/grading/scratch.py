@@ -8,7 +8,7 @@ import stat
 import tempfile
 from pathlib import Path
 
-from graders.grading.processes import remove_stale_learners
+from graders.grading.processes import remove_stale_learners, stat_fields
 from graders.grading.quota import unmount_stale
 
 GRADE_PREFIX = "cv3d-grade-"      # a grade's temporary folder (the learner's code and scratch space)
@@ -18,10 +18,8 @@ GRADE_MARKER = ".cv3d-grade-owner"
 def _started(pid: int) -> str:
     """The process's start time in clock ticks since boot (/proc/<pid>/stat field 22), '' where unknown:
     with the pid, it tells a live grader from a later process that reused its pid."""
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[19]
-    except (OSError, IndexError):
-        return ""
+    fields = stat_fields(pid)
+    return fields[19].decode() if len(fields) > 19 else ""
 
 
 def mark_grade_folder(folder: Path) -> None:
